@@ -1,0 +1,238 @@
+"""A loaded indoor scene: triangles in a z-up metric world, and the colour of every surface point.
+
+``load_scene`` reads any mesh trimesh can read (PLY, OBJ, GLB/glTF). Colour comes from
+per-vertex colours, face colours, a material's base colour, or a texture sampled at the hit's
+UV; everything is unified into per-triangle-corner colours, plus per-corner UVs and a texture
+index for textured triangles, so that the colour of a ray hit is one barycentric lookup.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import trimesh
+
+UpAxis = Literal["z", "y", "-y", "x"]
+
+# Rotations taking each stored up axis to +z (proper rotations, det = +1).
+_UP_AXIS_TO_Z: dict[str, np.ndarray] = {
+    "z": np.eye(3),
+    "y": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
+    "-y": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
+    "x": np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),
+}
+
+DEFAULT_SURFACE_RGB = (180, 180, 180)
+
+
+@dataclass
+class Scene:
+    """An indoor triangle mesh, z-up, metres.
+
+    Attributes:
+        vertices: (V, 3) float64 positions.
+        faces: (F, 3) int64 triangle vertex indices.
+        corner_colours: (F, 3, 3) uint8 RGB at each triangle corner.
+        name: human-readable name (file stem or catalogue name).
+        corner_uvs: (F, 3, 2) float32 texture coordinates, or None when nothing is textured.
+        face_texture_ids: (F,) int32 index into ``textures``, -1 for untextured triangles.
+        textures: list of (H, W, 3) uint8 images.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    corner_colours: np.ndarray
+    name: str = "scene"
+    corner_uvs: np.ndarray | None = None
+    face_texture_ids: np.ndarray | None = None
+    textures: list[np.ndarray] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.vertices = np.asarray(self.vertices, dtype=np.float64)
+        self.faces = np.asarray(self.faces, dtype=np.int64)
+        if self.faces.ndim != 2 or self.faces.shape[1] != 3 or len(self.faces) == 0:
+            raise ValueError(
+                f"scene {self.name!r} has no triangles (faces shape {self.faces.shape}); "
+                "pass a triangle mesh"
+            )
+        self.corner_colours = np.asarray(self.corner_colours, dtype=np.uint8)
+        # float32 copy used at render time: avoids a uint8 -> float conversion per frame.
+        self._corner_colours_f = self.corner_colours.astype(np.float32)
+
+    # -- geometry --------------------------------------------------------------------
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) axis-aligned bounds [min, max] in metres."""
+        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    @property
+    def extents(self) -> np.ndarray:
+        return self.bounds[1] - self.bounds[0]
+
+    def to_trimesh(self) -> trimesh.Trimesh:
+        """A plain trimesh copy with per-vertex colours (corner colours averaged)."""
+        colours = np.zeros((len(self.vertices), 3), dtype=np.float64)
+        counts = np.zeros(len(self.vertices), dtype=np.float64)
+        np.add.at(colours, self.faces.ravel(), self.corner_colours.reshape(-1, 3))
+        np.add.at(counts, self.faces.ravel(), 1.0)
+        colours /= np.maximum(counts, 1.0)[:, None]
+        rgba = np.concatenate(
+            [colours.astype(np.uint8), np.full((len(colours), 1), 255, np.uint8)], axis=1
+        )
+        return trimesh.Trimesh(self.vertices, self.faces, vertex_colors=rgba, process=False)
+
+    def sample_surface(self, count: int, seed: int = 0) -> np.ndarray:
+        """``count`` area-uniform points on the surface, (count, 3) float64, seeded."""
+        triangles = self.vertices[self.faces]
+        areas = 0.5 * np.linalg.norm(
+            np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1
+        )
+        if areas.sum() <= 0:
+            raise ValueError(f"scene {self.name!r} has zero surface area")
+        rng = np.random.default_rng(seed)
+        chosen = rng.choice(len(areas), size=count, p=areas / areas.sum())
+        r1, r2 = rng.random(count), rng.random(count)
+        flip = r1 + r2 > 1.0
+        r1[flip], r2[flip] = 1.0 - r1[flip], 1.0 - r2[flip]
+        tri = triangles[chosen]
+        return tri[:, 0] + r1[:, None] * (tri[:, 1] - tri[:, 0]) + r2[:, None] * (
+            tri[:, 2] - tri[:, 0]
+        )
+
+    # -- colour ----------------------------------------------------------------------
+    def colour_at(self, triangle_ids: np.ndarray, barycentric_uv: np.ndarray) -> np.ndarray:
+        """RGB uint8 (N, 3) of hit points given their triangles and barycentric (u, v)."""
+        u = barycentric_uv[:, 0:1]
+        v = barycentric_uv[:, 1:2]
+        corners = self._corner_colours_f[triangle_ids]
+        rgb = corners[:, 0] + u * (corners[:, 1] - corners[:, 0]) + v * (
+            corners[:, 2] - corners[:, 0]
+        )
+        if self.face_texture_ids is not None and self.textures:
+            texture_ids = self.face_texture_ids[triangle_ids]
+            for texture_index in np.unique(texture_ids[texture_ids >= 0]):
+                selected = np.flatnonzero(texture_ids == texture_index)
+                uv_corners = self.corner_uvs[triangle_ids[selected]]
+                tex_uv = (
+                    uv_corners[:, 0]
+                    + u[selected] * (uv_corners[:, 1] - uv_corners[:, 0])
+                    + v[selected] * (uv_corners[:, 2] - uv_corners[:, 0])
+                )
+                rgb[selected] = sample_texture(self.textures[texture_index], tex_uv)
+        return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+
+
+def sample_texture(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Nearest-texel lookup with wrap-around; uv origin at the bottom-left (OpenGL/glTF)."""
+    height, width = image.shape[:2]
+    column = np.floor(np.mod(uv[:, 0], 1.0) * width).astype(np.int64).clip(0, width - 1)
+    row = np.floor((1.0 - np.mod(uv[:, 1], 1.0)) * height).astype(np.int64).clip(0, height - 1)
+    return image[row, column, :3].astype(np.float32)
+
+
+def _geometry_colours(
+    mesh: trimesh.Trimesh,
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Corner colours, and corner UVs plus texture image when the mesh is textured."""
+    faces = mesh.faces
+    visual = mesh.visual
+    if isinstance(visual, trimesh.visual.TextureVisuals):
+        material = visual.material
+        image = getattr(material, "image", None)
+        if image is None:
+            image = getattr(material, "baseColorTexture", None)
+        if image is not None and visual.uv is not None and len(visual.uv) == len(mesh.vertices):
+            rgb_image = np.asarray(image.convert("RGB"), dtype=np.uint8)
+            corner_uvs = np.asarray(visual.uv, dtype=np.float32)[faces]
+            corner_rgb = sample_texture(rgb_image, corner_uvs.reshape(-1, 2)).reshape(-1, 3, 3)
+            return corner_rgb.astype(np.uint8), corner_uvs, rgb_image
+        base = getattr(material, "baseColorFactor", None)
+        if base is None:
+            base = getattr(material, "main_color", None)
+        rgb = np.asarray(base if base is not None else DEFAULT_SURFACE_RGB, dtype=np.float64)[:3]
+        if rgb.max() <= 1.0 and np.issubdtype(np.asarray(base).dtype, np.floating):
+            rgb = rgb * 255.0
+        return np.broadcast_to(rgb.astype(np.uint8), (len(faces), 3, 3)).copy(), None, None
+    if isinstance(visual, trimesh.visual.ColorVisuals):
+        if visual.kind == "vertex":
+            return np.asarray(visual.vertex_colors[:, :3], np.uint8)[faces], None, None
+        if visual.kind == "face":
+            face_rgb = np.asarray(visual.face_colors[:, :3], np.uint8)
+            return np.repeat(face_rgb[:, None, :], 3, axis=1), None, None
+    return np.full((len(faces), 3, 3), DEFAULT_SURFACE_RGB, dtype=np.uint8), None, None
+
+
+def scene_from_trimesh(
+    geometry: trimesh.Trimesh | trimesh.Scene, name: str = "scene", up_axis: UpAxis = "z"
+) -> Scene:
+    """Build a :class:`Scene` from a trimesh mesh or scene, rotating ``up_axis`` to +z."""
+    if up_axis not in _UP_AXIS_TO_Z:
+        raise ValueError(f"up_axis must be one of {sorted(_UP_AXIS_TO_Z)}, got {up_axis!r}")
+    if isinstance(geometry, trimesh.Scene):
+        meshes = [g for g in geometry.dump(concatenate=False) if isinstance(g, trimesh.Trimesh)]
+    else:
+        meshes = [geometry]
+    meshes = [m for m in meshes if len(m.faces) > 0]
+    if not meshes:
+        raise ValueError(f"scene {name!r} contains no triangles; pass a triangle mesh")
+
+    vertices, faces, corner_colours, corner_uvs, texture_ids, textures = [], [], [], [], [], []
+    offset = 0
+    any_texture = False
+    for mesh in meshes:
+        colours, uvs, image = _geometry_colours(mesh)
+        vertices.append(np.asarray(mesh.vertices, dtype=np.float64))
+        faces.append(np.asarray(mesh.faces, dtype=np.int64) + offset)
+        offset += len(mesh.vertices)
+        corner_colours.append(colours)
+        if image is not None:
+            any_texture = True
+            texture_ids.append(np.full(len(mesh.faces), len(textures), np.int32))
+            textures.append(image)
+            corner_uvs.append(uvs)
+        else:
+            texture_ids.append(np.full(len(mesh.faces), -1, np.int32))
+            corner_uvs.append(np.zeros((len(mesh.faces), 3, 2), np.float32))
+
+    all_vertices = np.concatenate(vertices) @ _UP_AXIS_TO_Z[up_axis].T
+    return Scene(
+        vertices=all_vertices,
+        faces=np.concatenate(faces),
+        corner_colours=np.concatenate(corner_colours),
+        name=name,
+        corner_uvs=np.concatenate(corner_uvs) if any_texture else None,
+        face_texture_ids=np.concatenate(texture_ids) if any_texture else None,
+        textures=textures,
+    )
+
+
+def load_scene(path: str | Path, up_axis: UpAxis = "z", name: str | None = None) -> Scene:
+    """Load a triangle mesh file (PLY, OBJ, GLB/glTF, ...) as a z-up :class:`Scene`.
+
+    Args:
+        path: mesh file in metres.
+        up_axis: the axis that points up in the file (``"y"`` for most glTF and SceneNet
+            files); it is rotated to +z. Never guessed.
+        name: display name, defaults to the file stem.
+
+    Raises:
+        FileNotFoundError: the file does not exist.
+        ValueError: the file cannot be read as a mesh, or holds no triangles.
+    """
+    path = Path(path).expanduser()
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"scene file {str(path)!r} does not exist; pass a mesh path or a catalogue name "
+            "(see naruto_gym.scenes.available_scenes())"
+        )
+    try:
+        geometry = trimesh.load(path, force="scene", process=False)
+    except Exception as error:  # trimesh raises many types for broken files
+        raise ValueError(
+            f"could not read {str(path)!r} as a triangle mesh ({type(error).__name__}: {error}); "
+            "use a PLY, OBJ or GLB/glTF file"
+        ) from error
+    return scene_from_trimesh(geometry, name=name or path.stem, up_axis=up_axis)
