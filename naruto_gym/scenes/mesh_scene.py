@@ -104,25 +104,32 @@ class Scene:
 
     # -- colour ----------------------------------------------------------------------
     def colour_at(self, triangle_ids: np.ndarray, barycentric_uv: np.ndarray) -> np.ndarray:
-        """RGB uint8 (N, 3) of hit points given their triangles and barycentric (u, v)."""
-        u = barycentric_uv[:, 0:1]
-        v = barycentric_uv[:, 1:2]
-        corners = self._corner_colours_f[triangle_ids]
-        rgb = corners[:, 0] + u * (corners[:, 1] - corners[:, 0]) + v * (
-            corners[:, 2] - corners[:, 0]
-        )
+        """RGB uint8 (N, 3) of hit points given their triangles and barycentric (u, v).
+
+        Misses (triangle id < 0) come back black.
+        """
+        from naruto_gym.sensors.shading import interpolate_corner_colours
+
+        triangle_ids = np.ascontiguousarray(triangle_ids)
+        barycentric_uv = np.ascontiguousarray(barycentric_uv, dtype=np.float32)
+        rgb = np.empty((len(triangle_ids), 3), dtype=np.uint8)
+        interpolate_corner_colours(triangle_ids, barycentric_uv, self._corner_colours_f, rgb)
         if self.face_texture_ids is not None and self.textures:
-            texture_ids = self.face_texture_ids[triangle_ids]
+            texture_ids = np.where(triangle_ids >= 0, self.face_texture_ids[triangle_ids], -1)
             for texture_index in np.unique(texture_ids[texture_ids >= 0]):
                 selected = np.flatnonzero(texture_ids == texture_index)
                 uv_corners = self.corner_uvs[triangle_ids[selected]]
+                u = barycentric_uv[selected, 0:1]
+                v = barycentric_uv[selected, 1:2]
                 tex_uv = (
                     uv_corners[:, 0]
-                    + u[selected] * (uv_corners[:, 1] - uv_corners[:, 0])
-                    + v[selected] * (uv_corners[:, 2] - uv_corners[:, 0])
+                    + u * (uv_corners[:, 1] - uv_corners[:, 0])
+                    + v * (uv_corners[:, 2] - uv_corners[:, 0])
                 )
-                rgb[selected] = sample_texture(self.textures[texture_index], tex_uv)
-        return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+                rgb[selected] = sample_texture(self.textures[texture_index], tex_uv).astype(
+                    np.uint8
+                )
+        return rgb
 
 
 def sample_texture(image: np.ndarray, uv: np.ndarray) -> np.ndarray:

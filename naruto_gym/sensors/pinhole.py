@@ -8,7 +8,7 @@ from functools import cached_property
 import numpy as np
 
 from naruto_gym.scenes.mesh_scene import Scene
-from naruto_gym.sensors.raycaster import RayCaster
+from naruto_gym.sensors.raycaster import RayCaster, RayHits
 
 
 @dataclass(frozen=True)
@@ -100,25 +100,26 @@ class RgbdRenderer:
         self.max_depth_m = float(max_depth_m)
         self.raycaster = raycaster or RayCaster(scene.vertices, scene.faces)
 
+        self._rays = np.empty((self.camera.width * self.camera.height, 6), dtype=np.float32)
+
     def render_depth(self, camera_to_world: np.ndarray) -> np.ndarray:
         """(H, W) float32 z-depth only (skips colour)."""
-        depth, _, _ = self._cast(camera_to_world)
-        return depth.reshape(self.camera.height, self.camera.width)
+        return self._cast(camera_to_world)[0]
 
     def render(self, camera_to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(rgb (H, W, 3) uint8, depth (H, W) float32) at a camera-to-world pose."""
-        depth, triangle_ids, uv = self._cast(camera_to_world)
-        rgb = np.zeros((depth.size, 3), dtype=np.uint8)
-        valid = depth > 0
-        rgb[valid] = self.scene.colour_at(triangle_ids[valid], uv[valid])
-        shape = (self.camera.height, self.camera.width)
-        return rgb.reshape(*shape, 3), depth.reshape(shape)
+        depth, hits = self._cast(camera_to_world)
+        # Pixels beyond the range are black like misses.
+        triangle_ids = np.where(depth.ravel() > 0, hits.triangle_ids, -1)
+        rgb = self.scene.colour_at(triangle_ids, hits.barycentric_uv)
+        return rgb.reshape(self.camera.height, self.camera.width, 3), depth
 
-    def _cast(self, camera_to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _cast(self, camera_to_world: np.ndarray) -> tuple[np.ndarray, RayHits]:
         pose = np.asarray(camera_to_world, dtype=np.float32)
         # Directions keep camera z = 1, so the ray parameter of a hit is its z-depth.
-        directions = self.camera.ray_directions @ pose[:3, :3].T
-        hits = self.raycaster.cast(pose[:3, 3], directions)
-        depth = hits.distance
+        self._rays[:, :3] = pose[:3, 3]
+        np.matmul(self.camera.ray_directions, pose[:3, :3].T, out=self._rays[:, 3:])
+        hits = self.raycaster.cast_packed(self._rays)
+        depth = hits.distance.copy()
         depth[~(depth <= self.max_depth_m)] = 0.0
-        return depth, hits.triangle_ids, hits.barycentric_uv
+        return depth.reshape(self.camera.height, self.camera.width), hits

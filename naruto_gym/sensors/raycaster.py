@@ -32,7 +32,7 @@ class RayHits:
 
     Attributes:
         distance: (N,) float32 ray parameter of the first hit, ``inf`` where nothing was hit.
-        triangle_ids: (N,) int64 index of the hit triangle, -1 where nothing was hit.
+        triangle_ids: (N,) int32 index of the hit triangle, -1 where nothing was hit.
         barycentric_uv: (N, 2) float32 barycentric coordinates (u, v) of the hit inside its
             triangle: point = (1 - u - v) * v0 + u * v1 + v * v2.
     """
@@ -113,19 +113,26 @@ class RayCaster:
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
         """First hit of each ray (origins may be a single (3,) point shared by all rays)."""
         origins, directions = _as_rays(origins, directions)
+        return self.cast_packed(np.concatenate([origins, directions], axis=1))
+
+    def cast_packed(self, rays: np.ndarray) -> RayHits:
+        """First hit of each ray given as one (N, 6) float32 array [origin, direction].
+
+        The fast path for renderers that keep a preallocated ray buffer: the open3d backend
+        wraps the buffer without copying it.
+        """
+        rays = np.ascontiguousarray(rays, dtype=np.float32)
         if self.backend == "open3d":
-            rays = self._o3d.core.Tensor(np.concatenate([origins, directions], axis=1))
-            result = self._scene.cast_rays(rays)
+            result = self._scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays))
             distance = result["t_hit"].numpy()
-            triangle_ids = result["primitive_ids"].numpy().astype(np.int64)
+            triangle_ids = result["primitive_ids"].numpy().view(np.int32)
             uv = result["primitive_uvs"].numpy()
-            hit = np.isfinite(distance)
-            triangle_ids[~hit] = -1
+            # Open3D marks a miss with id 2**32 - 1, which reads as -1 as int32.
             return RayHits(distance, triangle_ids, uv)
         result = self._scene.run(
-            np.ascontiguousarray(origins), np.ascontiguousarray(directions), output=1
+            np.ascontiguousarray(rays[:, :3]), np.ascontiguousarray(rays[:, 3:]), output=1
         )
-        triangle_ids = result["primID"].astype(np.int64)
+        triangle_ids = result["primID"].astype(np.int32)
         hit = triangle_ids >= 0
         distance = np.where(hit, result["tfar"], np.inf).astype(np.float32)
         uv = np.stack([result["u"], result["v"]], axis=1).astype(np.float32)

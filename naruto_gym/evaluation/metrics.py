@@ -1,0 +1,327 @@
+"""Reconstruction metrics of the active-mapping literature, as pure functions.
+
+Definitions (NARUTO, CVPR 2024, and the works it compares with; see ``NARUTO_NOTES.md`` §9):
+
+* **Accuracy** (cm): mean distance from each *reconstruction* sample to its nearest
+  *ground-truth* sample. Low when nothing spurious was reconstructed.
+* **Completion** (cm): mean distance from each *ground-truth* sample to its nearest
+  *reconstruction* sample. Low when the whole scene was reconstructed.
+* **Completion ratio** (%): share of ground-truth samples closer than the threshold (5 cm) to
+  the reconstruction; it is the recall at that threshold.
+* **Precision** (%): share of reconstruction samples closer than the threshold to the ground
+  truth, and **F-score** (%): the harmonic mean of precision and completion ratio.
+
+The released NARUTO evaluation passes the two meshes in swapped order, which exchanges
+accuracy with completion; this module uses the definitions above.
+
+Surfaces are compared through area-uniform point samples (200,000 per mesh by default,
+seeded), nearest neighbours through a KD-tree (``scipy.spatial.cKDTree``, all cores).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from naruto_gym.scenes.mesh_scene import Scene
+
+DEFAULT_NUM_SAMPLES = 200_000
+DEFAULT_THRESHOLD_M = 0.05
+
+# Anything the metrics can turn into surface points: an (N, 3) array of points, a
+# trimesh.Trimesh or PointCloud, a naruto_gym Scene, or a (vertices, faces) pair.
+SurfaceLike = np.ndarray | trimesh.Trimesh | trimesh.PointCloud | Scene | tuple
+
+
+@dataclass(frozen=True)
+class ReconstructionMetrics:
+    """Scores of one reconstruction against the ground truth.
+
+    Attributes:
+        accuracy_cm: mean reconstruction -> ground-truth nearest distance, cm.
+        completion_cm: mean ground-truth -> reconstruction nearest distance, cm.
+        completion_ratio_pct: % of ground-truth samples within ``threshold_m`` of the
+            reconstruction.
+        precision_pct: % of reconstruction samples within ``threshold_m`` of the ground truth.
+        fscore_pct: harmonic mean of precision and completion ratio, %.
+        threshold_m: the distance threshold used for the three percentages, metres.
+        num_recon_samples: number of reconstruction points compared.
+        num_gt_samples: number of ground-truth points compared.
+        faces_evaluated: faces of the reconstruction after culling (None for point inputs).
+        faces_culled: faces removed by culling (None when no culling ran).
+        note: free-text remark (e.g. why culling was skipped).
+    """
+
+    accuracy_cm: float
+    completion_cm: float
+    completion_ratio_pct: float
+    precision_pct: float
+    fscore_pct: float
+    threshold_m: float
+    num_recon_samples: int
+    num_gt_samples: int
+    faces_evaluated: int | None = None
+    faces_culled: int | None = None
+    note: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain ``dict`` (JSON-serialisable) of every field."""
+        return asdict(self)
+
+
+# -- input handling --------------------------------------------------------------------
+def _check_points(points: np.ndarray, what: str) -> np.ndarray:
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3:
+        raise ValueError(f"{what} must be an (N, 3) array of points, got shape {points.shape}")
+    if len(points) == 0:
+        raise ValueError(
+            f"{what} is empty (0 points): the reconstruction or ground truth has no surface; "
+            "check that the mapper integrated frames before scoring"
+        )
+    if not np.isfinite(points).all():
+        raise ValueError(f"{what} contains NaN or infinite coordinates; remove them first")
+    return points
+
+
+def _mesh_arrays(surface: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """(vertices, faces) of a mesh-like input, or None when it is a point set."""
+    if isinstance(surface, trimesh.Trimesh):
+        return np.asarray(surface.vertices), np.asarray(surface.faces)
+    if isinstance(surface, tuple) and len(surface) == 2:
+        return np.asarray(surface[0]), np.asarray(surface[1])
+    if isinstance(surface, Scene):
+        return np.asarray(surface.vertices), np.asarray(surface.faces)
+    return None
+
+
+def surface_points(
+    surface: SurfaceLike, count: int = DEFAULT_NUM_SAMPLES, seed: int = 0, what: str = "surface"
+) -> np.ndarray:
+    """Points that stand for a surface: samples of a mesh, or the given points unchanged.
+
+    Args:
+        surface: (N, 3) points, ``trimesh.Trimesh``, ``trimesh.PointCloud``, a ``Scene`` or a
+            ``(vertices, faces)`` pair.
+        count: number of area-uniform samples drawn from a mesh.
+        seed: seed of the sampling.
+        what: name used in error messages.
+
+    Returns:
+        (M, 3) float64 points.
+    """
+    arrays = _mesh_arrays(surface)
+    if arrays is not None:
+        return sample_mesh_surface(arrays[0], arrays[1], count, seed, what=what)
+    if isinstance(surface, trimesh.PointCloud):
+        return _check_points(surface.vertices, what)
+    return _check_points(surface, what)
+
+
+def sample_mesh_surface(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    count: int = DEFAULT_NUM_SAMPLES,
+    seed: int = 0,
+    what: str = "mesh",
+) -> np.ndarray:
+    """``count`` points drawn uniformly by area on a triangle mesh (seeded, reproducible).
+
+    Args:
+        vertices: (V, 3) vertex positions.
+        faces: (F, 3) triangle vertex indices.
+        count: number of samples (> 0).
+        seed: seed of the random generator.
+        what: name used in error messages.
+
+    Returns:
+        (count, 3) float64 points.
+
+    Raises:
+        ValueError: no triangles, bad indices, non-finite vertices or zero total area.
+    """
+    if count <= 0:
+        raise ValueError(f"count must be positive, got {count}")
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces)
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise ValueError(f"{what}: vertices must have shape (V, 3), got {vertices.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise ValueError(
+            f"{what} has no triangles (faces shape {faces.shape}); an empty reconstruction "
+            "cannot be scored: integrate frames or pass points instead"
+        )
+    faces = faces.astype(np.int64)
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise ValueError(f"{what}: face indices out of range for {len(vertices)} vertices")
+    triangles = vertices[faces]
+    if not np.isfinite(triangles).all():
+        raise ValueError(f"{what} has NaN or infinite vertex coordinates")
+    edge1 = triangles[:, 1] - triangles[:, 0]
+    edge2 = triangles[:, 2] - triangles[:, 0]
+    areas = 0.5 * np.linalg.norm(np.cross(edge1, edge2), axis=1)
+    total = float(areas.sum())
+    if not total > 0.0:
+        raise ValueError(f"{what} is degenerate: its triangles have zero total area")
+    rng = np.random.default_rng(seed)
+    # Inverse-CDF draw of triangles by area: faster than rng.choice(p=...) for large meshes.
+    cumulative = np.cumsum(areas)
+    chosen = np.searchsorted(cumulative, rng.random(count) * cumulative[-1], side="right")
+    chosen = np.minimum(chosen, len(areas) - 1)
+    r1, r2 = rng.random(count), rng.random(count)
+    flip = r1 + r2 > 1.0
+    r1[flip], r2[flip] = 1.0 - r1[flip], 1.0 - r2[flip]
+    return triangles[chosen, 0] + r1[:, None] * edge1[chosen] + r2[:, None] * edge2[chosen]
+
+
+# -- metrics ---------------------------------------------------------------------------
+def nearest_distances(queries: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Distance from each query point to its nearest reference point, (N,) float64 metres."""
+    queries = _check_points(queries, "query points")
+    reference = _check_points(reference, "reference points")
+    distances, _ = cKDTree(reference).query(queries, k=1, workers=-1)
+    return distances
+
+
+def reconstruction_metrics(
+    reconstruction: SurfaceLike,
+    ground_truth: SurfaceLike,
+    threshold_m: float = DEFAULT_THRESHOLD_M,
+    num_samples: int = DEFAULT_NUM_SAMPLES,
+    seed: int = 0,
+) -> ReconstructionMetrics:
+    """Accuracy, completion, completion ratio, precision and F-score of a reconstruction.
+
+    Meshes are sampled with ``num_samples`` area-uniform points each; point arrays are used as
+    given. The two meshes get different seeds derived from ``seed``, so a mesh scored against
+    itself shows the sampling floor (a few mm) rather than an artificial zero.
+
+    Args:
+        reconstruction: the reconstructed surface (mesh or (N, 3) points).
+        ground_truth: the true surface (mesh, ``Scene`` or (M, 3) points).
+        threshold_m: distance under which a sample counts as matched, metres (default 5 cm).
+        num_samples: samples per mesh.
+        seed: seed of the sampling.
+
+    Returns:
+        The :class:`ReconstructionMetrics`.
+
+    Raises:
+        ValueError: empty, degenerate or non-finite input, or a non-positive threshold.
+    """
+    if not threshold_m > 0.0:
+        raise ValueError(f"threshold_m must be positive (metres), got {threshold_m}")
+    recon_seed, gt_seed = (
+        int(s.generate_state(1)[0]) for s in np.random.SeedSequence(seed).spawn(2)
+    )
+    recon_points = surface_points(reconstruction, num_samples, recon_seed, "reconstruction")
+    gt_points = surface_points(ground_truth, num_samples, gt_seed, "ground truth")
+    accuracy = nearest_distances(recon_points, gt_points)
+    completion = nearest_distances(gt_points, recon_points)
+    precision = float(np.mean(accuracy < threshold_m))
+    recall = float(np.mean(completion < threshold_m))
+    fscore = 0.0 if precision + recall == 0.0 else 2.0 * precision * recall / (precision + recall)
+    arrays = _mesh_arrays(reconstruction)
+    return ReconstructionMetrics(
+        accuracy_cm=float(accuracy.mean() * 100.0),
+        completion_cm=float(completion.mean() * 100.0),
+        completion_ratio_pct=recall * 100.0,
+        precision_pct=precision * 100.0,
+        fscore_pct=fscore * 100.0,
+        threshold_m=float(threshold_m),
+        num_recon_samples=len(recon_points),
+        num_gt_samples=len(gt_points),
+        faces_evaluated=None if arrays is None else len(arrays[1]),
+    )
+
+
+def point_to_mesh_distance(
+    points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
+) -> np.ndarray:
+    """Exact unsigned distance from each point to a triangle mesh, (N,) float64 metres.
+
+    Uses Embree's closest-point query (Open3D ``RaycastingScene.compute_distance``).
+    """
+    from naruto_gym.sensors.raycaster import RayCaster
+
+    points = _check_points(points, "points")
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces)
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise ValueError(f"the mesh has no triangles (faces shape {faces.shape})")
+    return RayCaster(vertices, faces).unsigned_distance(points).astype(np.float64)
+
+
+def mean_absolute_distance_cm(
+    sdf_or_mesh: Callable[[np.ndarray], np.ndarray] | SurfaceLike,
+    gt_points: np.ndarray,
+) -> float:
+    """MAD: mean |SDF| of a reconstruction at ground-truth surface samples, in cm.
+
+    Args:
+        sdf_or_mesh: either a callable mapping (N, 3) world points (metres) to (N,) signed
+            distances in metres (a mapper's SDF), or a mesh (``trimesh.Trimesh``, ``Scene``,
+            ``(vertices, faces)``), for which the exact point-to-mesh distance is used.
+        gt_points: (N, 3) samples of the ground-truth surface (e.g. 200,000 from
+            :func:`sample_mesh_surface`).
+
+    Returns:
+        The mean absolute distance in centimetres.
+
+    Raises:
+        ValueError: empty points, a callable returning the wrong shape, or NaN values.
+    """
+    gt_points = _check_points(gt_points, "ground-truth points")
+    if callable(sdf_or_mesh):
+        values = np.asarray(sdf_or_mesh(gt_points), dtype=np.float64).reshape(-1)
+        if values.shape != (len(gt_points),):
+            raise ValueError(
+                f"the SDF callable must return one value per point ({len(gt_points)}), "
+                f"got {values.shape}"
+            )
+        if not np.isfinite(values).all():
+            raise ValueError(
+                "the SDF callable returned NaN or infinite values; clamp unobserved space "
+                "(e.g. to the truncation distance) before computing MAD"
+            )
+    else:
+        arrays = _mesh_arrays(sdf_or_mesh)
+        if arrays is None:
+            raise ValueError(
+                "sdf_or_mesh must be a callable SDF or a mesh (trimesh.Trimesh, Scene or "
+                f"(vertices, faces)), got {type(sdf_or_mesh).__name__}"
+            )
+        values = point_to_mesh_distance(gt_points, *arrays)
+    return float(np.mean(np.abs(values)) * 100.0)
+
+
+def trajectory_length(poses: np.ndarray) -> float:
+    """Length of a camera path: the sum of distances between consecutive positions, metres.
+
+    Args:
+        poses: (N, 4, 4) camera-to-world matrices or (N, 3) positions. Fewer than two poses
+            give 0.
+
+    Raises:
+        ValueError: wrong shape or non-finite values.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    if poses.ndim == 3 and poses.shape[1:] == (4, 4):
+        positions = poses[:, :3, 3]
+    elif poses.ndim == 2 and poses.shape[1] == 3:
+        positions = poses
+    else:
+        raise ValueError(
+            f"poses must be (N, 4, 4) camera-to-world matrices or (N, 3) positions, "
+            f"got shape {poses.shape}"
+        )
+    if not np.isfinite(positions).all():
+        raise ValueError("poses contain NaN or infinite values")
+    if len(positions) < 2:
+        return 0.0
+    return float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
