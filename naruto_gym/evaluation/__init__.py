@@ -1,0 +1,30 @@
+"""Reconstruction scoring: metrics, mesh culling, a reference TSDF mapper, one-call scoring."""
+
+from naruto_gym.evaluation.culling import cull_mesh, visible_vertex_mask
+from naruto_gym.evaluation.metrics import (
+    ReconstructionMetrics,
+    mean_absolute_distance_cm,
+    nearest_distances,
+    point_to_mesh_distance,
+    reconstruction_metrics,
+    sample_mesh_surface,
+    trajectory_length,
+)
+from naruto_gym.evaluation.scoring import EpisodeReconstruction, evaluate_reconstruction
+from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper, resolve_open3d_device
+
+__all__ = [
+    "EpisodeReconstruction",
+    "ReconstructionMetrics",
+    "TsdfFusionMapper",
+    "cull_mesh",
+    "evaluate_reconstruction",
+    "mean_absolute_distance_cm",
+    "nearest_distances",
+    "point_to_mesh_distance",
+    "reconstruction_metrics",
+    "resolve_open3d_device",
+    "sample_mesh_surface",
+    "trajectory_length",
+    "visible_vertex_mask",
+]
