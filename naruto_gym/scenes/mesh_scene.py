@@ -153,6 +153,9 @@ def _geometry_colours(
             image = getattr(material, "baseColorTexture", None)
         if image is not None and visual.uv is not None and len(visual.uv) == len(mesh.vertices):
             rgb_image = np.asarray(image.convert("RGB"), dtype=np.uint8)
+            if (rgb_image == rgb_image[0, 0]).all():
+                # A constant texture is a plain colour: no per-hit texture lookup needed.
+                return np.broadcast_to(rgb_image[0, 0], (len(faces), 3, 3)).copy(), None, None
             corner_uvs = np.asarray(visual.uv, dtype=np.float32)[faces]
             corner_rgb = sample_texture(rgb_image, corner_uvs.reshape(-1, 2)).reshape(-1, 3, 3)
             return corner_rgb.astype(np.uint8), corner_uvs, rgb_image

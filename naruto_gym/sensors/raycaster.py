@@ -18,6 +18,7 @@ env can be sent to a ``spawn`` worker.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Literal
 
@@ -77,10 +78,23 @@ class RayCaster:
         if backend not in ("open3d", "embreex"):
             raise ValueError(f"unknown ray-casting backend {backend!r}; use 'open3d' or 'embreex'")
         self.backend: RayCasterBackend = backend
-        self._build()
+        self._scene = None
+        self._built_in_pid: int | None = None
 
     # -- native scene ------------------------------------------------------------------
+    @property
+    def native_scene(self):
+        """The backend's scene, built on first use and rebuilt in a forked child.
+
+        Building lazily keeps Embree's worker threads out of a parent process that forks
+        (gymnasium's async vector env creates one env in the parent before forking).
+        """
+        if self._scene is None or self._built_in_pid != os.getpid():
+            self._build()
+        return self._scene
+
     def _build(self) -> None:
+        self._built_in_pid = os.getpid()
         if self.backend == "open3d":
             import open3d as o3d
 
@@ -107,7 +121,8 @@ class RayCaster:
         self.vertices = state["vertices"]
         self.faces = state["faces"]
         self.backend = state["backend"]
-        self._build()
+        self._scene = None
+        self._built_in_pid = None
 
     # -- queries -----------------------------------------------------------------------
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
@@ -123,13 +138,13 @@ class RayCaster:
         """
         rays = np.ascontiguousarray(rays, dtype=np.float32)
         if self.backend == "open3d":
-            result = self._scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays))
+            result = self.native_scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays))
             distance = result["t_hit"].numpy()
             triangle_ids = result["primitive_ids"].numpy().view(np.int32)
             uv = result["primitive_uvs"].numpy()
             # Open3D marks a miss with id 2**32 - 1, which reads as -1 as int32.
             return RayHits(distance, triangle_ids, uv)
-        result = self._scene.run(
+        result = self.native_scene.run(
             np.ascontiguousarray(rays[:, :3]), np.ascontiguousarray(rays[:, 3:]), output=1
         )
         triangle_ids = result["primID"].astype(np.int32)
@@ -146,7 +161,7 @@ class RayCaster:
         """Distance from each point to the closest surface point, (N,) float32 metres."""
         points = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
         if self.backend == "open3d":
-            return self._scene.compute_distance(self._o3d.core.Tensor(points)).numpy()
+            return self.native_scene.compute_distance(self._o3d.core.Tensor(points)).numpy()
         return self._closest_distance_fallback(points)
 
     def _closest_distance_fallback(self, points: np.ndarray) -> np.ndarray:
@@ -205,7 +220,7 @@ class RayCaster:
         origins, directions = _as_rays(origins, directions)
         if self.backend == "open3d":
             rays = self._o3d.core.Tensor(np.concatenate([origins, directions], axis=1))
-            return self._scene.count_intersections(rays).numpy().astype(np.int64)
+            return self.native_scene.count_intersections(rays).numpy().astype(np.int64)
         counts = np.zeros(len(origins), dtype=np.int64)
         current = origins.copy()
         active = np.ones(len(origins), dtype=bool)

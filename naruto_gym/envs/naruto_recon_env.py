@@ -1,0 +1,390 @@
+"""``NarutoReconEnv``: a camera-carrying agent explores an indoor mesh to reconstruct it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from naruto_gym.coverage import CoverageTracker
+from naruto_gym.geometry.transforms import look_at_rotation, make_pose, validate_pose
+from naruto_gym.motion.actions import (
+    ACTION_MODES,
+    DISCRETE_ACTIONS,
+    delta_target_from_action,
+    discrete_target_from_action,
+    limit_pose_step,
+    pose_target_from_action,
+)
+from naruto_gym.motion.collision import CollisionChecker
+from naruto_gym.rendering.topdown import TopDownMap, compose_frame
+from naruto_gym.scenes.mesh_scene import Scene
+from naruto_gym.sensors.panorama import EquirectangularCamera, no_hit_share, render_panorama
+from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
+from naruto_gym.sensors.raycaster import RayCaster
+
+START_CANDIDATES_PER_BATCH = 256
+START_BATCHES = 8
+
+
+class NarutoReconEnv(gym.Env):
+    """Active 3D reconstruction of an indoor scene by a camera-carrying agent.
+
+    ## Description
+    The agent is a sphere (radius ``agent_radius_m``) carrying a pinhole RGB-D camera through a
+    triangle mesh of an indoor scene. Every step it moves (with collision checking against the
+    ground-truth mesh), renders a new frame by Embree ray casting, and is rewarded for the
+    share of the scene's surface it sees for the first time. The task follows NARUTO (Feng et
+    al., CVPR 2024): explore so that a map built from the frames is as complete and accurate as
+    possible.
+
+    World frame: metres, z up. Poses are camera-to-world 4x4 matrices with OpenCV camera axes
+    (x right, y down, z forward). Quaternions are (x, y, z, w).
+
+    ## Action Space
+    Chosen by ``action_mode``:
+
+    * ``"pose"`` (default): ``Box(7,)`` float32, an absolute target pose
+      ``(x, y, z, qx, qy, qz, qw)``; position within the scene bounds, the quaternion is
+      normalised (must not be zero). The camera moves towards it by at most
+      ``max_translation_m`` along the straight line and at most ``max_rotation_deg`` along the
+      rotation geodesic (SLERP). This is what the NARUTO agent uses.
+    * ``"delta"``: ``Box(-1, 1, (6,))`` float32, increments in the camera frame:
+      ``(tx, ty, tz)`` scaled by ``max_translation_m`` and a rotation vector ``(rx, ry, rz)``
+      scaled by ``max_rotation_deg`` (each 3-vector clipped to norm 1).
+    * ``"discrete"``: ``Discrete(10)``: 0 move forward, 1 move backward, 2 move left, 3 move
+      right (horizontal, relative to the camera heading), 4 move up, 5 move down (world z), all
+      by ``max_translation_m``; 6 turn left, 7 turn right (yaw about world z), 8 look up, 9 look
+      down (pitch, kept within +-80 degrees), all by ``max_rotation_deg``.
+
+    Actions that are NaN/inf, of the wrong shape, or outside the space raise ``ValueError`` and
+    leave the env unchanged.
+
+    ## Observation Space
+    A flat ``Dict``:
+
+    * ``rgb``: ``Box(0, 255, (H, W, 3), uint8)``.
+    * ``depth``: ``Box(0, max_depth_m, (H, W), float32)``, z-depth in metres, 0 for no hit or
+      beyond ``max_depth_m``.
+    * ``pose``: ``Box(-inf, inf, (4, 4), float32)``, camera-to-world.
+    * ``panorama`` (when ``panorama_shape`` is not None): ``Box(0, inf, (h, w), float32)``,
+      world-aligned equirectangular radial distance, 0 for no hit.
+
+    ## Rewards
+    ``100 * (coverage_t - coverage_{t-1}) - collision_penalty * collided``: the coverage gain in
+    percentage points of the ground-truth surface, minus a penalty for a blocked move.
+    Coverage counts area-uniform surface samples that have been inside the frustum, within
+    ``coverage_range_m`` and not occluded.
+
+    ## Starting State
+    ``reset(seed=...)`` draws a position in free space at least ``start_clearance_m`` from every
+    surface and inside the scene (it sees walls all around), looking horizontally in a random
+    direction. ``reset(options={"pose": c2w})`` starts exactly at a 4x4 pose (not
+    collision-checked, so recorded trajectories replay exactly; it must lie inside the bounds).
+
+    ## Episode End
+    The env never terminates by itself; ``gymnasium.make`` adds a ``TimeLimit`` of 2000 steps
+    (the published Replica budget), which truncates.
+
+    ## Info
+    ``coverage`` (0..1), ``coverage_gain``, ``collided``, ``collision_reason`` ("", "surface",
+    "bounds", "escape"), ``path_length_m``, ``intrinsics`` (dict of width, height, fx, fy, cx,
+    cy), ``step``, and ``panorama_no_hit_share`` when the panorama is on.
+
+    ## Arguments
+    * ``scene``: a catalogue name (see ``naruto_gym.scenes.available_scenes()``), a mesh path
+      (PLY/OBJ/GLB/glTF) or a ``Scene``. Default: the shipped ``"replica_like_room"``.
+    * ``up_axis``: the up axis of a mesh file (``"z"`` or ``"y"``), rotated to +z.
+    * ``action_mode``: ``"pose"``, ``"delta"`` or ``"discrete"``.
+    * ``camera``: ``PinholeCamera`` intrinsics (default 680 x 1200, fx = fy = 600).
+    * ``image_scale``: resolution factor applied to ``camera`` (0.25 gives 170 x 300).
+    * ``max_depth_m``: sensor range (10 m).
+    * ``panorama_shape``: ``(h, w)`` of the panorama observation, None to switch it off.
+    * ``agent_radius_m``, ``max_translation_m``, ``max_rotation_deg``: body and step limits
+      (0.05 m, 0.1 m, 20 degrees).
+    * ``escape_no_hit_threshold``: refuse moves that see more than this share of no-hit
+      panorama pixels (0.5), None to switch off.
+    * ``collision_penalty``: reward subtracted for a blocked move (0.1).
+    * ``coverage_samples``, ``coverage_range_m``: surface samples for coverage (20,000) and the
+      range within which a sample counts as seen (5 m, the mapping range).
+    * ``start_clearance_m``: free space around a random start (0.3 m).
+    * ``raycaster_backend``: ``"open3d"`` (default) or ``"embreex"``.
+    * ``render_mode``: None or ``"rgb_array"``.
+
+    ## Version History
+    * v0: initial release.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        scene: str | Path | Scene | None = None,
+        up_axis: str = "z",
+        action_mode: str = "pose",
+        camera: PinholeCamera | None = None,
+        image_scale: float = 1.0,
+        max_depth_m: float = 10.0,
+        panorama_shape: tuple[int, int] | None = (64, 128),
+        agent_radius_m: float = 0.05,
+        max_translation_m: float = 0.1,
+        max_rotation_deg: float = 20.0,
+        escape_no_hit_threshold: float | None = 0.5,
+        collision_penalty: float = 0.1,
+        coverage_samples: int = 20_000,
+        coverage_range_m: float = 5.0,
+        start_clearance_m: float = 0.3,
+        raycaster_backend: str = "open3d",
+        render_mode: str | None = None,
+    ) -> None:
+        from naruto_gym.scenes.catalogue import DEFAULT_SCENE, resolve_scene
+
+        if action_mode not in ACTION_MODES:
+            raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {action_mode!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}, "
+                f"got {render_mode!r}"
+            )
+        if max_translation_m <= 0 or max_rotation_deg <= 0:
+            raise ValueError("max_translation_m and max_rotation_deg must be positive")
+        if image_scale <= 0:
+            raise ValueError(f"image_scale must be positive, got {image_scale}")
+        self.scene: Scene = resolve_scene(scene if scene is not None else DEFAULT_SCENE, up_axis)
+        self.action_mode = action_mode
+        self.render_mode = render_mode
+        self.camera = (camera or PinholeCamera()).scaled(image_scale) if image_scale != 1.0 else (
+            camera or PinholeCamera()
+        )
+        self.max_depth_m = float(max_depth_m)
+        self.agent_radius_m = float(agent_radius_m)
+        self.max_translation_m = float(max_translation_m)
+        self.max_rotation_rad = float(np.deg2rad(max_rotation_deg))
+        self.collision_penalty = float(collision_penalty)
+        self.start_clearance_m = float(start_clearance_m)
+        self.bounds = self.scene.bounds
+
+        # The native ray-casting scene is built lazily (first reset), after any fork.
+        self.raycaster = RayCaster(self.scene.vertices, self.scene.faces, raycaster_backend)
+        self.renderer = RgbdRenderer(self.scene, self.camera, self.max_depth_m, self.raycaster)
+        self.panorama_camera = (
+            EquirectangularCamera(*panorama_shape) if panorama_shape is not None else None
+        )
+        self.collision = CollisionChecker(
+            self.raycaster, self.bounds, self.agent_radius_m, escape_no_hit_threshold
+        )
+        self.coverage = CoverageTracker(
+            self.scene.sample_surface(coverage_samples, seed=0), self.camera, coverage_range_m
+        )
+        self._top_down: TopDownMap | None = None
+
+        height, width = self.camera.height, self.camera.width
+        observation_spaces: dict[str, spaces.Space] = {
+            "rgb": spaces.Box(0, 255, (height, width, 3), np.uint8),
+            "depth": spaces.Box(0.0, self.max_depth_m, (height, width), np.float32),
+            "pose": spaces.Box(-np.inf, np.inf, (4, 4), np.float32),
+        }
+        if self.panorama_camera is not None:
+            observation_spaces["panorama"] = spaces.Box(
+                0.0, np.inf, (self.panorama_camera.height, self.panorama_camera.width), np.float32
+            )
+        self.observation_space = spaces.Dict(observation_spaces)
+        if action_mode == "pose":
+            low = np.concatenate([self.bounds[0], -np.ones(4)]).astype(np.float32)
+            high = np.concatenate([self.bounds[1], np.ones(4)]).astype(np.float32)
+            self.action_space = spaces.Box(low, high, dtype=np.float32)
+        elif action_mode == "delta":
+            self.action_space = spaces.Box(-1.0, 1.0, (6,), np.float32)
+        else:
+            self.action_space = spaces.Discrete(len(DISCRETE_ACTIONS))
+
+        self._pose = np.eye(4)
+        self._positions: list[np.ndarray] = []
+        self._rgb: np.ndarray | None = None
+        self._depth: np.ndarray | None = None
+        self._panorama: np.ndarray | None = None
+        self._path_length_m = 0.0
+        self._step_count = 0
+
+    # -- public helpers ------------------------------------------------------------------
+    @property
+    def pose(self) -> np.ndarray:
+        """Current camera-to-world pose (a copy)."""
+        return self._pose.copy()
+
+    @property
+    def trajectory(self) -> np.ndarray:
+        """(K, 3) positions visited this episode, start included."""
+        return np.array(self._positions)
+
+    # -- gymnasium API -------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        super().reset(seed=seed)
+        options = options or {}
+        unknown = set(options) - {"pose"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; supported: ['pose']")
+        if "pose" in options:
+            pose = validate_pose(options["pose"], "options['pose']")
+            if not np.all((pose[:3, 3] >= self.bounds[0]) & (pose[:3, 3] <= self.bounds[1])):
+                raise ValueError(
+                    f"options['pose'] position {pose[:3, 3].tolist()} lies outside the scene "
+                    f"bounds {self.bounds.tolist()}"
+                )
+        else:
+            pose = self._sample_start_pose()
+        self._pose = pose
+        self._positions = [pose[:3, 3].copy()]
+        self._path_length_m = 0.0
+        self._step_count = 0
+        self.coverage.reset()
+        self._observe()
+        gain = self.coverage.update(self._pose, self._depth)
+        return self._observation(), self._info(gain, False, "")
+
+    def step(
+        self, action: Any
+    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        if self._rgb is None:
+            raise RuntimeError("call reset() before step()")
+        target = self._target_pose(self._validated_action(action))
+        limited = limit_pose_step(self._pose, target, self.max_translation_m, self.max_rotation_rad)
+        move = self.collision.move(self._pose[:3, 3], limited[:3, 3])
+        self._path_length_m += float(np.linalg.norm(move.position - self._pose[:3, 3]))
+        self._pose = make_pose(limited[:3, :3], move.position)
+        self._positions.append(move.position.copy())
+        self._step_count += 1
+        self._observe()
+        gain = self.coverage.update(self._pose, self._depth)
+        reward = 100.0 * gain - (self.collision_penalty if move.collided else 0.0)
+        info = self._info(gain, move.collided, move.reason)
+        return self._observation(), float(reward), False, False, info
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        if self._rgb is None:
+            raise RuntimeError("call reset() before render()")
+        if self._top_down is None:
+            self._top_down = TopDownMap(self.scene, self.raycaster)
+        top_down = self._top_down.draw(self.trajectory, self._pose)
+        return compose_frame(top_down, self._rgb, self._depth, self.max_depth_m)
+
+    # -- internals -----------------------------------------------------------------------
+    def _validated_action(self, action: Any) -> Any:
+        if self.action_mode == "discrete":
+            if isinstance(action, (bool, np.bool_)) or not np.issubdtype(
+                np.asarray(action).dtype, np.integer
+            ):
+                raise ValueError(
+                    f"discrete action must be an integer in [0, {self.action_space.n}), "
+                    f"got {action!r}"
+                )
+            if np.asarray(action).shape not in ((), (1,)) or not self.action_space.contains(
+                int(np.asarray(action).reshape(-1)[0])
+            ):
+                raise ValueError(
+                    f"discrete action must be an integer in [0, {self.action_space.n}), "
+                    f"got {action!r}"
+                )
+            return int(np.asarray(action).reshape(-1)[0])
+        try:
+            array = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"action must be a numeric array, got {action!r}") from error
+        expected = self.action_space.shape
+        if array.shape != expected:
+            raise ValueError(
+                f"{self.action_mode} action must have shape {expected}, got {array.shape}"
+            )
+        if not np.all(np.isfinite(array)):
+            raise ValueError(f"action contains NaN or inf: {array.tolist()}")
+        tolerance = 1e-5
+        low, high = self.action_space.low, self.action_space.high
+        if np.any(array < low - tolerance) or np.any(array > high + tolerance):
+            raise ValueError(
+                f"{self.action_mode} action {np.round(array, 4).tolist()} is outside the action "
+                f"space [{low.tolist()}, {high.tolist()}]"
+            )
+        return array
+
+    def _target_pose(self, action: Any) -> np.ndarray:
+        if self.action_mode == "pose":
+            return pose_target_from_action(action)
+        if self.action_mode == "delta":
+            return delta_target_from_action(
+                self._pose, action, self.max_translation_m, self.max_rotation_rad
+            )
+        return discrete_target_from_action(
+            self._pose, action, self.max_translation_m, self.max_rotation_rad
+        )
+
+    def _observe(self) -> None:
+        self._rgb, self._depth = self.renderer.render(self._pose)
+        if self.panorama_camera is not None:
+            self._panorama = render_panorama(self.raycaster, self.panorama_camera, self._pose[:3, 3])
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        observation = {
+            "rgb": self._rgb.copy(),
+            "depth": self._depth.copy(),
+            "pose": self._pose.astype(np.float32),
+        }
+        if self._panorama is not None:
+            observation["panorama"] = self._panorama.copy()
+        return observation
+
+    def _info(self, gain: float, collided: bool, reason: str) -> dict[str, Any]:
+        info: dict[str, Any] = {
+            "coverage": self.coverage.coverage,
+            "coverage_gain": float(gain),
+            "collided": bool(collided),
+            "collision_reason": reason,
+            "path_length_m": float(self._path_length_m),
+            "intrinsics": self.camera.as_dict(),
+            "step": self._step_count,
+        }
+        if self._panorama is not None:
+            info["panorama_no_hit_share"] = no_hit_share(self._panorama)
+        return info
+
+    def _sample_start_pose(self) -> np.ndarray:
+        low = self.bounds[0] + self.start_clearance_m
+        high = self.bounds[1] - self.start_clearance_m
+        if np.any(high <= low):
+            raise ValueError(
+                f"scene {self.scene.name!r} is too small for start_clearance_m="
+                f"{self.start_clearance_m}"
+            )
+        probe = EquirectangularCamera(16, 32)
+        for _ in range(START_BATCHES):
+            candidates = self.np_random.uniform(low, high, size=(START_CANDIDATES_PER_BATCH, 3))
+            clear = self.raycaster.unsigned_distance(candidates) >= self.start_clearance_m
+            for position in candidates[clear]:
+                if self._is_inside_scene(position, probe):
+                    yaw = self.np_random.uniform(-np.pi, np.pi)
+                    target = position + np.array([np.cos(yaw), np.sin(yaw), 0.0])
+                    return make_pose(look_at_rotation(position, target), position)
+        raise RuntimeError(
+            f"found no free start position in scene {self.scene.name!r} with "
+            f"start_clearance_m={self.start_clearance_m}; lower it or pass "
+            "reset(options={'pose': c2w})"
+        )
+
+    def _is_inside_scene(self, position: np.ndarray, probe: EquirectangularCamera) -> bool:
+        """Inside the building and not inside a solid: surrounded by front-facing surfaces."""
+        hits = self.raycaster.cast(position.astype(np.float32), probe.ray_directions)
+        hit = hits.hit_mask
+        # Scans without a ceiling see the sky upwards: accept what a move would accept.
+        threshold = self.collision.escape_no_hit_threshold
+        if 1.0 - hit.mean() > (0.5 if threshold is None else threshold):
+            return False
+        triangles = self.scene.vertices[self.scene.faces[hits.triangle_ids[hit]]]
+        normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+        facing = np.einsum("ij,ij->i", normals, probe.ray_directions[hit]) < 0
+        return facing.mean() >= 0.9
