@@ -27,6 +27,11 @@ if TYPE_CHECKING:  # pragma: no cover
 # (axis-aligned rays graze the walls of box-shaped rooms).
 _SIGN_VOTE_DIRECTIONS = 9
 
+# Voxel offsets of the 8 corners of a cell, i-major (matching the trilinear weights below).
+_CELL_CORNER_OFFSETS = np.array(
+    [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.int64
+)
+
 
 def _fibonacci_directions(count: int) -> np.ndarray:
     """``count`` unit vectors spread nearly uniformly over the sphere, none on an axis."""
@@ -127,21 +132,21 @@ class SdfVolume:
         upper = self._upper_index
         inside = np.all((index >= 0.0) & (index <= upper), axis=1)
         # Clamp the cell so points on the upper face interpolate within the last cell.
-        cell = np.minimum(np.floor(index), upper - 1.0)
-        np.maximum(cell, 0.0, out=cell)
+        cell = np.floor(index)
+        np.clip(cell, 0.0, upper - 1.0, out=cell)
         frac = index - cell
         _, ny, nz = self.values.shape
-        sx, sy, sz = ny * nz, nz, 1
-        base = cell.astype(np.int64) @ np.array([sx, sy, sz], dtype=np.int64)
-        # A view, so the lookup follows values that were edited or replaced in place.
-        flat = self.values.reshape(-1)
-        fx, fy, fz = frac[:, 0], frac[:, 1], frac[:, 2]
-        gx, gy, gz = 1.0 - fx, 1.0 - fy, 1.0 - fz
-        c00 = flat[base] * gz + flat[base + sz] * fz
-        c01 = flat[base + sy] * gz + flat[base + sy + sz] * fz
-        c10 = flat[base + sx] * gz + flat[base + sx + sz] * fz
-        c11 = flat[base + sx + sy] * gz + flat[base + sx + sy + sz] * fz
-        value = (c00 * gy + c01 * fy) * gx + (c10 * gy + c11 * fy) * fx
+        strides = np.array([ny * nz, nz, 1], dtype=np.int64)
+        corners = (_CELL_CORNER_OFFSETS @ strides)[None, :]
+        # A view, so the lookup follows values that were edited in place.
+        base = (cell.astype(np.int64) @ strides)[:, None]
+        corner_values = self.values.reshape(-1)[base + corners]
+        # Trilinear weights of the 8 corners, in the same (i, j, k) order as the offsets.
+        both = np.stack([1.0 - frac, frac], axis=2)
+        weights = (
+            both[:, 0, :, None, None] * both[:, 1, None, :, None] * both[:, 2, None, None, :]
+        ).reshape(-1, 8)
+        value = np.einsum("ij,ij->i", corner_values, weights)
         if not inside.all():
             value = np.where(inside, value, outside_value)
         return value
