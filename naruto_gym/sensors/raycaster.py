@@ -79,6 +79,8 @@ class RayCaster:
             raise ValueError(f"unknown ray-casting backend {backend!r}; use 'open3d' or 'embreex'")
         self.backend: RayCasterBackend = backend
         self._scene = None
+        self._distance_scene = None
+        self._distance_pid: int | None = None
         self._built_in_pid: int | None = None
 
     # -- native scene ------------------------------------------------------------------
@@ -122,6 +124,8 @@ class RayCaster:
         self.faces = state["faces"]
         self.backend = state["backend"]
         self._scene = None
+        self._distance_scene = None
+        self._distance_pid: int | None = None
         self._built_in_pid = None
 
     # -- queries -----------------------------------------------------------------------
@@ -160,16 +164,22 @@ class RayCaster:
     def unsigned_distance(self, points: np.ndarray) -> np.ndarray:
         """Distance from each point to the closest surface point, (N,) float32 metres."""
         points = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
+        # embreex has no closest-point query: both backends answer it with Open3D.
+        return self._open3d_scene().compute_distance(self._o3d.core.Tensor(points)).numpy()
+
+    def _open3d_scene(self):
         if self.backend == "open3d":
-            return self.native_scene.compute_distance(self._o3d.core.Tensor(points)).numpy()
-        return self._closest_distance_fallback(points)
+            return self.native_scene
+        if self._distance_scene is None or self._distance_pid != os.getpid():
+            import open3d as o3d
 
-    def _closest_distance_fallback(self, points: np.ndarray) -> np.ndarray:
-        import trimesh
-
-        mesh = trimesh.Trimesh(self.vertices, self.faces, process=False)
-        _, distance, _ = trimesh.proximity.closest_point(mesh, points)
-        return distance.astype(np.float32)
+            self._distance_pid = os.getpid()
+            self._o3d = o3d
+            self._distance_scene = o3d.t.geometry.RaycastingScene()
+            self._distance_scene.add_triangles(
+                o3d.core.Tensor(self.vertices), o3d.core.Tensor(self.faces.astype(np.uint32))
+            )
+        return self._distance_scene
 
     def segment_is_free(
         self, start: np.ndarray, end: np.ndarray, clearance: float

@@ -1,0 +1,98 @@
+"""Loading meshes: formats, colour sources, up axis, clear errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+
+from naruto_gym.scenes.mesh_scene import load_scene, scene_from_trimesh
+from tests.conftest import SAMPLE_MESHES
+
+
+def _coloured_box() -> trimesh.Trimesh:
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    colours = np.zeros((len(box.vertices), 4), np.uint8)
+    colours[:, 0] = 255
+    colours[:, 3] = 255
+    box.visual.vertex_colors = colours
+    return box
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".obj", ".glb"])
+def test_formats_round_trip_geometry(tmp_path, suffix):
+    path = tmp_path / f"box{suffix}"
+    _coloured_box().export(path)
+    scene = load_scene(path)
+    np.testing.assert_allclose(scene.extents, [1.0, 2.0, 3.0], atol=1e-6)
+    assert len(scene.faces) == 12
+
+
+def test_vertex_colour_is_interpolated():
+    scene = scene_from_trimesh(_coloured_box())
+    rgb = scene.colour_at(np.array([0, 5]), np.array([[0.2, 0.3], [0.5, 0.5]], np.float32))
+    np.testing.assert_array_equal(rgb, [[255, 0, 0], [255, 0, 0]])
+    assert scene.colour_at(np.array([-1]), np.zeros((1, 2), np.float32)).tolist() == [[0, 0, 0]]
+
+
+def test_face_colours():
+    box = trimesh.creation.box()
+    box.visual.face_colors = np.tile([10, 200, 30, 255], (12, 1))
+    scene = scene_from_trimesh(box)
+    assert scene.colour_at(np.array([3]), np.array([[0.1, 0.1]], np.float32)).tolist() == [
+        [10, 200, 30]
+    ]
+
+
+def test_texture_is_sampled_at_hit_uv():
+    # A 2 x 2 texture: left half red, right half blue; a quad mapped onto it.
+    image = np.zeros((2, 2, 3), np.uint8)
+    image[:, 0] = [255, 0, 0]
+    image[:, 1] = [0, 0, 255]
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    material = trimesh.visual.material.SimpleMaterial(image=Image.fromarray(image))
+    mesh = trimesh.Trimesh(
+        vertices, faces, visual=trimesh.visual.TextureVisuals(uv=uv, material=material),
+        process=False,
+    )
+    scene = scene_from_trimesh(mesh)
+    # Triangle 0 = (v0, v1, v2); (u, v) = (0.9, 0.05) is near v1 (uv x = 0.95): blue.
+    near_right = scene.colour_at(np.array([0]), np.array([[0.9, 0.05]], np.float32))
+    # Triangle 1 = (v0, v2, v3); near v3 (uv x = 0.05): red.
+    near_left = scene.colour_at(np.array([1]), np.array([[0.05, 0.9]], np.float32))
+    assert near_right.tolist() == [[0, 0, 255]]
+    assert near_left.tolist() == [[255, 0, 0]]
+
+
+def test_y_up_is_rotated_to_z_up():
+    box = trimesh.creation.box(extents=(1.0, 3.0, 2.0))  # tall along y
+    scene = scene_from_trimesh(box, up_axis="y")
+    np.testing.assert_allclose(scene.extents, [1.0, 2.0, 3.0], atol=1e-9)
+
+
+def test_errors_are_clear(tmp_path):
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        load_scene(tmp_path / "missing.ply")
+    broken = tmp_path / "broken.ply"
+    broken.write_bytes(b"ply\nformat nonsense\n\x00\x01")
+    with pytest.raises(ValueError, match="could not read|no triangles"):
+        load_scene(broken)
+    points = tmp_path / "points.ply"
+    trimesh.PointCloud(np.random.default_rng(0).random((10, 3))).export(points)
+    with pytest.raises(ValueError, match="no triangles"):
+        load_scene(points)
+    with pytest.raises(ValueError, match="up_axis"):
+        scene_from_trimesh(trimesh.creation.box(), up_axis="w")
+
+
+@pytest.mark.parametrize("name", sorted(SAMPLE_MESHES))
+def test_sample_meshes_load(shared_scenes, name):
+    relative, up_axis = SAMPLE_MESHES[name]
+    scene = load_scene(shared_scenes / relative, up_axis=up_axis)
+    assert len(scene.faces) > 50
+    assert scene.extents[2] < scene.extents[:2].max()  # z-up rooms are wider than tall
+    samples = scene.sample_surface(1000, seed=0)
+    assert samples.shape == (1000, 3)
