@@ -194,6 +194,7 @@ class EpisodeReconstruction:
         num_samples: int = DEFAULT_NUM_SAMPLES,
         seed: int = 0,
         threshold_m: float = DEFAULT_THRESHOLD_M,
+        cull_every: int = DEFAULT_CULL_EVERY,
         renderer: RgbdRenderer | None = None,
     ) -> dict[str, Any]:
         """Metrics of the fused reconstruction, as a flat dict for an env's ``info``.
@@ -221,6 +222,7 @@ class EpisodeReconstruction:
             num_samples=num_samples,
             seed=seed,
             threshold_m=threshold_m,
+            cull_every=cull_every,
             renderer=renderer,
         )
         return {**metrics.as_dict(), **base}

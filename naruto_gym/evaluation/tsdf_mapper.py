@@ -98,6 +98,12 @@ class TsdfFusionMapper:
     def _trunc_multiplier(self) -> float:
         return self.truncation_m / self.voxel_size_m
 
+    @property
+    def _open3d_weight_threshold(self) -> float:
+        # Open3D keeps voxels with weight strictly above the threshold; every frame adds a
+        # weight of 1, so this makes "seen by at least min_weight frames" inclusive.
+        return self.min_weight - 1e-3
+
     def reset(self) -> None:
         """Forget everything fused so far."""
         self._grid = o3d.t.geometry.VoxelBlockGrid(
@@ -180,7 +186,8 @@ class TsdfFusionMapper:
         """
         if self.is_empty:
             return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
-        mesh = self._grid.extract_triangle_mesh(weight_threshold=self.min_weight).cpu()
+        threshold = self._open3d_weight_threshold
+        mesh = self._grid.extract_triangle_mesh(weight_threshold=threshold).cpu()
         vertices = mesh.vertex.positions.numpy().astype(np.float64)
         if len(vertices) == 0 or "indices" not in mesh.triangle:
             return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
@@ -193,7 +200,8 @@ class TsdfFusionMapper:
         """Zero-crossing surface points and their colours: ((N, 3) float64, (N, 3) uint8)."""
         if self.is_empty:
             return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.uint8)
-        cloud = self._grid.extract_point_cloud(weight_threshold=self.min_weight).cpu()
+        threshold = self._open3d_weight_threshold
+        cloud = self._grid.extract_point_cloud(weight_threshold=threshold).cpu()
         if "positions" not in cloud.point or len(cloud.point.positions) == 0:
             return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.uint8)
         points = cloud.point.positions.numpy().astype(np.float64)

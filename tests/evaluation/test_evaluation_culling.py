@@ -1,0 +1,128 @@
+"""Mesh culling: faces seen from the trajectory stay, faces never seen go."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from naruto_gym.evaluation import cull_mesh, visible_vertex_mask
+from naruto_gym.geometry.transforms import look_at_rotation, make_pose
+from naruto_gym.scenes.mesh_scene import scene_from_trimesh
+from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
+
+CAMERA = PinholeCamera().scaled(0.1)  # 120 x 68: enough for these tests, fast
+
+
+def wall_scene():
+    """Ground truth: one 4 m x 3 m wall in the plane y = 2, facing the camera at the origin."""
+    wall = trimesh.Trimesh(
+        [[-2, 2, -1.5], [2, 2, -1.5], [2, 2, 1.5], [-2, 2, 1.5]], [[0, 1, 2], [0, 2, 3]]
+    )
+    return scene_from_trimesh(wall, name="wall")
+
+
+def small_quad(y: float, x: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """A 10 cm quad in the plane at ``y``, centred at (x, y, 0)."""
+    h = 0.05
+    vertices = np.array([[x - h, y, -h], [x + h, y, -h], [x + h, y, h], [x - h, y, h]])
+    return vertices, np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def union(*meshes):
+    vertices, faces, offset = [], [], 0
+    for v, f in meshes:
+        vertices.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+    return np.concatenate(vertices), np.concatenate(faces)
+
+
+def pose_looking_at(eye, target) -> np.ndarray:
+    eye, target = np.asarray(eye, float), np.asarray(target, float)
+    return make_pose(look_at_rotation(eye, target), eye)
+
+
+FORWARD_POSE = pose_looking_at([0, 0, 0], [0, 1, 0])
+
+
+def test_keeps_seen_faces_and_drops_hidden_or_behind_faces():
+    scene = wall_scene()
+    on_wall = small_quad(1.99)
+    hidden_behind_wall = small_quad(2.5)
+    just_behind_within_margin = small_quad(2.02, x=0.5)
+    behind_camera = small_quad(-1.0)
+    vertices, faces = union(on_wall, hidden_behind_wall, just_behind_within_margin, behind_camera)
+    kept_vertices, kept_faces = cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene)
+    assert len(kept_faces) == 4
+    kept_points = kept_vertices[kept_faces].reshape(-1, 3)
+    assert set(np.round(kept_points[:, 1], 2)) == {1.99, 2.02}
+    # Faces are re-indexed into the compacted vertex array.
+    assert kept_faces.max() == len(kept_vertices) - 1
+    mask = visible_vertex_mask(vertices, FORWARD_POSE[None], CAMERA, scene)
+    assert mask.tolist() == [True] * 4 + [False] * 4 + [True] * 4 + [False] * 4
+
+
+def test_margin_is_respected():
+    scene = wall_scene()
+    vertices, faces = small_quad(2.05)
+    assert len(cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene)[1]) == 0
+    assert len(
+        cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene, depth_margin_m=0.06)[1]
+    ) == 2
+
+
+def test_face_outside_the_frustum_is_dropped_and_one_visible_vertex_keeps_a_face():
+    scene = wall_scene()
+    # Far to the side: the 90 degree horizontal field of view at 1.9 m spans |x| < 1.9.
+    outside = small_quad(1.9, x=1.95 + 0.2)
+    # A long triangle with one vertex in view and two outside: kept whole.
+    straddling = (
+        np.array([[0.0, 1.9, 0.0], [5.0, 1.9, 0.0], [5.0, 1.9, 0.5]]),
+        np.array([[0, 1, 2]]),
+    )
+    vertices, faces = union(outside, straddling)
+    kept_vertices, kept_faces = cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene)
+    assert len(kept_faces) == 1
+    np.testing.assert_allclose(kept_vertices[kept_faces[0]], straddling[0])
+
+
+def test_every_nth_pose_is_used():
+    scene = wall_scene()
+    vertices, faces = small_quad(1.99)
+    away = pose_looking_at([0, 0, 0], [0, -1, 0])
+    poses = np.stack([away, FORWARD_POSE, away])
+    assert len(cull_mesh(vertices, faces, poses, CAMERA, scene, every=1)[1]) == 2
+    # every=2 uses poses 0 and 2, both looking away.
+    assert len(cull_mesh(vertices, faces, poses, CAMERA, scene, every=2)[1]) == 0
+
+
+def test_full_and_reduced_resolution_depth_agree_and_renderer_is_accepted():
+    scene = wall_scene()
+    rng = np.random.default_rng(0)
+    # Random small triangles in front of, on, and behind the wall, all inside the frustum.
+    centres = np.column_stack(
+        [rng.uniform(-0.8, 0.8, 300), rng.uniform(1.0, 3.0, 300), rng.uniform(-0.4, 0.4, 300)]
+    )
+    vertices = (centres[:, None, :] + rng.normal(0, 0.01, (300, 3, 3))).reshape(-1, 3)
+    faces = np.arange(len(vertices)).reshape(-1, 3)
+    full = visible_vertex_mask(vertices, FORWARD_POSE[None], CAMERA, scene, depth_scale=1.0)
+    renderer = RgbdRenderer(scene, CAMERA)
+    half = visible_vertex_mask(vertices, FORWARD_POSE[None], CAMERA, renderer, depth_scale=0.5)
+    np.testing.assert_array_equal(full, half)
+    expected = vertices[:, 1] <= 2.03
+    np.testing.assert_array_equal(full, expected)
+    assert 0 < len(cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene)[1]) < 300
+
+
+def test_bad_inputs_raise_clear_errors():
+    scene = wall_scene()
+    vertices, faces = small_quad(1.99)
+    with pytest.raises(ValueError, match="camera-to-world"):
+        cull_mesh(vertices, faces, np.zeros((0, 4, 4)), CAMERA, scene)
+    with pytest.raises(ValueError, match="every"):
+        cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene, every=0)
+    with pytest.raises(ValueError, match="Scene"):
+        cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, "scene.ply")
+    with pytest.raises(ValueError, match="out of range"):
+        cull_mesh(vertices, faces + 10, FORWARD_POSE[None], CAMERA, scene)
