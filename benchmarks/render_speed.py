@@ -44,7 +44,8 @@ def parse_args() -> Args:
         elif f.type in ("bool", bool):
             parser.add_argument(f"--{f.name.replace('_', '-')}", type=int, default=int(f.default))
         else:
-            parser.add_argument(f"--{f.name.replace('_', '-')}", type=type(f.default), default=f.default)
+            flag = f"--{f.name.replace('_', '-')}"
+            parser.add_argument(flag, type=type(f.default), default=f.default)
     return Args(**vars(parser.parse_args()))
 
 

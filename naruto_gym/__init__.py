@@ -9,7 +9,7 @@
   quarter-resolution camera, a cheap start for RL.
 """
 
-from gymnasium.envs.registration import register
+from gymnasium.envs.registration import WrapperSpec, register
 
 from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
 
@@ -18,16 +18,23 @@ __version__ = "0.1.0"
 
 ENTRY_POINT = "naruto_gym.envs.naruto_recon_env:NarutoReconEnv"
 
-register(id="NarutoRecon-v0", entry_point=ENTRY_POINT, max_episode_steps=2000)
-register(
-    id="NarutoReconApartment-v0",
-    entry_point=ENTRY_POINT,
-    max_episode_steps=5000,
-    kwargs={"scene": "apartment"},
-)
-register(
-    id="NarutoReconDiscrete-v0",
-    entry_point=ENTRY_POINT,
-    max_episode_steps=2000,
-    kwargs={"action_mode": "discrete", "image_scale": 0.25},
-)
+# Variants are keyword presets of one class (budget: the published Replica / MP3D frames).
+PRESETS: dict[str, tuple[int, dict]] = {
+    "NarutoRecon-v0": (2000, {}),
+    "NarutoReconApartment-v0": (5000, {"scene": "apartment"}),
+    "NarutoReconDiscrete-v0": (2000, {"action_mode": "discrete", "image_scale": 0.25}),
+}
+for _env_id, (_budget, _kwargs) in PRESETS.items():
+    register(
+        id=_env_id,
+        entry_point=ENTRY_POINT,
+        max_episode_steps=_budget,
+        kwargs=_kwargs,
+        additional_wrappers=(
+            WrapperSpec(
+                "FinalReconstructionMetrics",
+                "naruto_gym.wrappers:FinalReconstructionMetrics",
+                {},
+            ),
+        ),
+    )

@@ -10,6 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from naruto_gym.coverage import CoverageTracker
+from naruto_gym.evaluation.scoring import EpisodeReconstruction, evaluate_reconstruction
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, validate_pose
 from naruto_gym.motion.actions import (
     ACTION_MODES,
@@ -112,7 +113,16 @@ class NarutoReconEnv(gym.Env):
       range within which a sample counts as seen (5 m, the mapping range).
     * ``start_clearance_m``: free space around a random start (0.3 m).
     * ``raycaster_backend``: ``"open3d"`` (default) or ``"embreex"``.
+    * ``reconstruct``: fuse every frame into a reference TSDF map (2 cm voxels) so that any
+      policy gets accuracy / completion / completion ratio: ``gymnasium.make`` adds the
+      ``FinalReconstructionMetrics`` wrapper, so the info of the episode's last step
+      (terminated or truncated) carries them under ``"reconstruction"``;
+      ``env.unwrapped.reconstruction_metrics()`` gives them at any time.
     * ``render_mode``: None or ``"rgb_array"``.
+
+    ## Scoring
+    ``env.unwrapped.evaluate(mesh)`` scores a policy's own mesh against the ground truth,
+    culled to what the episode's frames saw.
 
     ## Version History
     * v0: initial release.
@@ -138,6 +148,7 @@ class NarutoReconEnv(gym.Env):
         coverage_range_m: float = 5.0,
         start_clearance_m: float = 0.3,
         raycaster_backend: str = "open3d",
+        reconstruct: bool = False,
         render_mode: str | None = None,
     ) -> None:
         from naruto_gym.scenes.catalogue import DEFAULT_SCENE, resolve_scene
@@ -180,6 +191,9 @@ class NarutoReconEnv(gym.Env):
             self.scene.sample_surface(coverage_samples, seed=0), self.camera, coverage_range_m
         )
         self._top_down: TopDownMap | None = None
+        self.reconstruction: EpisodeReconstruction | None = (
+            EpisodeReconstruction(self.camera) if reconstruct else None
+        )
 
         height, width = self.camera.height, self.camera.width
         observation_spaces: dict[str, spaces.Space] = {
@@ -203,6 +217,7 @@ class NarutoReconEnv(gym.Env):
 
         self._pose = np.eye(4)
         self._positions: list[np.ndarray] = []
+        self._poses: list[np.ndarray] = []
         self._rgb: np.ndarray | None = None
         self._depth: np.ndarray | None = None
         self._panorama: np.ndarray | None = None
@@ -219,6 +234,38 @@ class NarutoReconEnv(gym.Env):
     def trajectory(self) -> np.ndarray:
         """(K, 3) positions visited this episode, start included."""
         return np.array(self._positions)
+
+    @property
+    def poses(self) -> np.ndarray:
+        """(K, 4, 4) camera-to-world poses of every frame this episode, start included."""
+        return np.array(self._poses).reshape(-1, 4, 4)
+
+    def evaluate(self, mesh: Any, cull: bool = True, **kwargs: Any) -> dict[str, Any]:
+        """Score a policy's own reconstruction against the ground truth.
+
+        Accuracy / completion (cm), completion ratio, precision and F-score (%) at 5 cm from
+        200,000 area-uniform samples per mesh; the mesh is first culled to what this episode's
+        frames saw (see ``naruto_gym.evaluation``).
+
+        Args:
+            mesh: a ``trimesh.Trimesh`` (or ``(vertices, faces)``) in world coordinates.
+            cull: cull by this episode's poses (default True).
+            **kwargs: passed to ``naruto_gym.evaluation.evaluate_reconstruction``
+                (``num_samples``, ``threshold_m``, ``seed``, ...).
+        """
+        if not self._poses:
+            raise RuntimeError("call reset() and run an episode before evaluate()")
+        metrics = evaluate_reconstruction(
+            mesh, self.scene, poses=self.poses, camera=self.camera, cull=cull,
+            renderer=self.renderer, **kwargs,
+        )
+        return {**metrics.as_dict(), "trajectory_length_m": self._path_length_m}
+
+    def reconstruction_metrics(self, **kwargs: Any) -> dict[str, Any]:
+        """Metrics of the reference TSDF reconstruction of this episode (``reconstruct=True``)."""
+        if self.reconstruction is None:
+            raise RuntimeError("make the env with reconstruct=True to fuse a reference map")
+        return self.reconstruction.evaluate(self.scene, renderer=self.renderer, **kwargs)
 
     # -- gymnasium API -------------------------------------------------------------------
     def reset(
@@ -240,6 +287,9 @@ class NarutoReconEnv(gym.Env):
             pose = self._sample_start_pose()
         self._pose = pose
         self._positions = [pose[:3, 3].copy()]
+        self._poses = [pose.copy()]
+        if self.reconstruction is not None:
+            self.reconstruction.reset()
         self._path_length_m = 0.0
         self._step_count = 0
         self.coverage.reset()
@@ -258,6 +308,7 @@ class NarutoReconEnv(gym.Env):
         self._path_length_m += float(np.linalg.norm(move.position - self._pose[:3, 3]))
         self._pose = make_pose(limited[:3, :3], move.position)
         self._positions.append(move.position.copy())
+        self._poses.append(self._pose.copy())
         self._step_count += 1
         self._observe()
         gain = self.coverage.update(self._pose, self._depth)
@@ -327,7 +378,10 @@ class NarutoReconEnv(gym.Env):
     def _observe(self) -> None:
         self._rgb, self._depth = self.renderer.render(self._pose)
         if self.panorama_camera is not None:
-            self._panorama = render_panorama(self.raycaster, self.panorama_camera, self._pose[:3, 3])
+            position = self._pose[:3, 3]
+            self._panorama = render_panorama(self.raycaster, self.panorama_camera, position)
+        if self.reconstruction is not None:
+            self.reconstruction.add_frame(self._rgb, self._depth, self._pose)
 
     def _observation(self) -> dict[str, np.ndarray]:
         observation = {

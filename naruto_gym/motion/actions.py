@@ -64,7 +64,9 @@ def pose_target_from_action(action: np.ndarray) -> np.ndarray:
     quaternion = np.asarray(action[3:7], dtype=np.float64)
     norm = np.linalg.norm(quaternion)
     if norm < 1e-6:
-        raise ValueError("pose action quaternion (x, y, z, w) has zero norm; pass a unit quaternion")
+        raise ValueError(
+            "pose action quaternion (x, y, z, w) has zero norm; pass a unit quaternion"
+        )
     return make_pose(Rotation.from_quat(quaternion / norm).as_matrix(), action[:3])
 
 

@@ -56,7 +56,7 @@ class CollisionChecker:
         bounds: np.ndarray,
         radius_m: float = 0.05,
         escape_no_hit_threshold: float | None = 0.5,
-        escape_panorama: EquirectangularCamera = EquirectangularCamera(32, 64),
+        escape_panorama: EquirectangularCamera | None = None,
     ) -> None:
         if radius_m <= 0:
             raise ValueError(f"agent radius must be positive, got {radius_m}")
@@ -65,7 +65,7 @@ class CollisionChecker:
         self.box_min = np.asarray(bounds[0], np.float64) + radius_m
         self.box_max = np.asarray(bounds[1], np.float64) - radius_m
         self.escape_no_hit_threshold = escape_no_hit_threshold
-        self.escape_panorama = escape_panorama
+        self.escape_panorama = escape_panorama or EquirectangularCamera(32, 64)
 
     def clearance(self, position: np.ndarray) -> float:
         """Distance from ``position`` to the nearest surface, metres."""

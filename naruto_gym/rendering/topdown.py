@@ -49,7 +49,8 @@ class TopDownMap:
         # Floors of files with flipped normals stay floors.
         image[hit & (normal_z < 0) & (height > bounds[0, 2] + 0.05)] = WALL_RGB
         # Shade by height so furniture stands out from the floor.
-        shade = 0.65 + 0.35 * np.clip((height - bounds[0, 2]) / max(cut_z - bounds[0, 2], 1e-6), 0, 1)
+        relative_height = (height - bounds[0, 2]) / max(cut_z - bounds[0, 2], 1e-6)
+        shade = 0.65 + 0.35 * np.clip(relative_height, 0.0, 1.0)
         image = (image * shade[:, None]).astype(np.uint8)
         self.image = image.reshape(self.height, self.width, 3)
 

@@ -58,7 +58,7 @@ def _rollout(env: gym.Env, seed: int, steps: int) -> list[dict]:
 def test_same_seed_same_rollout(env_id):
     first = _rollout(gym.make(env_id, **SMALL), seed=7, steps=8)
     second = _rollout(gym.make(env_id, **SMALL), seed=7, steps=8)
-    for a, b in zip(first, second):
+    for a, b in zip(first, second, strict=True):
         for key in a:
             np.testing.assert_array_equal(a[key], b[key])
     third = _rollout(gym.make(env_id, **SMALL), seed=8, steps=0)
