@@ -43,7 +43,8 @@ def look_at_rotation(eye: np.ndarray, target: np.ndarray, up: np.ndarray = WORLD
     if norm < 1e-12:
         raise ValueError("look_at_rotation: eye and target coincide")
     forward /= norm
-    right = np.cross(forward, -np.asarray(up, dtype=np.float64))
+    # OpenCV axes: right = down x forward with down ~ -up, i.e. forward x up.
+    right = np.cross(forward, np.asarray(up, dtype=np.float64))
     if np.linalg.norm(right) < 1e-9:
         right = np.array([1.0, 0.0, 0.0]) - forward * forward[0]
     right /= np.linalg.norm(right)
