@@ -1,0 +1,39 @@
+"""Scenes: loading meshes, the procedural generator and the shipped catalogue."""
+
+from naruto_gym.scenes.catalogue import (
+    DEFAULT_SCENE,
+    available_scenes,
+    load_catalogue_scene,
+    resolve_scene,
+    scene_info,
+    scene_path,
+)
+from naruto_gym.scenes.mesh_scene import Scene, load_scene, scene_from_trimesh
+from naruto_gym.scenes.procedural import (
+    SceneLayout,
+    generate_apartment,
+    generate_layout,
+    generate_room,
+    make_random_scene,
+    random_layout,
+    save_scene_ply,
+)
+
+__all__ = [
+    "DEFAULT_SCENE",
+    "Scene",
+    "SceneLayout",
+    "available_scenes",
+    "generate_apartment",
+    "generate_layout",
+    "generate_room",
+    "load_catalogue_scene",
+    "load_scene",
+    "make_random_scene",
+    "random_layout",
+    "resolve_scene",
+    "save_scene_ply",
+    "scene_from_trimesh",
+    "scene_info",
+    "scene_path",
+]
