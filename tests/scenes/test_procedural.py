@@ -1,0 +1,268 @@
+"""The procedural scene generator: determinism, sizes, closed rooms, doorways, free space."""
+
+from __future__ import annotations
+
+import hashlib
+from collections import deque
+
+import numpy as np
+import pytest
+
+from naruto_gym.scenes.catalogue import available_scenes, catalogue_entry
+from naruto_gym.scenes.mesh_scene import Scene, load_scene
+from naruto_gym.scenes.procedural import (
+    FLOOR_THICKNESS_M,
+    SceneLayout,
+    generate_apartment,
+    generate_layout,
+    generate_room,
+    make_random_scene,
+    random_layout,
+    save_scene_ply,
+    scene_to_ply_bytes,
+)
+from naruto_gym.sensors.raycaster import RayCaster
+
+AGENT_RADIUS_M = 0.05
+FURNITURE_EXCLUDED = {"painting", "rug", "ceiling_light"}
+
+
+def _digest(scene: Scene) -> str:
+    return hashlib.sha256(scene_to_ply_bytes(scene)).hexdigest()
+
+
+def _unit_directions(count: int, seed: int) -> np.ndarray:
+    directions = np.random.default_rng(seed).normal(size=(count, 3))
+    return directions / np.linalg.norm(directions, axis=1, keepdims=True)
+
+
+def _reachable_rooms(layout: SceneLayout, caster: RayCaster, z: float, step: float = 0.1):
+    """Rooms whose free point a breadth-first search over free plan cells reaches from the
+    start position, on a grid at height ``z``."""
+    width, depth, _ = layout.size
+    xs = np.arange(step / 2, width, step)
+    ys = np.arange(step / 2, depth, step)
+    grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)
+    points = np.concatenate([grid.reshape(-1, 2), np.full((grid.shape[0] * grid.shape[1], 1), z)],
+                            axis=1)
+    free = (caster.unsigned_distance(points) >= AGENT_RADIUS_M + 0.03).reshape(grid.shape[:2])
+
+    def cell_of(point) -> tuple[int, int]:
+        return (int(np.clip(round((point[0] - step / 2) / step), 0, len(xs) - 1)),
+                int(np.clip(round((point[1] - step / 2) / step), 0, len(ys) - 1)))
+
+    start = cell_of(layout.start_position)
+    assert free[start], "start cell is not free"
+    seen = np.zeros_like(free)
+    seen[start] = True
+    queue = deque([start])
+    while queue:
+        i, j = queue.popleft()
+        for a, b in ((i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)):
+            if 0 <= a < free.shape[0] and 0 <= b < free.shape[1] and free[a, b] and not seen[a, b]:
+                seen[a, b] = True
+                queue.append((a, b))
+    return [index for index, point in enumerate(layout.room_points) if seen[cell_of(point)]]
+
+
+# ---------------------------------------------------------------------------------------
+def test_same_seed_gives_byte_identical_mesh():
+    assert scene_to_ply_bytes(generate_room(3)) == scene_to_ply_bytes(generate_room(3))
+    first = generate_apartment(5, num_rooms=4, size=(10.0, 8.0, 2.7))
+    second = generate_apartment(5, num_rooms=4, size=(10.0, 8.0, 2.7))
+    assert scene_to_ply_bytes(first) == scene_to_ply_bytes(second)
+
+
+def test_different_seeds_give_different_scenes():
+    digests = {_digest(generate_room(seed)) for seed in range(4)}
+    assert len(digests) == 4
+    layouts = [generate_layout(seed, (12.0, 9.0, 2.8), 5) for seed in (0, 1)]
+    assert [r.cell for r in layouts[0].rooms] != [r.cell for r in layouts[1].rooms]
+
+
+@pytest.mark.parametrize("size", [(5.0, 5.0, 3.0), (4.2, 6.3, 2.6)])
+def test_room_extents_match_requested_size(size):
+    layout = generate_layout(2, size, 1)
+    scene = layout.to_scene()
+    t = layout.wall_thickness
+    expected = np.array(size) + np.array([2 * t, 2 * t, 2 * FLOOR_THICKNESS_M])
+    np.testing.assert_allclose(scene.extents, expected, atol=1e-4)
+    # The free interior starts at the origin: floor at z = 0, inner wall faces at 0 and W.
+    np.testing.assert_allclose(scene.bounds[0], [-t, -t, -FLOOR_THICKNESS_M], atol=1e-4)
+    assert 1_000 <= len(scene.faces) <= 50_000
+
+
+def test_apartment_has_rooms_doorways_and_size():
+    layout = generate_layout(12, (12.0, 9.0, 2.8), 6)
+    scene = layout.to_scene()
+    assert len(layout.rooms) == 6
+    assert max(scene.extents[:2]) >= 10.0
+    assert len(scene.faces) <= 50_000
+    # The cells tile the footprint exactly.
+    assert sum(room.cell.area for room in layout.rooms) == pytest.approx(12.0 * 9.0)
+    # Room graph through doorways is connected.
+    neighbours = {i: set() for i in range(len(layout.rooms))}
+    for door in layout.doorways:
+        a, b = door.rooms
+        assert a != b
+        neighbours[a].add(b)
+        neighbours[b].add(a)
+    seen, stack = {0}, [0]
+    while stack:
+        for other in neighbours[stack.pop()] - seen:
+            seen.add(other)
+            stack.append(other)
+    assert seen == set(range(len(layout.rooms)))
+
+
+def _layouts_under_test() -> list[tuple[str, SceneLayout]]:
+    cases = [(f"catalogue:{name}", catalogue_entry(name).layout()) for name in available_scenes()]
+    cases += [(f"random_apartment:{seed}", random_layout(seed, "apartment")) for seed in (3, 8)]
+    cases += [(f"random_room:{seed}", random_layout(seed, "room")) for seed in (4,)]
+    return cases
+
+
+@pytest.fixture(scope="module", params=_layouts_under_test(), ids=lambda case: case[0])
+def built(request):
+    _, layout = request.param
+    scene = layout.to_scene()
+    return layout, scene, RayCaster(scene.vertices, scene.faces)
+
+
+def test_doorways_are_open(built):
+    layout, _, caster = built
+    for door in layout.doorways:
+        near, far = door.passage(depth=0.6, z=1.0)
+        assert caster.segment_is_free(near, far, clearance=AGENT_RADIUS_M), door
+        # ...and the doorway is an opening, not just a hole: its lintel closes it above.
+        centre = 0.5 * (near + far)
+        up = caster.cast_distance(centre[None], np.array([[0.0, 0.0, 1.0]]))[0]
+        assert up == pytest.approx(door.height - 1.0, abs=1e-3)
+
+
+def test_every_room_is_reachable_from_the_start(built):
+    layout, _, caster = built
+    reached = _reachable_rooms(layout, caster, z=1.5)
+    assert reached == list(range(len(layout.rooms)))
+
+
+def test_rooms_are_closed(built):
+    layout, scene, caster = built
+    directions = _unit_directions(3000, seed=0)
+    lower, upper = scene.bounds[0] - 1e-3, scene.bounds[1] + 1e-3
+    for point in [layout.start_position, *layout.room_points]:
+        hits = caster.cast(np.asarray(point), directions)
+        assert hits.hit_mask.all(), f"a ray escaped from {point}"
+        ends = np.asarray(point) + directions * hits.distance[:, None]
+        assert np.all((ends >= lower) & (ends <= upper))
+        # Never hits the outside of a wall: the point is inside (even crossings beyond).
+        assert np.all(caster.count_surface_crossings(np.asarray(point), directions[:50]) >= 1)
+
+
+def test_start_and_room_points_are_clear(built):
+    layout, _, caster = built
+    points = np.array([layout.start_position, *layout.room_points])
+    assert np.all(caster.unsigned_distance(points) >= 0.3)
+    assert layout.start_position in layout.room_points
+
+
+def test_furniture_keeps_gaps_and_leaves_doorways_free(built):
+    layout, _, _ = built
+    furniture = [o for o in layout.objects if o.kind not in FURNITURE_EXCLUDED]
+    assert furniture, "no furniture placed"
+    for index, item in enumerate(furniture):
+        room = layout.rooms[item.room]
+        assert room.interior.contains(item.footprint), item.kind
+        for other in furniture[index + 1:]:
+            if other.room != item.room:
+                continue  # back to back across a wall is fine
+            assert not item.footprint.intersects(other.footprint.inflated(0.399)), (
+                item.kind, other.kind)
+        for door in layout.doorways:
+            near, far = door.passage(depth=0.7, z=0.0)
+            lo = np.minimum(near, far)[:2] - 0.05
+            hi = np.maximum(near, far)[:2] + 0.05
+            if door.along == "x":
+                lo[0], hi[0] = door.lo, door.hi
+            else:
+                lo[1], hi[1] = door.lo, door.hi
+            fp = item.footprint
+            assert not (fp.x0 < hi[0] and lo[0] < fp.x1 and fp.y0 < hi[1] and lo[1] < fp.y1), (
+                f"{item.kind} stands in front of a doorway")
+
+
+def test_colours_are_varied():
+    scene = generate_room(0)
+    colours = scene.corner_colours.reshape(-1, 3)
+    distinct = np.unique(colours // 16, axis=0)
+    assert len(distinct) >= 40
+    # Hue spread: red-, green- and blue-dominant surfaces all exist.
+    dominant = np.argmax(colours.astype(int) - colours.mean(axis=1, keepdims=True), axis=1)
+    saturated = colours.max(axis=1).astype(int) - colours.min(axis=1) > 60
+    assert set(np.unique(dominant[saturated])) == {0, 1, 2}
+
+
+def test_furniture_density_zero_leaves_only_decorations():
+    layout = generate_layout(1, (5.0, 5.0, 3.0), 1, furniture_density=0.0)
+    assert {o.kind for o in layout.objects} <= FURNITURE_EXCLUDED
+
+
+@pytest.mark.parametrize("kind", ["room", "apartment"])
+def test_make_random_scene(kind):
+    scenes = [make_random_scene(seed, kind) for seed in (0, 1)]
+    assert _digest(scenes[0]) != _digest(scenes[1])
+    assert _digest(scenes[0]) == _digest(make_random_scene(0, kind))
+    for seed, scene in enumerate(scenes):
+        assert scene.name == f"{kind}_{seed}"
+        if kind == "apartment":
+            assert len(random_layout(seed, kind).rooms) >= 4
+            assert max(scene.extents[:2]) >= 10.0
+        else:
+            assert 4.0 <= scene.extents[0] <= 7.5
+
+
+def test_ply_round_trip(tmp_path):
+    scene = generate_room(6, (4.0, 4.0, 2.6))
+    path = save_scene_ply(scene, tmp_path / "nested" / "room.ply")
+    loaded = load_scene(path)
+    np.testing.assert_array_equal(loaded.vertices, scene.vertices)
+    np.testing.assert_array_equal(loaded.faces, scene.faces)
+    np.testing.assert_array_equal(loaded.corner_colours, scene.corner_colours)
+    assert not list(tmp_path.rglob("*.tmp"))
+
+
+def test_ply_splits_vertices_whose_corners_disagree(tmp_path):
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    colours = np.array([[[255, 0, 0]] * 3, [[0, 0, 255]] * 3], dtype=np.uint8)
+    scene = Scene(vertices, faces, colours)
+    loaded = load_scene(save_scene_ply(scene, tmp_path / "two.ply"))
+    assert len(loaded.vertices) == 6
+    np.testing.assert_array_equal(loaded.vertices[loaded.faces], vertices[faces])
+    np.testing.assert_array_equal(loaded.corner_colours, colours)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"seed": -1}, "seed"),
+        ({"seed": 1.5}, "seed"),
+        ({"size": (1.0, 5.0, 3.0)}, "at least 2 m"),
+        ({"size": (5.0, 5.0)}, "three positive"),
+        ({"size": (5.0, 5.0, 2.0)}, "door_height"),
+        ({"num_rooms": 0}, "num_rooms"),
+        ({"size": (5.0, 5.0, 3.0), "num_rooms": 5}, "cannot split"),
+        ({"furniture_density": -1.0}, "furniture_density"),
+    ],
+)
+def test_bad_settings_raise_clear_errors(kwargs, message):
+    arguments = {"seed": 0, "size": (5.0, 5.0, 3.0), "num_rooms": 1} | kwargs
+    with pytest.raises(ValueError, match=message):
+        generate_layout(**arguments)
+
+
+def test_bad_kind_and_room_count_raise():
+    with pytest.raises(ValueError, match="kind"):
+        make_random_scene(0, "castle")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="num_rooms >= 2"):
+        generate_apartment(0, num_rooms=1)
