@@ -1,0 +1,172 @@
+"""The policy interface every exploration policy implements, and what it may know of the env.
+
+A policy is bound once to an :class:`EnvContext` (what a real robot knows before it starts:
+the action mode and space, the scene's bounding box, the camera intrinsics, its step limits
+and the episode's step budget), then, for every episode, ``reset`` with the first observation
+and info, then ``act`` on each observation. It never sees the ground-truth mesh: geometry comes
+only from the observations (RGB-D, pose, panorama) and the info of the last step.
+
+The loop a runner drives::
+
+    policy.bind(EnvContext.from_env(env, step_budget=500))
+    obs, info = env.reset(seed=seed, options=policy.reset_options())
+    policy.reset(obs, info, seed=seed)
+    for _ in range(500):
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+
+from naruto_gym.geometry.transforms import quaternion_from_pose
+from naruto_gym.sensors.pinhole import PinholeCamera
+
+Observation = dict[str, np.ndarray]
+Info = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class EnvContext:
+    """What a policy may know about the env before it starts (no ground-truth geometry).
+
+    Attributes:
+        action_mode: ``"pose"``, ``"delta"`` or ``"discrete"``.
+        action_space: the env's action space.
+        bounds: (2, 3) scene bounding box (min, max), metres, world z-up.
+        camera: intrinsics of the ``rgb``/``depth`` observations.
+        max_translation_m: longest move of one step.
+        max_rotation_rad: largest rotation of one step.
+        agent_radius_m: radius of the agent's collision sphere.
+        max_depth_m: sensor range; depth is 0 beyond it.
+        step_budget: steps the episode will last, when known.
+    """
+
+    action_mode: str
+    action_space: gym.Space
+    bounds: np.ndarray
+    camera: PinholeCamera
+    max_translation_m: float = 0.1
+    max_rotation_rad: float = float(np.deg2rad(20.0))
+    agent_radius_m: float = 0.05
+    max_depth_m: float = 10.0
+    step_budget: int | None = None
+
+    @classmethod
+    def from_env(cls, env: gym.Env, step_budget: int | None = None) -> EnvContext:
+        """Context of a (possibly wrapped) ``NarutoReconEnv``.
+
+        Args:
+            env: the env, wrapped or not.
+            step_budget: the episode's step budget; defaults to the ``TimeLimit`` of the
+                env's spec when there is one.
+        """
+        base = env.unwrapped
+        for name in ("bounds", "camera", "action_mode"):
+            if not hasattr(base, name):
+                raise ValueError(
+                    f"EnvContext.from_env needs a NarutoReconEnv-like env with `{name}`; got "
+                    f"{type(base).__name__}. Build the EnvContext yourself for other envs."
+                )
+        if step_budget is None and env.spec is not None:
+            step_budget = env.spec.max_episode_steps
+        return cls(
+            action_mode=base.action_mode,
+            action_space=base.action_space,
+            bounds=np.array(base.bounds, dtype=np.float64),
+            camera=base.camera,
+            max_translation_m=float(base.max_translation_m),
+            max_rotation_rad=float(base.max_rotation_rad),
+            agent_radius_m=float(base.agent_radius_m),
+            max_depth_m=float(base.max_depth_m),
+            step_budget=step_budget,
+        )
+
+
+class Policy(ABC):
+    """Base class of exploration policies.
+
+    Subclasses set :attr:`action_modes` (the env action modes they can act in, preferred
+    first) and implement :meth:`act`; they override :meth:`reset` to clear per-episode state
+    and :meth:`reset_options` to ask for a start pose.
+    """
+
+    #: Action modes this policy can act in; the first is the one a runner builds the env with.
+    action_modes: ClassVar[tuple[str, ...]] = ("pose",)
+    #: Observation keys the policy reads; a runner checks the env provides them.
+    required_observations: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self) -> None:
+        self._context: EnvContext | None = None
+
+    @property
+    def context(self) -> EnvContext:
+        """The env context given to :meth:`bind` (raises if not bound yet)."""
+        if self._context is None:
+            raise RuntimeError(
+                f"{type(self).__name__} is not bound to an env: call "
+                "policy.bind(EnvContext.from_env(env)) before reset()"
+            )
+        return self._context
+
+    @property
+    def preferred_action_mode(self) -> str:
+        return self.action_modes[0]
+
+    def bind(self, context: EnvContext) -> None:
+        """Attach the policy to an env; checks the action mode is supported."""
+        if context.action_mode not in self.action_modes:
+            raise ValueError(
+                f"{type(self).__name__} acts in action modes {self.action_modes}, but the env "
+                f"uses {context.action_mode!r}; make the env with "
+                f"action_mode={self.preferred_action_mode!r}"
+            )
+        self._context = context
+
+    def check_observation(self, observation: Observation) -> None:
+        """Raise a ValueError when an observation lacks a key the policy needs."""
+        missing = [key for key in self.required_observations if key not in observation]
+        if missing:
+            raise ValueError(
+                f"{type(self).__name__} needs observation keys {missing}, which the env does "
+                f"not provide (it gives {sorted(observation)}); e.g. keep the env's panorama on"
+            )
+
+    def reset_options(self) -> dict[str, Any] | None:
+        """Options for ``env.reset`` (e.g. ``{"pose": c2w}`` for a fixed start), or None."""
+        return None
+
+    def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
+        """Start an episode from its first observation and info.
+
+        Args:
+            observation: the env's first observation.
+            info: the env's reset info.
+            seed: reseeds the policy's own randomness when given.
+        """
+        self.check_observation(observation)
+
+    @abstractmethod
+    def act(self, observation: Observation, info: Info | None = None) -> Any:
+        """The action for the current observation (and the info of the step that produced it)."""
+
+    def close(self) -> None:  # noqa: B027 (optional hook, empty by default)
+        """Free resources (optional)."""
+
+
+def pose_action(pose: np.ndarray) -> np.ndarray:
+    """A ``"pose"`` action (x, y, z, qx, qy, qz, qw) float32 from a 4x4 camera-to-world pose."""
+    pose = np.asarray(pose, dtype=np.float64)
+    return np.concatenate([pose[:3, 3], quaternion_from_pose(pose)]).astype(np.float32)
+
+
+def clip_pose_action(action: np.ndarray, space: gym.spaces.Box) -> np.ndarray:
+    """Clip a pose action's position into the action space (the quaternion is left alone)."""
+    action = np.array(action, dtype=np.float32)
+    action[:3] = np.clip(action[:3], space.low[:3], space.high[:3])
+    return action

@@ -1,0 +1,352 @@
+"""Classic frontier-based exploration (Yamauchi, 1997) on a voxel occupancy map from depth.
+
+The policy builds its own :class:`~naruto_agent.policies.occupancy.OccupancyGrid` from the
+depth and pose observations (never the ground-truth mesh), then repeats:
+
+1. *look around*: at the start, turn on the spot through ``look_around_headings`` headings
+   (a full turn), alternating the pitch, so the map around the agent fills in;
+2. *plan*: frontier voxels (free, next to unknown) are grouped into 26-connected clusters;
+   clusters smaller than ``min_cluster_voxels`` and those near goals already visited are
+   dropped; the goal is the reachable traversable voxel closest (path length plus stand-off)
+   to any remaining cluster, i.e. the nearest reachable frontier cluster (ignoring those
+   closer than ``min_goal_distance_m`` while farther ones exist);
+3. *move*: follow the minimum-cost path through traversable voxels (free, away from occupied
+   ones, inside a height band), shortcut where the straight line stays traversable, the
+   camera looking where it goes; replan when the goal's cluster is gone, the agent is
+   blocked or stuck;
+4. at the goal, look at the cluster and to either side of it, mark the goal visited.
+
+When no frontier is left the map is complete and the agent keeps looking around where it is.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from scipy import ndimage
+
+from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
+from naruto_agent.policies.occupancy import OccupancyGrid
+from naruto_gym.geometry.transforms import look_at_rotation, make_pose, rotation_angle_between
+
+_ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
+
+
+class FrontierPolicy(Policy):
+    """Nearest-frontier exploration with a depth-built voxel occupancy map.
+
+    Args:
+        voxel_size_m: occupancy voxel size.
+        pixel_stride: integrate every n-th depth pixel in each direction.
+        max_range_m: depth range integrated into the map.
+        min_cluster_voxels: smallest frontier cluster worth a visit.
+        inflation_voxels: keep paths this many voxels away from occupied voxels.
+        height_margin_m: paths stay this far inside the bounds' floor and ceiling.
+        goal_radius_voxels: a goal lies within this many voxels of its frontier cluster.
+        visited_radius_m: frontier voxels this close to a visited goal are ignored.
+        min_goal_distance_m: goals closer than this (path length) are taken only when no
+            farther one is left; the frontier right around the agent is mostly what a camera
+            with a limited field of view has not looked at yet (straight up or down), which
+            a look-around there would not fix.
+        look_around_headings: headings of the full turn (at the start, and when done).
+        look_pitches_deg: pitches the full turn cycles through.
+        look_focus_sweep_deg: at a goal, the look-around views the frontier cluster and the
+            headings this far to either side of it.
+        max_focus_pitch_deg: the largest pitch used to look at a frontier cluster.
+        replan_every: while moving, check the goal every this many steps.
+        lookahead_voxels: how far along the path a shortcut may reach.
+    """
+
+    required_observations = ("depth", "pose")
+
+    def __init__(
+        self,
+        voxel_size_m: float = 0.1,
+        pixel_stride: int = 4,
+        max_range_m: float = 5.0,
+        min_cluster_voxels: int = 8,
+        inflation_voxels: int = 1,
+        height_margin_m: float = 0.3,
+        goal_radius_voxels: float = 4.0,
+        visited_radius_m: float = 0.8,
+        min_goal_distance_m: float = 1.0,
+        look_around_headings: int = 6,
+        look_pitches_deg: tuple[float, ...] = (-25.0, 20.0),
+        look_focus_sweep_deg: float = 60.0,
+        max_focus_pitch_deg: float = 60.0,
+        replan_every: int = 10,
+        lookahead_voxels: int = 10,
+    ) -> None:
+        super().__init__()
+        if look_around_headings < 1 or not look_pitches_deg:
+            raise ValueError("need at least one look-around heading and one pitch")
+        self.voxel_size_m = voxel_size_m
+        self.pixel_stride = pixel_stride
+        self.max_range_m = max_range_m
+        self.min_cluster_voxels = min_cluster_voxels
+        self.inflation_voxels = inflation_voxels
+        self.height_margin_m = height_margin_m
+        self.goal_radius_voxels = goal_radius_voxels
+        self.visited_radius_m = visited_radius_m
+        self.min_goal_distance_m = min_goal_distance_m
+        self.look_around_headings = look_around_headings
+        self.look_focus_sweep_rad = float(np.deg2rad(look_focus_sweep_deg))
+        self.max_focus_pitch_rad = float(np.deg2rad(max_focus_pitch_deg))
+        self.look_pitches_rad = tuple(float(np.deg2rad(p)) for p in look_pitches_deg)
+        self.replan_every = replan_every
+        self.lookahead_voxels = lookahead_voxels
+        self.grid: OccupancyGrid | None = None
+        self.state = "look"
+        #: Goals reached or given up on this episode (world positions), for tests and plots.
+        self.visited_goals: list[np.ndarray] = []
+        self.plans = 0
+        self._views: deque[np.ndarray] = deque()
+        self._path: np.ndarray = np.zeros((0, 3))
+        self._goal_cell: np.ndarray | None = None
+        self._goal_focus: np.ndarray | None = None
+        self._visited: np.ndarray | None = None
+        self._steps_since_plan = 0
+        self._last_position: np.ndarray | None = None
+        self._stuck = 0
+        self._pitch_index = 0
+        self._traversable_cache: np.ndarray | None = None
+
+    # -- episode -------------------------------------------------------------------------
+    def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
+        super().reset(observation, info, seed)
+        context = self.context
+        self.grid = OccupancyGrid(
+            context.bounds,
+            voxel_size_m=self.voxel_size_m,
+            max_range_m=min(self.max_range_m, context.max_depth_m),
+            pixel_stride=self.pixel_stride,
+        )
+        self._visited = np.zeros(self.grid.shape, bool)
+        self.visited_goals = []
+        self.plans = 0
+        self._path = np.zeros((0, 3))
+        self._goal_cell = None
+        self._goal_focus = None
+        self._steps_since_plan = 0
+        self._last_position = None
+        self._stuck = 0
+        self._pitch_index = 0
+        pose = np.asarray(observation["pose"], np.float64)
+        self.grid.integrate(observation["depth"], pose, context.camera)
+        self._start_look_around(pose, focus=None)
+
+    # -- helpers -------------------------------------------------------------------------
+    def _z_band(self) -> tuple[float, float]:
+        bounds = self.context.bounds
+        low = bounds[0, 2] + self.height_margin_m
+        high = bounds[1, 2] - self.height_margin_m
+        if high <= low:  # a very flat scene: use its middle
+            middle = (bounds[0, 2] + bounds[1, 2]) / 2.0
+            return middle - self.voxel_size_m, middle + self.voxel_size_m
+        return low, high
+
+    def _start_look_around(self, pose: np.ndarray, focus: np.ndarray | None) -> None:
+        """Queue the views of a look-around: a full turn without a focus; with one, the
+        focus itself, then headings ``look_focus_sweep_deg`` to either side of it."""
+        position = pose[:3, 3]
+        self._views.clear()
+        to_focus = None if focus is None else focus - position
+        if to_focus is not None and np.linalg.norm(to_focus[:2]) > 1e-3:
+            yaw = float(np.arctan2(to_focus[1], to_focus[0]))
+            pitch = float(np.arctan2(to_focus[2], np.linalg.norm(to_focus[:2])))
+            pitch = float(np.clip(pitch, -self.max_focus_pitch_rad, self.max_focus_pitch_rad))
+            sweep = self.look_focus_sweep_rad
+            views = [(yaw, pitch), (yaw + sweep, pitch), (yaw - sweep, pitch)]
+        else:
+            forward = pose[:3, 2]
+            start_yaw = float(np.arctan2(forward[1], forward[0]))
+            views = []
+            for k in range(self.look_around_headings):
+                pitch = self.look_pitches_rad[self._pitch_index % len(self.look_pitches_rad)]
+                self._pitch_index += 1
+                views.append((start_yaw + 2.0 * np.pi * k / self.look_around_headings, pitch))
+        for yaw, pitch in views:
+            look = np.array(
+                [np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)]
+            )
+            self._views.append(look_at_rotation(position, position + look))
+        self.state = "look"
+
+    def _mark_visited(self, position: np.ndarray) -> None:
+        assert self.grid is not None and self._visited is not None
+        self.visited_goals.append(position.copy())
+        radius = int(np.ceil(self.visited_radius_m / self.voxel_size_m))
+        centre = self.grid.world_to_cell(position[None])[0]
+        low = np.maximum(centre - radius, 0)
+        high = np.minimum(centre + radius + 1, np.array(self.grid.shape))
+        if np.any(high <= low):
+            return
+        axes = [np.arange(low[i], high[i]) for i in range(3)]
+        cells = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        near = np.linalg.norm(self.grid.cell_to_world(cells) - position, axis=1)
+        cells = cells[near <= self.visited_radius_m]
+        self._visited[tuple(cells.T)] = True
+
+    def _frontier_clusters(self) -> tuple[np.ndarray, np.ndarray]:
+        """(labels, kept) of frontier clusters big enough and not yet visited."""
+        assert self.grid is not None and self._visited is not None
+        frontier = self.grid.frontier() & ~self._visited
+        labels, _ = ndimage.label(frontier, structure=_ALL_NEIGHBOURS)
+        sizes = np.bincount(labels.reshape(-1))
+        big = sizes >= self.min_cluster_voxels
+        big[0] = False
+        return labels, big[labels]
+
+    def _traversable(self, position: np.ndarray) -> np.ndarray:
+        assert self.grid is not None
+        traversable = self.grid.traversable(self.inflation_voxels, self._z_band())
+        # The agent may always leave its own neighbourhood (it may start close to a wall).
+        centre = self.grid.world_to_cell(position[None])[0]
+        low = np.maximum(centre - 1, 0)
+        high = np.minimum(centre + 2, np.array(self.grid.shape))
+        block = (slice(low[0], high[0]), slice(low[1], high[1]), slice(low[2], high[2]))
+        traversable[block] |= ~self.grid.occupied[block]
+        return traversable
+
+    def _plan(self, position: np.ndarray) -> bool:
+        """Choose the nearest reachable frontier cluster; set the path. False: none left."""
+        assert self.grid is not None
+        self.plans += 1
+        self._steps_since_plan = 0
+        labels, kept = self._frontier_clusters()
+        if not kept.any():
+            return False
+        traversable = self._traversable(position)
+        start = self.grid.world_to_cell(position[None])[0]
+        start = np.clip(start, 0, np.array(self.grid.shape) - 1)
+        plan = self.grid.plan_from(start, traversable)
+        reachable = np.isfinite(plan.costs) & traversable
+        distance, nearest = ndimage.distance_transform_edt(~kept, return_indices=True)
+        candidates = reachable & (distance <= self.goal_radius_voxels)
+        # Do not count the start as a goal: it was just looked around from.
+        candidates[tuple(start)] = False
+        index = np.flatnonzero(candidates)
+        if len(index) == 0:
+            return False
+        path_cost = plan.costs.reshape(-1)[index]
+        if np.any(path_cost >= self.min_goal_distance_m):
+            index = index[path_cost >= self.min_goal_distance_m]
+        score = plan.costs.reshape(-1)[index] + distance.reshape(-1)[index] * self.voxel_size_m
+        best = index[int(np.argmin(score))]
+        goal = np.array(np.unravel_index(best, self.grid.shape))
+        focus_cell = np.array([n.reshape(-1)[best] for n in nearest])
+        cluster = labels == labels[tuple(focus_cell)]
+        self._goal_focus = self.grid.cell_to_world(np.argwhere(cluster)).mean(axis=0)
+        self._goal_cell = goal
+        cells = self.grid.trace_path(plan, goal)
+        self._path = self.grid.cell_to_world(cells)
+        self._path[0] = position  # start exactly where the agent is
+        self._traversable_cache = traversable
+        self.state = "move"
+        return True
+
+    def _goal_still_frontier(self) -> bool:
+        if self._goal_cell is None:
+            return False
+        _, kept = self._frontier_clusters()
+        radius = int(np.ceil(self.goal_radius_voxels))
+        low = np.maximum(self._goal_cell - radius, 0)
+        high = self._goal_cell + radius + 1
+        return bool(kept[low[0] : high[0], low[1] : high[1], low[2] : high[2]].any())
+
+    # -- acting --------------------------------------------------------------------------
+    def _look_action(self, pose: np.ndarray) -> np.ndarray | None:
+        while self._views:
+            if rotation_angle_between(pose[:3, :3], self._views[0]) > np.deg2rad(2.0):
+                return pose_action(make_pose(self._views[0], pose[:3, 3]))
+            self._views.popleft()
+        return None
+
+    def _move_action(self, pose: np.ndarray) -> np.ndarray | None:
+        assert self.grid is not None
+        position = pose[:3, 3]
+        # Drop the path points already passed.
+        distances = np.linalg.norm(self._path - position, axis=1)
+        closest = int(np.argmin(distances))
+        self._path = self._path[closest:]
+        if len(self._path) <= 1 and np.linalg.norm(self._path[-1] - position) < 0.02:
+            return None
+        target = self._path[min(1, len(self._path) - 1)]
+        for index in range(min(self.lookahead_voxels, len(self._path) - 1), 1, -1):
+            if self.grid.segment_is_traversable(
+                position, self._path[index], self._traversable_cache
+            ):
+                target = self._path[index]
+                break
+        step = target - position
+        heading = np.array([step[0], step[1], 0.0])
+        if np.linalg.norm(heading) < 1e-6:
+            rotation = pose[:3, :3]
+        else:
+            rotation = look_at_rotation(position, position + heading)
+        length = float(np.linalg.norm(step))
+        if length > self.context.max_translation_m:
+            target = position + step * (self.context.max_translation_m / length)
+        return pose_action(make_pose(rotation, target))
+
+    def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
+        if self.grid is None:
+            raise RuntimeError("call reset() before act()")
+        pose = np.asarray(observation["pose"], np.float64)
+        position = pose[:3, 3]
+        self.grid.integrate(observation["depth"], pose, self.context.camera)
+        self._steps_since_plan += 1
+        collided = bool(info.get("collided", False)) if info else False
+
+        if self.state == "move":
+            moved = (
+                self._last_position is None or np.linalg.norm(position - self._last_position) > 1e-3
+            )
+            self._stuck = 0 if moved else self._stuck + 1
+            if collided and len(self._path) > 1:
+                # A bump: the map missed an obstacle there; remember it and plan again.
+                ahead = self._path[min(1, len(self._path) - 1)] - position
+                norm = np.linalg.norm(ahead)
+                if norm > 1e-6:
+                    bump = position + ahead / norm * (
+                        self.context.agent_radius_m + 0.5 * self.voxel_size_m
+                    )
+                    self.grid.mark_occupied(bump[None])
+            if self._stuck >= 3 or (collided and self._stuck >= 1):
+                self._mark_visited(self.grid.cell_to_world(self._goal_cell[None])[0])
+                self._stuck = 0
+                self.state = "plan"
+            elif self._steps_since_plan >= self.replan_every:
+                self._steps_since_plan = 0
+                if not self._goal_still_frontier():
+                    self.state = "plan"
+        elif self.state == "done" and self._steps_since_plan >= 3 * self.replan_every:
+            self.state = "plan"  # turning on the spot may have revealed new frontiers
+        self._last_position = position.copy()
+
+        for _ in range(3):
+            if self.state == "look":
+                action = self._look_action(pose)
+                if action is not None:
+                    return clip_pose_action(action, self.context.action_space)
+                self.state = "plan"
+            if self.state == "plan":
+                if not self._plan(position):
+                    self.state = "done"
+                    break
+            if self.state == "move":
+                action = self._move_action(pose)
+                if action is not None:
+                    return clip_pose_action(action, self.context.action_space)
+                # Arrived: look around here, towards the cluster first.
+                self._mark_visited(position)
+                self._start_look_around(pose, self._goal_focus)
+        # Nothing left to explore (or no decision this step): keep turning on the spot.
+        if not self._views:
+            self._start_look_around(pose, focus=None)
+            self.state = "done" if self.state == "done" else "look"
+        action = self._look_action(pose)
+        if action is None:
+            action = pose_action(pose)
+        return clip_pose_action(action, self.context.action_space)

@@ -1,0 +1,103 @@
+"""Random exploration that respects collisions: a seeded random walk in straight runs.
+
+The agent picks a random direction (uniform heading, a small random climb), walks along it
+with the camera looking where it goes (a random pitch per run), and picks a new random
+direction when a move is blocked (``info["collided"]``: a surface, the bounds, or a move into
+the open) or when the run's random length is used up. It never keeps pushing against a wall,
+which is what ``action_space.sample()`` would do. All randomness comes from its own seeded
+generator, so one seed gives one trajectory.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
+from naruto_gym.geometry.transforms import look_at_rotation, make_pose
+
+
+class RandomPolicy(Policy):
+    """Seeded random walk in straight runs, turning at random when blocked.
+
+    Args:
+        seed: seed of the policy's generator (``reset(seed=...)`` overrides it).
+        min_run_steps, max_run_steps: a run lasts a uniform number of steps in this range.
+        max_climb: largest vertical component of a run's (unit) direction.
+        max_pitch_deg: the camera's pitch is drawn uniformly within +-this per run.
+        height_margin_m: runs turn back vertically within this distance of the bounds'
+            floor and ceiling.
+        avoid_blocked_deg: a new direction after a block is at least this far from the
+            blocked one.
+    """
+
+    def __init__(
+        self,
+        seed: int | None = None,
+        min_run_steps: int = 5,
+        max_run_steps: int = 40,
+        max_climb: float = 0.3,
+        max_pitch_deg: float = 30.0,
+        height_margin_m: float = 0.3,
+        avoid_blocked_deg: float = 60.0,
+    ) -> None:
+        super().__init__()
+        if not 1 <= min_run_steps <= max_run_steps:
+            raise ValueError(
+                f"need 1 <= min_run_steps <= max_run_steps, got {min_run_steps}, {max_run_steps}"
+            )
+        self.seed = seed
+        self.min_run_steps = min_run_steps
+        self.max_run_steps = max_run_steps
+        self.max_climb = max_climb
+        self.max_pitch_rad = float(np.deg2rad(max_pitch_deg))
+        self.height_margin_m = height_margin_m
+        self.cos_avoid = float(np.cos(np.deg2rad(avoid_blocked_deg)))
+        self.rng = np.random.default_rng(seed)
+        self.direction = np.array([1.0, 0.0, 0.0])
+        self.pitch = 0.0
+        self.steps_left = 0
+        #: Number of new directions drawn because a move was blocked (for tests and logs).
+        self.turns_after_block = 0
+
+    def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
+        super().reset(observation, info, seed)
+        if seed is not None:
+            self.seed = seed
+            self.rng = np.random.default_rng(seed)
+        self.turns_after_block = 0
+        self._new_run(np.asarray(observation["pose"], np.float64), blocked=None)
+
+    def _new_run(self, pose: np.ndarray, blocked: np.ndarray | None) -> None:
+        bounds = self.context.bounds
+        z = pose[2, 3]
+        for _ in range(100):
+            heading = self.rng.uniform(-np.pi, np.pi)
+            climb = self.rng.uniform(-self.max_climb, self.max_climb)
+            # Turn back vertically near the floor or the ceiling.
+            if z < bounds[0, 2] + self.height_margin_m:
+                climb = abs(climb)
+            elif z > bounds[1, 2] - self.height_margin_m:
+                climb = -abs(climb)
+            direction = np.array([np.cos(heading), np.sin(heading), 0.0]) * np.sqrt(1 - climb**2)
+            direction[2] = climb
+            if blocked is None or float(direction @ blocked) < self.cos_avoid:
+                break
+        self.direction = direction
+        self.pitch = self.rng.uniform(-self.max_pitch_rad, self.max_pitch_rad)
+        self.steps_left = int(self.rng.integers(self.min_run_steps, self.max_run_steps + 1))
+
+    def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
+        pose = np.asarray(observation["pose"], np.float64)
+        if info is not None and info.get("collided", False):
+            self.turns_after_block += 1
+            self._new_run(pose, blocked=self.direction)
+        elif self.steps_left <= 0:
+            self._new_run(pose, blocked=None)
+        self.steps_left -= 1
+        position = pose[:3, 3]
+        target = position + self.direction * self.context.max_translation_m
+        heading = np.array([self.direction[0], self.direction[1], 0.0])
+        heading /= max(np.linalg.norm(heading), 1e-9)
+        look = heading * np.cos(self.pitch) + np.array([0.0, 0.0, np.sin(self.pitch)])
+        rotation = look_at_rotation(target, target + look)
+        return clip_pose_action(pose_action(make_pose(rotation, target)), self.context.action_space)
