@@ -122,5 +122,6 @@ def discrete_target_from_action(
     pitch = float(np.arcsin(np.clip(rotation[2, 2], -1.0, 1.0)))
     wanted = pitch + (max_rotation_rad if name == "look_up" else -max_rotation_rad)
     wanted = float(np.clip(wanted, -MAX_DISCRETE_PITCH_RAD, MAX_DISCRETE_PITCH_RAD))
-    turn = Rotation.from_rotvec(np.array([-(wanted - pitch), 0.0, 0.0])).as_matrix()
+    # Rotating about camera x by +angle tilts the optical axis towards camera -y (image up).
+    turn = Rotation.from_rotvec(np.array([wanted - pitch, 0.0, 0.0])).as_matrix()
     return make_pose(rotation @ turn, position)

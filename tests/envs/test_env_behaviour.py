@@ -8,6 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import naruto_gym  # noqa: F401
+from naruto_gym import NarutoReconEnv
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, quaternion_from_pose
 
 SMALL = {"image_scale": 0.1, "coverage_samples": 2000}
@@ -184,6 +185,6 @@ def test_invalid_configuration_errors():
     with pytest.raises(ValueError, match="action_mode"):
         make_env(action_mode="teleport")
     with pytest.raises(ValueError, match="render_mode"):
-        make_env(render_mode="human")
+        NarutoReconEnv(render_mode="human", **SMALL)
     with pytest.raises(FileNotFoundError, match="does not exist"):
         make_env(scene="/nonexistent/room.ply")
