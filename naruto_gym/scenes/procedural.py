@@ -53,6 +53,10 @@ from naruto_gym.scenes.mesh_scene import Scene, scene_from_trimesh
 
 SceneKind = Literal["room", "apartment"]
 
+# Bump whenever the same arguments start producing a different mesh: it names the cache
+# folder where missing catalogue meshes are regenerated, so stale files are never reused.
+GENERATOR_VERSION = 1
+
 FLOOR_THICKNESS_M = 0.1
 START_HEIGHT_M = 1.5  # camera height of a standing person, as in Replica trajectories
 _EPS = 1e-6

@@ -21,6 +21,7 @@ from naruto_gym.scenes.catalogue import (
     CACHE_DIR_ENV,
     CATALOGUE_FILE,
     assets_dir,
+    cache_dir,
     catalogue_document,
 )
 from naruto_gym.scenes.procedural import save_scene_ply
@@ -114,10 +115,22 @@ def test_missing_asset_is_regenerated_into_the_cache(tmp_path, monkeypatch):
     monkeypatch.setenv(ASSETS_DIR_ENV, str(tmp_path / "no_assets"))
     monkeypatch.setenv(CACHE_DIR_ENV, str(tmp_path / "cache"))
     path = scene_path("two_rooms")
-    assert path == tmp_path / "cache" / "two_rooms.ply"
+    assert path == cache_dir() / "two_rooms.ply"
+    assert path.is_relative_to(tmp_path / "cache")
     assert hashlib.sha256(path.read_bytes()).hexdigest() == expected["sha256"]
     modified = path.stat().st_mtime_ns
     assert scene_path("two_rooms").stat().st_mtime_ns == modified  # reused, not rewritten
     # Without catalogue.json the metadata is computed from the generator, identically.
     assert scene_info("two_rooms") == expected
     assert load_catalogue_scene("two_rooms").name == "two_rooms"
+
+
+def test_regeneration_warns_when_the_shipped_record_disagrees(tmp_path, monkeypatch):
+    record = scene_info("two_rooms") | {"sha256": "0" * 64}
+    assets = tmp_path / "assets"
+    assets.mkdir()
+    (assets / CATALOGUE_FILE).write_text(json.dumps({"scenes": [record]}), encoding="utf-8")
+    monkeypatch.setenv(ASSETS_DIR_ENV, str(assets))
+    monkeypatch.setenv(CACHE_DIR_ENV, str(tmp_path / "cache"))
+    with pytest.warns(UserWarning, match="generate_scenes.py"):
+        scene_path("two_rooms")
