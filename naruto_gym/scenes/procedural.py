@@ -62,7 +62,8 @@ START_HEIGHT_M = 1.5  # camera height of a standing person, as in Replica trajec
 _EPS = 1e-6
 
 # Fixed light direction for the baked shading: faces towards it are brighter.
-_LIGHT = np.array([0.35, 0.55, 0.76]) / np.linalg.norm([0.35, 0.55, 0.76])
+_LIGHT_NORM = math.sqrt(0.35**2 + 0.55**2 + 0.76**2)
+_LIGHT = (0.35 / _LIGHT_NORM, 0.55 / _LIGHT_NORM, 0.76 / _LIGHT_NORM)
 
 _EXTERIOR_RGB: RGB = (150, 150, 150)
 _CEILING_RGB: RGB = (242, 240, 236)
@@ -247,7 +248,10 @@ class SceneLayout:
 # ---------------------------------------------------------------------------------------
 def _shade(rgb: Sequence[int], normals: np.ndarray) -> np.ndarray:
     """Colour lit by a fixed light: (N, 3) uint8 for (N, 3) unit normals."""
-    factor = 0.78 + 0.22 * (normals @ _LIGHT)
+    # Element-wise products rather than a matrix product: BLAS kernels may round differently
+    # from machine to machine, and the colours must be bit-identical everywhere.
+    lit = normals[:, 0] * _LIGHT[0] + normals[:, 1] * _LIGHT[1] + normals[:, 2] * _LIGHT[2]
+    factor = 0.78 + 0.22 * lit
     return np.clip(np.asarray(rgb, np.float64)[None, :] * factor[:, None] + 0.5, 0, 255).astype(
         np.uint8
     )
