@@ -155,8 +155,6 @@ def test_rooms_are_closed(built):
         assert hits.hit_mask.all(), f"a ray escaped from {point}"
         ends = np.asarray(point) + directions * hits.distance[:, None]
         assert np.all((ends >= lower) & (ends <= upper))
-        # Never hits the outside of a wall: the point is inside (even crossings beyond).
-        assert np.all(caster.count_surface_crossings(np.asarray(point), directions[:50]) >= 1)
 
 
 def test_start_and_room_points_are_clear(built):
