@@ -35,12 +35,15 @@ def _scene_kwargs():
 
 def _random_action(env, rng: np.random.Generator):
     if env.action_mode == "pose":
-        # Far targets anywhere in the bounds: most of them lie behind walls or furniture.
-        position = rng.uniform(env.bounds[0], env.bounds[1])
-        quaternion = rng.normal(size=4)
-        return np.concatenate([position, quaternion / np.linalg.norm(quaternion)]).astype(
-            np.float32
-        )
+        # Far targets anywhere in the bounds, kept for a while: most lie behind walls or
+        # furniture, so the straight line towards them runs into surfaces.
+        if rng.random() < 0.03 or not hasattr(env, "_test_target"):
+            position = rng.uniform(env.bounds[0], env.bounds[1])
+            quaternion = rng.normal(size=4)
+            env._test_target = np.concatenate(
+                [position, quaternion / np.linalg.norm(quaternion)]
+            ).astype(np.float32)
+        return env._test_target
     if env.action_mode == "delta":
         # Keep pushing in one direction for a while so that walls are actually reached.
         if rng.random() < 0.05 or not hasattr(env, "_test_direction"):
