@@ -27,8 +27,9 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import ndimage
 
-from naruto_agent.planning.collision import free_steps_along_direction, segment_is_free
+from naruto_agent.planning.collision import samples_per_step, segment_is_free
 from naruto_agent.planning.free_space import FreeSpaceComponents
 from naruto_agent.planning.sdf_volume import SdfVolume
 
@@ -55,8 +56,9 @@ class PlannerConfig:
         check_connectivity: before growing a tree, reject goals that no free path can reach
             (see :class:`~naruto_agent.planning.free_space.FreeSpaceComponents`).
         seed: seed of the random points; the same seed gives the same tree.
-        device: "auto" (CUDA when available, else CPU), "cpu" or a torch device string, for
-            the nearest-neighbour search.
+        device: where the nearest-neighbour search runs: "auto" (CUDA when available, else
+            CPU), "cpu" (numpy, the fastest on a CPU), a torch device string ("cuda:0"), or
+            "torch:cpu" (torch on the CPU; for testing).
     """
 
     step_m: float = 0.1
@@ -141,6 +143,8 @@ class _Tree:
     """Preallocated node storage with brute-force nearest-neighbour search."""
 
     def __init__(self, root: np.ndarray, capacity: int, device: str) -> None:
+        """``device == "cpu"``: numpy search; any other torch device: torch search there
+        ("torch:cpu" runs the torch search on the CPU, to test that path without a GPU)."""
         self.points = np.empty((capacity, 3), dtype=np.float64)
         self.parents = np.empty(capacity, dtype=np.int64)
         self.points[0] = root
@@ -153,6 +157,7 @@ class _Tree:
             import torch
 
             self._torch = torch
+            device = device.removeprefix("torch:")
             self._torch_points = torch.empty((capacity, 3), dtype=torch.float32, device=device)
             self._torch_points[0] = torch.as_tensor(root, dtype=torch.float32)
 
@@ -217,35 +222,69 @@ def _point(value: np.ndarray, what: str) -> np.ndarray:
     return point
 
 
-def _steps_towards(
-    tree: _Tree,
-    sdf: SdfVolume,
-    source: int,
-    target: np.ndarray,
-    max_steps: int,
-    config: PlannerConfig,
-) -> range:
-    """Add the free prefix of up to ``max_steps`` steps from node ``source`` towards ``target``.
+class _MoveChecker:
+    """The planner's hot path: the free prefix of a move, in one trilinear lookup.
 
-    Takes at least one step when the target is nearer than a step (the node may overshoot a
-    random point by less than a step; it never matters for the goal, which is reached within
-    tolerance first).
+    Same samples and rule as :func:`~naruto_agent.planning.collision.free_steps_along_segment`
+    (every ``collision_sample_m``, free where SDF > clearance, counted from the start), with
+    the sample offsets precomputed and the points built directly in voxel coordinates.
     """
-    origin = tree.points[source]
-    delta = target - origin
-    distance = math.sqrt(float(delta @ delta))
-    if distance < 1e-12:
-        return range(0)
-    steps = min(max_steps, max(1, int(distance / config.step_m + 1e-9)))
-    direction = delta / distance
-    free = free_steps_along_direction(
-        sdf, origin, direction, steps, config.step_m, config.collision_sample_m,
-        config.clearance_m,
-    )
-    if free == 0:
-        return range(0)
-    offsets = np.arange(1, free + 1, dtype=np.float64) * config.step_m
-    return tree.add_chain(source, origin + offsets[:, None] * direction)
+
+    def __init__(self, sdf: SdfVolume, config: PlannerConfig) -> None:
+        self.values = sdf.values
+        self.origin = sdf.origin
+        self.inverse_voxel = 1.0 / sdf.voxel_size
+        self.step_m = config.step_m
+        self.per_step = samples_per_step(config.step_m, config.collision_sample_m)
+        self.clearance = config.clearance_m
+        diagonal = float(np.linalg.norm(sdf.bounds[1] - sdf.bounds[0]))
+        self._grow(int(diagonal / config.step_m) + 2)
+
+    def _grow(self, steps: int) -> None:
+        self.max_steps = steps
+        self.along = np.arange(1, steps * self.per_step + 1, dtype=np.float64) * (
+            self.step_m / self.per_step
+        )
+        self.buffer = np.empty(len(self.along), dtype=self.values.dtype)
+
+    def free_steps(self, origin: np.ndarray, direction: np.ndarray, steps: int) -> int:
+        if steps > self.max_steps:
+            self._grow(steps)
+        count = steps * self.per_step
+        start = (origin - self.origin) * self.inverse_voxel
+        coordinates = start[:, None] + (direction * self.inverse_voxel)[:, None] * self.along[
+            None, :count
+        ]
+        values = self.buffer[:count]
+        ndimage.map_coordinates(
+            self.values, coordinates, output=values, order=1, mode="constant", cval=-1.0,
+            prefilter=False,
+        )
+        free = values > self.clearance
+        if free.all():
+            return steps
+        return int(free.argmin()) // self.per_step
+
+    def steps_towards(
+        self, tree: _Tree, source: int, target: np.ndarray, max_steps: int
+    ) -> range:
+        """Add the free prefix of up to ``max_steps`` steps from node ``source`` to ``target``.
+
+        Takes at least one step when the target is nearer than a step (a node may overshoot
+        a random point by less than a step; the goal is reached within tolerance first).
+        """
+        origin = tree.points[source]
+        delta = target - origin
+        distance = math.sqrt(float(delta @ delta))
+        if distance < 1e-12:
+            return range(0)
+        steps = min(max_steps, max(1, int(distance / self.step_m + 1e-9)))
+        direction = delta / distance
+        free = self.free_steps(origin, direction, steps)
+        if free == 0:
+            return range(0)
+        ends = self.along[self.per_step - 1 : free * self.per_step : self.per_step]
+        return tree.add_chain(source, origin + ends[:, None] * direction)
 
 
 def _first_within(tree: _Tree, added: range, goal: np.ndarray, tolerance: float) -> int:
@@ -318,6 +357,7 @@ def plan_path(
             return finish(False, "goal is not connected to the start through free space")
 
     tree = _Tree(start, capacity=4096, device=resolve_device(config.device))
+    mover = _MoveChecker(sdf, config)
     tolerance = config.goal_tolerance_steps * config.step_m
 
     def success_at(index: int, iterations: int) -> PlanResult:
@@ -348,17 +388,17 @@ def plan_path(
             distance = float(np.linalg.norm(goal - tree.points[source]))
             whole_steps = int(distance / config.step_m + 1e-9)
             if whole_steps > 0:
-                added = _steps_towards(tree, sdf, source, goal, whole_steps, config)
+                added = mover.steps_towards(tree, source, goal, whole_steps)
                 reached = _first_within(tree, added, goal, tolerance)
                 if reached >= 0:
                     return success_at(reached, iteration)
 
-        if next_random == _RANDOM_BATCH:
+        if next_random >= len(randoms):
             randoms = rng.uniform(bounds[0], bounds[1], size=(_RANDOM_BATCH, 3))
             next_random = 0
         target = randoms[next_random]
         next_random += 1
-        added = _steps_towards(tree, sdf, tree.nearest(target), target, extend_steps, config)
+        added = mover.steps_towards(tree, tree.nearest(target), target, extend_steps)
         if len(added) > 0:
             reached = _first_within(tree, added, goal, tolerance)
             if reached >= 0:
@@ -396,6 +436,7 @@ def reachable_voxels(
     if not sdf.contains(start)[0] or sdf.sample(start)[0] <= config.clearance_m:
         return mask
     tree = _Tree(start, capacity=4096, device=resolve_device(config.device))
+    mover = _MoveChecker(sdf, config)
     rng = np.random.default_rng(config.seed)
     bounds = sdf.bounds
     deadline = time.perf_counter() + config.time_limit_s
@@ -404,7 +445,7 @@ def reachable_voxels(
     for target in targets:
         if time.perf_counter() > deadline:
             break
-        _steps_towards(tree, sdf, tree.nearest(target), target, extend_steps, config)
+        mover.steps_towards(tree, tree.nearest(target), target, extend_steps)
 
     # Every voxel centre within one step of a node: test the block of voxels around each node.
     nodes = sdf.world_to_voxel(tree.points[: tree.count])

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy import ndimage
 
 if TYPE_CHECKING:  # pragma: no cover
     from naruto_gym.scenes.mesh_scene import Scene
@@ -26,11 +27,6 @@ if TYPE_CHECKING:  # pragma: no cover
 # number of well spread directions, so a vote cannot tie and no direction is axis-aligned
 # (axis-aligned rays graze the walls of box-shaped rooms).
 _SIGN_VOTE_DIRECTIONS = 9
-
-# Voxel offsets of the 8 corners of a cell, i-major (matching the trilinear weights below).
-_CELL_CORNER_OFFSETS = np.array(
-    [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.int64
-)
 
 
 def _fibonacci_directions(count: int) -> np.ndarray:
@@ -126,30 +122,16 @@ class SdfVolume:
         Returns:
             (N,) float64 values.
         """
-        index = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.origin) * (
-            1.0 / self.voxel_size
+        index = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.origin) / (
+            self.voxel_size
         )
-        upper = self._upper_index
-        inside = np.all((index >= 0.0) & (index <= upper), axis=1)
-        # Clamp the cell so points on the upper face interpolate within the last cell.
-        cell = np.floor(index)
-        np.clip(cell, 0.0, upper - 1.0, out=cell)
-        frac = index - cell
-        _, ny, nz = self.values.shape
-        strides = np.array([ny * nz, nz, 1], dtype=np.int64)
-        corners = (_CELL_CORNER_OFFSETS @ strides)[None, :]
-        # A view, so the lookup follows values that were edited in place.
-        base = (cell.astype(np.int64) @ strides)[:, None]
-        corner_values = self.values.reshape(-1)[base + corners]
-        # Trilinear weights of the 8 corners, in the same (i, j, k) order as the offsets.
-        both = np.stack([1.0 - frac, frac], axis=2)
-        weights = (
-            both[:, 0, :, None, None] * both[:, 1, None, :, None] * both[:, 2, None, None, :]
-        ).reshape(-1, 8)
-        value = np.einsum("ij,ij->i", corner_values, weights)
-        if not inside.all():
-            value = np.where(inside, value, outside_value)
-        return value
+        # scipy's order-1 spline is exactly trilinear interpolation, in C: several times
+        # faster than numpy for the few dozen points of a collision check. Its "constant" mode
+        # returns cval for every point outside [0, n - 1] on any axis and never blends it in.
+        return ndimage.map_coordinates(
+            self.values, index.T, order=1, mode="constant", cval=outside_value, prefilter=False,
+            output=np.float64,
+        )
 
     # -- construction -----------------------------------------------------------------------------
     @staticmethod
