@@ -108,7 +108,7 @@ class Scene:
 
         Misses (triangle id < 0) come back black.
         """
-        from naruto_gym.sensors.shading import interpolate_corner_colours
+        from naruto_gym.sensors.kernels import interpolate_corner_colours
 
         triangle_ids = np.ascontiguousarray(triangle_ids)
         barycentric_uv = np.ascontiguousarray(barycentric_uv, dtype=np.float32)

@@ -8,6 +8,7 @@ from functools import cached_property
 import numpy as np
 
 from naruto_gym.scenes.mesh_scene import Scene
+from naruto_gym.sensors.kernels import fill_world_rays
 from naruto_gym.sensors.raycaster import RayCaster, RayHits
 
 
@@ -117,8 +118,12 @@ class RgbdRenderer:
     def _cast(self, camera_to_world: np.ndarray) -> tuple[np.ndarray, RayHits]:
         pose = np.asarray(camera_to_world, dtype=np.float32)
         # Directions keep camera z = 1, so the ray parameter of a hit is its z-depth.
-        self._rays[:, :3] = pose[:3, 3]
-        np.matmul(self.camera.ray_directions, pose[:3, :3].T, out=self._rays[:, 3:])
+        fill_world_rays(
+            self.camera.ray_directions,
+            np.ascontiguousarray(pose[:3, :3]),
+            np.ascontiguousarray(pose[:3, 3]),
+            self._rays,
+        )
         hits = self.raycaster.cast_packed(self._rays)
         depth = hits.distance.copy()
         depth[~(depth <= self.max_depth_m)] = 0.0
