@@ -52,3 +52,33 @@ class PanoramaClearance:
         distance = np.where(distance > 0.0, distance, np.inf)
         inside = directions @ rays.T.astype(np.float64) >= self.cos_half_angle
         return np.where(inside, distance[None, :], np.inf).min(axis=1)
+
+
+def horizontal_profile(
+    panorama: np.ndarray, max_height_offset_m: float = 0.3, max_elevation_deg: float = 20.0
+) -> np.ndarray:
+    """Horizontal free distance per panorama column (azimuth) around the agent's height.
+
+    Pixels within ``max_elevation_deg`` of the horizon whose hit lies within
+    ``max_height_offset_m`` of the agent's height count; the result is, per column, the
+    smallest horizontal distance of those (inf when none). Column ``u`` looks at azimuth
+    ``-pi + 2 pi (u + 0.5) / W``.
+    """
+    panorama = np.asarray(panorama, np.float64)
+    height, width = panorama.shape
+    elevation = np.pi / 2.0 - np.pi * (np.arange(height) + 0.5) / height
+    rows = np.abs(elevation) <= np.deg2rad(max_elevation_deg)
+    distance = np.where(panorama[rows] > 0.0, panorama[rows], np.inf)
+    horizontal = distance * np.cos(elevation[rows])[:, None]
+    offset = np.abs(distance * np.sin(elevation[rows])[:, None])
+    horizontal = np.where(offset <= max_height_offset_m, horizontal, np.inf)
+    return horizontal.min(axis=0)
+
+
+def profile_clearance(profile: np.ndarray, yaw: float, half_width_rad: float) -> float:
+    """Smallest profile distance within ``half_width_rad`` of azimuth ``yaw``."""
+    width = len(profile)
+    azimuth = -np.pi + 2.0 * np.pi * (np.arange(width) + 0.5) / width
+    difference = np.angle(np.exp(1j * (azimuth - yaw)))
+    inside = np.abs(difference) <= half_width_rad
+    return float(profile[inside].min()) if inside.any() else float("inf")

@@ -1,0 +1,204 @@
+"""``naruto-benchmark``: compare policies on scenes x seeds with a step budget.
+
+Runs every (scene, policy, seed) episode in spawned worker processes (or as Ray tasks with
+``--ray-address``), writes one JSON record per episode as soon as it finishes, then a Markdown
+table (mean +- std over seeds), a JSON summary and plots. A rerun skips the episodes already
+recorded with the same settings and retries the failed ones.
+
+Example::
+
+    naruto-benchmark --scenes replica_like_room apartment \\
+        ../shared/scenes/replica_office0/mesh.ply --policies passive random frontier \\
+        --seeds 0 1 2 --steps 1000 --workers 2 --out-dir runs/compare_policies
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, get_args, get_origin, get_type_hints
+
+from naruto_agent.benchmark.executors import pending_specs, run_local, run_ray
+from naruto_agent.benchmark.plots import plot_curves, plot_trajectories
+from naruto_agent.benchmark.records import load_records, write_json_atomic
+from naruto_agent.benchmark.spec import build_specs
+from naruto_agent.benchmark.tables import markdown_table, summarise
+
+
+@dataclass
+class Args:
+    """Arguments of the policy comparison (each field is a ``--flag``)."""
+
+    scenes: list[str] = field(default_factory=lambda: ["replica_like_room"])
+    """catalogue names or mesh paths (PATH@AXIS for a y-up file)"""
+    policies: list[str] = field(default_factory=lambda: ["passive", "random", "frontier"])
+    """policy names (passive, random, frontier) or package.module:Class"""
+    seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
+    """episode seeds"""
+    steps: int = 500
+    """step budget of every episode"""
+    image_scale: float = 0.25
+    """camera resolution factor (0.25: 170 x 300 pixels)"""
+    workers: int = 2
+    """parallel worker processes (0: run in this process)"""
+    ray_address: str | None = None
+    """run on Ray instead: auto, HOST:PORT, or local"""
+    out_dir: str = "runs/compare_policies"
+    """output folder (records/, results.md, summary.json, plots)"""
+    eval_points: int = 4
+    """completion-ratio checkpoints per episode besides the final score (0: final only)"""
+    eval_samples: int = 200_000
+    """surface samples per mesh of the final score"""
+    checkpoint_samples: int = 50_000
+    """surface samples per mesh at the checkpoints"""
+    reconstruct: bool = True
+    """fuse frames with the reference TSDF mapper and score them"""
+    device: str = "auto"
+    """Open3D device of the reference mapper (auto, cpu, cuda)"""
+    policy_kwargs: str = "{}"
+    """JSON dict from policy name to constructor arguments, e.g. '{"frontier": {"voxel_size_m": 0.2}}'"""
+    env_kwargs: str = "{}"
+    """JSON dict of extra env arguments, e.g. '{"max_depth_m": 5.0}'"""
+    plots: bool = True
+    """write the plots"""
+    progress: bool = True
+    """show a progress bar"""
+
+
+def _field_docs() -> dict[str, str]:
+    """The string literal under each ``Args`` field (its help text)."""
+    import ast
+    import inspect
+
+    tree = ast.parse(inspect.getsource(Args))
+    body = tree.body[0].body  # type: ignore[attr-defined]
+    docs = {}
+    for node, following in zip(body, body[1:], strict=False):
+        if (
+            isinstance(node, ast.AnnAssign)
+            and isinstance(following, ast.Expr)
+            and isinstance(following.value, ast.Constant)
+        ):
+            docs[node.target.id] = str(following.value.value)  # type: ignore[union-attr]
+    return docs
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """An ``argparse`` parser made from the fields of :class:`Args`."""
+    parser = argparse.ArgumentParser(
+        prog="naruto-benchmark",
+        description=__doc__.split("\n\n")[1].replace("\n", " "),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    hints = get_type_hints(Args)
+    try:
+        docs = _field_docs()
+    except (OSError, TypeError):  # no source available (frozen app)
+        docs = {}
+    for item in dataclasses.fields(Args):
+        flag = "--" + item.name.replace("_", "-")
+        kind = hints[item.name]
+        default = (
+            item.default if item.default is not dataclasses.MISSING else item.default_factory()
+        )
+        help_text = docs.get(item.name, "")
+        if kind is bool:
+            parser.add_argument(
+                flag, action=argparse.BooleanOptionalAction, default=default, help=help_text
+            )
+        elif get_origin(kind) is list:
+            (element,) = get_args(kind)
+            parser.add_argument(flag, nargs="+", type=element, default=default, help=help_text)
+        else:
+            element = next((a for a in get_args(kind) if a is not type(None)), kind)
+            parser.add_argument(flag, type=element, default=default, help=help_text)
+    return parser
+
+
+def parse_args(argv: list[str] | None = None) -> Args:
+    namespace = build_parser().parse_args(argv)
+    return Args(**vars(namespace))
+
+
+def _json_dict(text: str, name: str) -> dict[str, Any]:
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"--{name} must be a JSON object: {error}") from error
+    if not isinstance(value, dict):
+        raise ValueError(f"--{name} must be a JSON object, got {text!r}")
+    return value
+
+
+def write_reports(out_dir: str | Path, plots: bool = True) -> dict[str, Any]:
+    """Table, summary and plots of every record under ``out_dir``; returns the summary."""
+    out_dir = Path(out_dir)
+    records = load_records(out_dir)
+    rows = summarise(records)
+    table = markdown_table(rows)
+    (out_dir / "results.md").write_text(table)
+    summary = {"rows": rows, "episodes": len(records)}
+    write_json_atomic(out_dir / "summary.json", summary)
+    if plots and records:
+        plot_curves(records, out_dir / "curves.png")
+        plot_trajectories(records, out_dir)
+    return summary
+
+
+def run(args: Args) -> int:
+    """Run the comparison; returns the number of failed episodes."""
+    specs = build_specs(
+        args.scenes,
+        args.policies,
+        args.seeds,
+        args.steps,
+        image_scale=args.image_scale,
+        eval_points=args.eval_points,
+        eval_samples=args.eval_samples,
+        checkpoint_samples=args.checkpoint_samples,
+        reconstruct=args.reconstruct,
+        device=args.device,
+        policy_kwargs=_json_dict(args.policy_kwargs, "policy-kwargs"),
+        env_kwargs=_json_dict(args.env_kwargs, "env-kwargs"),
+    )
+    todo = pending_specs(specs, args.out_dir)
+    print(
+        f"{len(specs)} episodes, {len(specs) - len(todo)} already done, running {len(todo)} "
+        f"({'Ray ' + args.ray_address if args.ray_address else f'{args.workers} workers'})",
+        flush=True,
+    )
+    started = time.perf_counter()
+    failed = 0
+    if todo:
+        if args.ray_address:
+            failed = run_ray(todo, args.out_dir, args.ray_address, args.progress)
+        else:
+            failed = run_local(todo, args.out_dir, args.workers, args.progress)
+    summary = write_reports(args.out_dir, args.plots)
+    out_dir = Path(args.out_dir)
+    print((out_dir / "results.md").read_text())
+    print(
+        f"{summary['episodes']} records in {out_dir}; this run: {len(todo)} episodes, "
+        f"{failed} failed, {time.perf_counter() - started:.0f} s"
+    )
+    return failed
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point (``naruto-benchmark``)."""
+    args = parse_args(argv)
+    try:
+        failed = run(args)
+    except ValueError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,194 @@
+"""What one benchmark episode is: scene, policy, seed, budget and env settings.
+
+An :class:`EpisodeSpec` is plain data (JSON-able), so it travels to worker processes and Ray
+tasks unchanged, and its hash tells a rerun whether a stored record was made with the same
+settings.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+UP_AXES = ("x", "y", "z", "-x", "-y", "-z")
+TRAJECTORY_FILE = "traj.txt"
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """A scene argument: a catalogue name or a mesh path, with the mesh file's up axis."""
+
+    scene: str
+    up_axis: str = "z"
+
+    @property
+    def label(self) -> str:
+        """Short name for tables and folders: the catalogue name, else the mesh file's stem
+        (its folder's name when the file is called ``mesh``)."""
+        path = Path(self.scene)
+        if path.suffix == "":
+            return _slug(self.scene)
+        stem = path.parent.name if path.stem == "mesh" and path.parent.name else path.stem
+        return _slug(stem)
+
+    @property
+    def is_path(self) -> bool:
+        return Path(self.scene).suffix != ""
+
+
+def parse_scene(argument: str) -> SceneSpec:
+    """``"NAME"``, ``"PATH"`` or ``"PATH@AXIS"`` (e.g. ``room.obj@y``) to a :class:`SceneSpec`."""
+    scene, up_axis = argument, "z"
+    if "@" in argument:
+        scene, _, up_axis = argument.rpartition("@")
+    if not scene:
+        raise ValueError(f"empty scene in {argument!r}; use NAME, PATH or PATH@AXIS")
+    if up_axis not in UP_AXES:
+        raise ValueError(f"unknown up axis {up_axis!r} in {argument!r}; use one of {UP_AXES}")
+    return SceneSpec(scene, up_axis)
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "scene"
+
+
+def policy_label(policy: str) -> str:
+    """Registry name, or the class name of a ``module:Class`` import path."""
+    return _slug(policy.rpartition(":")[2] if ":" in policy else policy)
+
+
+@dataclass(frozen=True)
+class EpisodeSpec:
+    """One benchmark episode.
+
+    Attributes:
+        scene: catalogue name or mesh path.
+        up_axis: up axis of a mesh file.
+        policy: registry name (``passive``, ``random``, ``frontier``) or ``module:Class``.
+        seed: episode seed (env reset and the policy's own randomness).
+        steps: step budget.
+        image_scale: camera resolution factor (0.25 gives 170 x 300).
+        policy_kwargs: constructor arguments of the policy.
+        env_kwargs: further ``gymnasium.make`` keyword arguments of the env.
+        reconstruct: fuse frames with the reference TSDF mapper and score the result.
+        eval_points: completion-ratio checkpoints during the episode (0: final only).
+        eval_samples: surface samples per mesh of the final score (200,000 as published).
+        checkpoint_samples: surface samples per mesh at the checkpoints (cheaper).
+        device: Open3D device of the reference mapper.
+    """
+
+    scene: str
+    policy: str
+    seed: int
+    steps: int
+    up_axis: str = "z"
+    image_scale: float = 0.25
+    policy_kwargs: dict[str, Any] = field(default_factory=dict)
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    reconstruct: bool = True
+    eval_points: int = 4
+    eval_samples: int = 200_000
+    checkpoint_samples: int = 50_000
+    device: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.steps < 1:
+            raise ValueError(f"steps must be at least 1, got {self.steps}")
+        if self.image_scale <= 0:
+            raise ValueError(f"image_scale must be positive, got {self.image_scale}")
+        if self.eval_points < 0:
+            raise ValueError(f"eval_points must be >= 0, got {self.eval_points}")
+
+    @property
+    def scene_label(self) -> str:
+        return SceneSpec(self.scene, self.up_axis).label
+
+    @property
+    def policy_label(self) -> str:
+        return policy_label(self.policy)
+
+    @property
+    def episode_id(self) -> str:
+        return f"{self.scene_label}/{self.policy_label}/seed{self.seed}"
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> EpisodeSpec:
+        return cls(**data)
+
+    @property
+    def config_hash(self) -> str:
+        """Short hash of every setting: a stored record with another hash is out of date."""
+        text = json.dumps(self.as_dict(), sort_keys=True, default=str)
+        return hashlib.sha1(text.encode()).hexdigest()[:12]
+
+    def record_path(self, out_dir: str | Path) -> Path:
+        """Where this episode's record lives under an output folder."""
+        return (
+            Path(out_dir)
+            / "records"
+            / self.scene_label
+            / self.policy_label
+            / f"seed{self.seed}.json"
+        )
+
+
+def default_policy_kwargs(policy: str, scene: SceneSpec) -> dict[str, Any]:
+    """Policy arguments the harness fills in: a passive policy replays the ``traj.txt`` that
+    lies beside a mesh file (e.g. the Replica sample); others get nothing."""
+    if policy == "passive" and scene.is_path:
+        trajectory = Path(scene.scene).parent / TRAJECTORY_FILE
+        if trajectory.is_file():
+            return {"trajectory": str(trajectory.resolve())}
+    return {}
+
+
+def build_specs(
+    scenes: list[str],
+    policies: list[str],
+    seeds: list[int],
+    steps: int,
+    **settings: Any,
+) -> list[EpisodeSpec]:
+    """The episodes of scenes x policies x seeds, ordered scene-major.
+
+    Args:
+        scenes: ``NAME``, ``PATH`` or ``PATH@AXIS`` arguments.
+        policies: policy names or import paths.
+        seeds: episode seeds.
+        steps: step budget of every episode.
+        **settings: further :class:`EpisodeSpec` fields (``image_scale``, ``eval_points``...);
+            ``policy_kwargs`` here is a dict from policy name to its arguments.
+    """
+    if not scenes or not policies or not seeds:
+        raise ValueError("need at least one scene, one policy and one seed")
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds must be distinct, got {seeds}")
+    per_policy = settings.pop("policy_kwargs", {}) or {}
+    specs = []
+    for argument in scenes:
+        scene = parse_scene(argument)
+        for policy in policies:
+            kwargs = {**default_policy_kwargs(policy, scene), **per_policy.get(policy, {})}
+            for seed in seeds:
+                specs.append(
+                    EpisodeSpec(
+                        scene=scene.scene,
+                        up_axis=scene.up_axis,
+                        policy=policy,
+                        seed=int(seed),
+                        steps=int(steps),
+                        policy_kwargs=kwargs,
+                        **settings,
+                    )
+                )
+    ids = [spec.episode_id for spec in specs]
+    if len(set(ids)) != len(ids):
+        raise ValueError("two scenes or policies share a label; give them distinct names")
+    return specs

@@ -1,0 +1,84 @@
+"""Aggregate episode records into mean +- std over seeds per scene and policy, as Markdown."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any
+
+import numpy as np
+
+from naruto_agent.benchmark.records import STATUS_OK
+
+# (column title, how to read the value from a record, decimals)
+COLUMNS: tuple[tuple[str, str, int], ...] = (
+    ("Coverage (%)", "coverage_pct", 1),
+    ("Comp. ratio (%)", "metrics.completion_ratio_pct", 1),
+    ("Comp. (cm)", "metrics.completion_cm", 2),
+    ("Acc. (cm)", "metrics.accuracy_cm", 2),
+    ("Path (m)", "path_length_m", 1),
+    ("Collisions", "collisions", 1),
+    ("Policy ms/step", "time_per_step_ms.policy", 1),
+    ("Env ms/step", "time_per_step_ms.env", 1),
+    ("Map ms/step", "time_per_step_ms.mapping", 1),
+)
+
+
+def record_value(record: dict[str, Any], key: str) -> float | None:
+    """A number from a record by dotted key (``coverage_pct`` is ``coverage_final`` in %)."""
+    if key == "coverage_pct":
+        value = record.get("coverage_final")
+        return None if value is None else 100.0 * float(value)
+    value: Any = record
+    for part in key.split("."):
+        if not isinstance(value, dict) or part not in value:
+            return None
+        value = value[part]
+    return None if value is None else float(value)
+
+
+def summarise(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per (scene, policy): seeds, failures, and mean / std of every column.
+
+    The std is the sample standard deviation over seeds (0 with one seed).
+    """
+    groups: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
+    for record in records:
+        groups[(record["scene"], record["policy"])].append(record)
+    rows = []
+    for (scene, policy), members in sorted(groups.items()):
+        ok = [record for record in members if record.get("status") == STATUS_OK]
+        row: dict[str, Any] = {
+            "scene": scene,
+            "policy": policy,
+            "seeds": sorted(record["seed"] for record in ok),
+            "failed": len(members) - len(ok),
+            "steps": sorted({record.get("steps_run") for record in ok}),
+        }
+        for _, key, _ in COLUMNS:
+            values = [v for v in (record_value(record, key) for record in ok) if v is not None]
+            if values:
+                array = np.array(values)
+                std = float(array.std(ddof=1)) if len(array) > 1 else 0.0
+                row[key] = {"mean": float(array.mean()), "std": std, "n": len(array)}
+            else:
+                row[key] = None
+        rows.append(row)
+    return rows
+
+
+def markdown_table(rows: list[dict[str, Any]]) -> str:
+    """Markdown table of :func:`summarise` rows (mean +- std over seeds)."""
+    header = ["Scene", "Policy", "Seeds", "Steps", *[title for title, _, _ in COLUMNS]]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for row in rows:
+        cells = [row["scene"], row["policy"], str(len(row["seeds"]))]
+        if row["failed"]:
+            cells[2] += f" ({row['failed']} failed)"
+        cells.append("/".join(str(step) for step in row["steps"]) or "-")
+        for _, key, decimals in COLUMNS:
+            stat = row[key]
+            cells.append(
+                "-" if stat is None else f"{stat['mean']:.{decimals}f} ± {stat['std']:.{decimals}f}"
+            )
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

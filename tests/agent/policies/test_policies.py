@@ -1,0 +1,194 @@
+"""Policy interface, adapters and the three baselines, on small cheap envs."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import naruto_gym  # noqa: F401  (registers the env ids)
+from naruto_agent.policies import (
+    CallablePolicy,
+    EnvContext,
+    FrontierPolicy,
+    PassivePolicy,
+    RandomPolicy,
+    SB3Policy,
+    as_policy,
+    load_trajectory,
+    make_policy,
+    pose_action,
+    subsample_poses,
+)
+
+CHEAP = {"image_scale": 0.1, "panorama_shape": (16, 32), "coverage_samples": 3000}
+
+
+def make_env(policy_mode: str = "pose", scene: str = "two_rooms", steps: int = 50, **kwargs):
+    return gym.make(
+        "NarutoRecon-v0",
+        scene=scene,
+        action_mode=policy_mode,
+        max_episode_steps=steps,
+        **{**CHEAP, **kwargs},
+    )
+
+
+def rollout(env, policy, steps: int, seed: int = 0):
+    """Run a policy; returns the poses (start included), infos and the policy."""
+    policy.bind(EnvContext.from_env(env, step_budget=steps))
+    observation, info = env.reset(seed=seed, options=policy.reset_options())
+    policy.reset(observation, info, seed=seed)
+    poses, infos = [observation["pose"].astype(np.float64)], [info]
+    for _ in range(steps):
+        observation, _, terminated, truncated, info = env.step(policy.act(observation, info))
+        poses.append(observation["pose"].astype(np.float64))
+        infos.append(info)
+        if terminated or truncated:
+            break
+    return np.array(poses), infos
+
+
+# -- interface and adapters -------------------------------------------------------------
+def test_callable_policy_with_and_without_info():
+    env = make_env()
+    seen_infos = []
+
+    def stay(observation, info):
+        seen_infos.append(info)
+        return pose_action(observation["pose"])
+
+    poses, _ = rollout(env, CallablePolicy(stay), 3)
+    np.testing.assert_allclose(poses[-1], poses[0], atol=1e-5)
+    assert len(seen_infos) == 3 and "coverage" in seen_infos[0]
+
+    def forward_only(observation):  # one argument: no info passed
+        pose = observation["pose"].astype(np.float64)
+        pose[:3, 3] += pose[:3, 2] * 0.05
+        return pose_action(pose)
+
+    policy = as_policy(forward_only)
+    assert isinstance(policy, CallablePolicy)
+    poses, infos = rollout(env, policy, 2)
+    moved = np.linalg.norm(poses[-1][:3, 3] - poses[0][:3, 3])
+    assert moved > 0.0 or infos[-1]["collided"]
+    env.close()
+
+
+def test_policy_refuses_an_unsupported_action_mode():
+    env = make_env("discrete")
+    with pytest.raises(ValueError, match="action_mode='pose'"):
+        RandomPolicy(seed=0).bind(EnvContext.from_env(env))
+    env.close()
+
+
+def test_sb3_model_is_wrapped_and_acts_in_discrete_mode():
+    sb3 = pytest.importorskip("stable_baselines3")
+    env = make_env("discrete", image_scale=0.06, panorama_shape=None)
+    model = sb3.PPO("MultiInputPolicy", env, n_steps=8, batch_size=8, device="cpu", seed=0)
+    policy = as_policy(model)
+    assert isinstance(policy, SB3Policy) and policy.action_modes == ("discrete",)
+    poses, infos = rollout(env, policy, 4)
+    assert len(poses) == 5 and all("coverage" in info for info in infos)
+    # Deterministic actions of a fixed model: the same rollout twice.
+    again, _ = rollout(env, policy, 4)
+    np.testing.assert_allclose(again, poses, atol=1e-6)
+    env.close()
+
+
+def test_make_policy_by_name_and_import_path():
+    assert isinstance(make_policy("random", seed=3), RandomPolicy)
+    assert isinstance(make_policy("naruto_agent.policies:FrontierPolicy"), FrontierPolicy)
+    with pytest.raises(ValueError, match="unknown policy"):
+        make_policy("nope")
+
+
+# -- random ------------------------------------------------------------------------------
+def _context(bounds=((0.0, 0.0, 0.0), (5.0, 5.0, 3.0))):
+    bounds = np.array(bounds)
+    space = gym.spaces.Box(
+        np.concatenate([bounds[0], -np.ones(4)]).astype(np.float32),
+        np.concatenate([bounds[1], np.ones(4)]).astype(np.float32),
+    )
+    from naruto_gym.sensors.pinhole import PinholeCamera
+
+    return EnvContext("pose", space, bounds, PinholeCamera().scaled(0.1))
+
+
+def test_random_picks_a_new_direction_away_from_a_block():
+    policy = RandomPolicy(seed=5, min_run_steps=50, max_run_steps=50)
+    policy.bind(_context())
+    pose = np.eye(4)
+    pose[:3, 3] = (2.5, 2.5, 1.5)
+    observation = {"pose": pose.astype(np.float32)}
+    policy.reset(observation, {}, seed=5)
+    first = policy.direction.copy()
+    policy.act(observation, {"collided": False})
+    np.testing.assert_allclose(policy.direction, first)  # no block: the run goes on
+    policy.act(observation, {"collided": True})
+    assert policy.turns_after_block == 1
+    assert float(policy.direction @ first) < np.cos(np.deg2rad(60.0)) + 1e-9
+
+
+def test_random_walk_does_not_push_against_walls_and_is_seeded():
+    env = make_env(steps=120)
+    poses, infos = rollout(env, RandomPolicy(), 120, seed=4)
+    collided = np.array([info["collided"] for info in infos[1:]])
+    # Never more than two blocked steps in a row: it turns away instead of pushing on.
+    longest = max(
+        (len(run) for run in "".join("x" if c else "." for c in collided).split(".")), default=0
+    )
+    assert longest <= 2
+    assert infos[-1]["path_length_m"] > 0.5 * 0.1 * 120
+    again, _ = rollout(env, RandomPolicy(), 120, seed=4)
+    np.testing.assert_allclose(again, poses, atol=1e-6)
+    other, _ = rollout(env, RandomPolicy(), 120, seed=5)
+    assert not np.allclose(other[-1], poses[-1])
+    env.close()
+
+
+# -- passive -----------------------------------------------------------------------------
+def test_subsample_poses_keeps_ends_and_fits_the_budget():
+    poses = np.repeat(np.eye(4)[None], 101, axis=0)
+    poses[:, 0, 3] = np.arange(101)
+    picked = subsample_poses(poses, 10)
+    assert len(picked) == 11
+    assert picked[0, 0, 3] == 0 and picked[-1, 0, 3] == 100
+    assert subsample_poses(poses[:5], 10).shape == (5, 4, 4)
+    with pytest.raises(ValueError):
+        subsample_poses(poses, 0)
+
+
+def test_load_trajectory_rejects_bad_files(tmp_path):
+    bad = tmp_path / "traj.txt"
+    bad.write_text("1 2 3\n")
+    with pytest.raises(ValueError, match="16 numbers"):
+        load_trajectory(bad)
+    with pytest.raises(ValueError, match="does not exist"):
+        load_trajectory(tmp_path / "missing.txt")
+
+
+def test_passive_replays_the_replica_trajectory_exactly(replica_dir):
+    trajectory = load_trajectory(replica_dir / "traj.txt")[:25]
+    env = make_env(scene=str(replica_dir / "mesh.ply"), steps=24)
+    poses, infos = rollout(env, PassivePolicy(trajectory), 24)
+    np.testing.assert_allclose(poses, trajectory, atol=2e-4)
+    assert not any(info["collided"] for info in infos)
+    # Fitted to a smaller budget: every 3rd pose, still reached exactly.
+    env = make_env(scene=str(replica_dir / "mesh.ply"), steps=8)
+    policy = PassivePolicy(trajectory)
+    poses, _ = rollout(env, policy, 8)
+    np.testing.assert_allclose(poses, trajectory[::3], atol=2e-4)
+    env.close()
+
+
+def test_passive_scripted_scan_walks_along_the_walls():
+    env = make_env(scene="replica_like_room", steps=150)
+    policy = PassivePolicy()
+    poses, infos = rollout(env, policy, 150, seed=1)
+    assert sum(info["collided"] for info in infos) <= 3
+    assert infos[-1]["path_length_m"] > 8.0  # it walks, not just turns
+    # It went around: the path spans most of the room in both directions.
+    extent = np.ptp(poses[:, :2, 3], axis=0)
+    assert np.all(extent > 2.0)
+    env.close()
