@@ -58,7 +58,7 @@ def evaluate_reconstruction(
     threshold_m: float = DEFAULT_THRESHOLD_M,
     cull_every: int = DEFAULT_CULL_EVERY,
     depth_margin_m: float = DEFAULT_DEPTH_MARGIN_M,
-    cull_depth_scale: float = DEFAULT_CULL_DEPTH_SCALE,
+    cull_depth_scale: float | None = DEFAULT_CULL_DEPTH_SCALE,
     renderer: RgbdRenderer | None = None,
     progress: bool = False,
 ) -> ReconstructionMetrics:
@@ -76,7 +76,8 @@ def evaluate_reconstruction(
         threshold_m: completion-ratio / precision threshold (5 cm).
         cull_every: cull with every n-th pose (2).
         depth_margin_m: occlusion margin of the culling (3 cm).
-        cull_depth_scale: resolution factor of the culling's depth renders (0.5).
+        cull_depth_scale: None (default) for per-vertex occlusion rays, or the resolution
+            factor of rendered occlusion depth images (see :mod:`.culling`).
         renderer: an existing renderer of ``scene`` to reuse its ray-casting scene.
         progress: show a progress bar while culling.
 

@@ -97,7 +97,7 @@ def test_every_nth_pose_is_used():
     assert len(cull_mesh(vertices, faces, poses, CAMERA, scene, every=2)[1]) == 0
 
 
-def test_full_and_reduced_resolution_depth_agree_and_renderer_is_accepted():
+def test_vertex_rays_and_depth_images_agree_and_renderer_is_accepted():
     scene = wall_scene()
     rng = np.random.default_rng(0)
     # Random small triangles in front of, on, and behind the wall, all inside the frustum.
@@ -106,12 +106,13 @@ def test_full_and_reduced_resolution_depth_agree_and_renderer_is_accepted():
     )
     vertices = (centres[:, None, :] + rng.normal(0, 0.01, (300, 3, 3))).reshape(-1, 3)
     faces = np.arange(len(vertices)).reshape(-1, 3)
+    rays = visible_vertex_mask(vertices, FORWARD_POSE[None], CAMERA, scene)
     full = visible_vertex_mask(vertices, FORWARD_POSE[None], CAMERA, scene, depth_scale=1.0)
     renderer = RgbdRenderer(scene, CAMERA)
     half = visible_vertex_mask(vertices, FORWARD_POSE[None], CAMERA, renderer, depth_scale=0.5)
-    np.testing.assert_array_equal(full, half)
     expected = vertices[:, 1] <= 2.03
-    np.testing.assert_array_equal(full, expected)
+    for mask in (rays, full, half):
+        np.testing.assert_array_equal(mask, expected)
     assert 0 < len(cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene)[1]) < 300
 
 
