@@ -1,0 +1,283 @@
+"""Mapping quality and speed on the Replica office0 sample along its real trajectory.
+
+Maps the sample scene from its 2000 ground-truth poses with:
+
+* ``neural``: the neural mapper without active ray sampling (Co-SLAM with known poses);
+* ``neural_active``: the same with NARUTO's uncertainty-driven active ray sampling;
+* ``tsdf``: the fast alternative (TSDF fusion + count-derived uncertainty),
+
+then scores the 2 cm meshes (culled by the trajectory's views, as in the literature) with
+accuracy, completion and completion ratio, and reports the time per mapping iteration and in
+total. Before that it times one mapping iteration (2048 + 100 rays) with the batched hash
+grid and with a plain per-level hash grid (the reference for the speed-up ratio), both in
+this run.
+
+Frames come from the same renderer the env uses (:class:`RgbdRenderer`'s ray caster and
+colour lookup). The neural mapper reads only the pixels it needs (keyframes: 5 %; mapping
+frames: the current-frame rays of the 10 iterations), so only those pixels are ray-cast
+(:meth:`NeuralMapper.required_pixels`): the result is identical to rendering whole frames
+and picking the same pixels, but costs a fraction of the time. The TSDF mapper fuses whole
+frames, so it renders them.
+
+Usage::
+
+    python benchmarks/mapping_quality.py                    # everything (long)
+    python benchmarks/mapping_quality.py --num-frames 500 --variants neural tsdf
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from naruto_agent.mapping import (
+    NaiveHashGridEncoding,
+    NeuralMapper,
+    NeuralMapperConfig,
+    TsdfMapperConfig,
+    TsdfUncertaintyMapper,
+)
+from naruto_gym.evaluation import evaluate_reconstruction
+from naruto_gym.scenes.mesh_scene import Scene, load_scene
+from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+PUBLISHED_COMPLETION_RATIO = 96.33  # passive Co-SLAM, office0, full mesh (NARUTO supp. T4)
+
+
+@dataclass
+class Args:
+    """Benchmark settings."""
+
+    scene_dir: str = str(REPO_ROOT.parent / "shared" / "scenes" / "replica_office0")
+    """folder with mesh.ply and traj.txt"""
+    num_frames: int = 2000
+    """frames of the trajectory to map (the whole sequence has 2000)"""
+    variants: list[str] = field(default_factory=lambda: ["neural", "neural_active", "tsdf"])
+    """which mappers to run: neural, neural_active, tsdf"""
+    speed_iterations: int = 10
+    """timed iterations per hash-grid implementation in the speed test (0 skips it)"""
+    device: str = "auto"
+    """torch device of the neural mapper"""
+    mesh_voxel_m: float = 0.02
+    """marching-cubes voxel of the final meshes"""
+    eval_samples: int = 200_000
+    """surface samples per mesh for the metrics"""
+    bounds_padding_m: float = 0.1
+    """margin added around the mesh bounds for the map's box"""
+    seed: int = 0
+    """seed of the mapper and of the evaluation sampling"""
+    output: str = str(REPO_ROOT / "benchmarks" / "results" / "mapping_quality.json")
+    """where the JSON results go"""
+
+
+def parse_args() -> Args:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    for f in dataclasses.fields(Args):
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        flag = "--" + f.name.replace("_", "-")
+        if isinstance(default, list):
+            parser.add_argument(flag, nargs="+", default=default)
+        else:
+            parser.add_argument(flag, type=type(default), default=default)
+    return Args(**vars(parser.parse_args()))
+
+
+def load_trajectory(path: Path) -> np.ndarray:
+    return np.loadtxt(path, dtype=np.float64).reshape(-1, 4, 4)
+
+
+def render_pixels(
+    renderer: RgbdRenderer, pose: np.ndarray, pixels: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """RGB (K, 3) uint8 and z-depth (K,) of chosen pixels: exactly what a full render gives
+    at those pixels (same rays, same range cut, same colour lookup)."""
+    pose32 = np.asarray(pose, dtype=np.float32)
+    directions = renderer.camera.ray_directions[pixels] @ pose32[:3, :3].T
+    hits = renderer.raycaster.cast(pose32[:3, 3], directions)
+    depth = hits.distance.copy()
+    depth[~(depth <= renderer.max_depth_m)] = 0.0
+    triangle_ids = np.where(depth > 0, hits.triangle_ids, -1)
+    rgb = renderer.scene.colour_at(triangle_ids, hits.barycentric_uv)
+    return rgb, depth
+
+
+def time_iteration(
+    scene: Scene, renderer: RgbdRenderer, poses: np.ndarray, bounds: np.ndarray, args: Args
+) -> dict[str, float]:
+    """Seconds per mapping iteration of 2048 + 100 rays: batched vs plain hash grid."""
+    camera = renderer.camera
+    rgb, depth = renderer.render(poses[0])
+    results: dict[str, float] = {}
+    variants = {
+        "batched hash grid (published 43 samples)": (None, None),
+        "batched hash grid (samples > 0.2 m behind depth skipped)": (0.2, None),
+        "plain per-level hash grid (published 43 samples)": (None, NaiveHashGridEncoding),
+    }
+    for name, (cull, encoding) in variants.items():
+        config = NeuralMapperConfig(
+            device=args.device, seed=args.seed, first_frame_iterations=0,
+            cull_behind_depth_m=cull, active_sampling=False,
+        )
+        kwargs = {"hash_encoding_cls": encoding} if encoding is not None else {}
+        mapper = NeuralMapper(bounds, camera, config, **kwargs)
+        pose = torch.tensor(poses[0], dtype=torch.float32, device=mapper.device)
+        rays = NeuralMapper._world_rays(
+            pose, mapper._directions, torch.from_numpy(rgb.reshape(-1, 3)).to(mapper.device),
+            torch.from_numpy(depth.reshape(-1)).to(mapper.device),
+        )
+        generator = torch.Generator().manual_seed(args.seed)
+        durations = []
+        for _ in range(args.speed_iterations + 2):
+            index = torch.randint(0, len(rays), (2048 + 100,), generator=generator)
+            batch = rays.select(index.to(mapper.device))
+            start = time.perf_counter()
+            mapper.train_iteration(batch)
+            if mapper.device.type == "cuda":
+                torch.cuda.synchronize()
+            durations.append(time.perf_counter() - start)
+        results[name] = float(np.median(durations[2:]))  # the first two warm up
+        print(f"  {name}: {results[name] * 1e3:.0f} ms per iteration", flush=True)
+    return results
+
+
+def run_neural(
+    scene: Scene, renderer: RgbdRenderer, poses: np.ndarray, bounds: np.ndarray, args: Args,
+    active: bool,
+) -> tuple[NeuralMapper, dict[str, float]]:
+    config = NeuralMapperConfig(device=args.device, seed=args.seed, active_sampling=active)
+    mapper = NeuralMapper(bounds, renderer.camera, config)
+    render_seconds = 0.0
+    start = time.perf_counter()
+    for index in tqdm(range(len(poses)), desc="neural" + (" active" if active else "")):
+        pixels = mapper.required_pixels(index)
+        if len(pixels) == 0:
+            continue
+        t0 = time.perf_counter()
+        rgb, depth = render_pixels(renderer, poses[index], pixels)
+        render_seconds += time.perf_counter() - t0
+        mapper.integrate_pixels(pixels, rgb, depth, poses[index], index)
+    total = time.perf_counter() - start
+    return mapper, {
+        "total_s": total,
+        "render_s": render_seconds,
+        "mapping_s": total - render_seconds,
+        "iterations": mapper.stats.iterations,
+        "ms_per_iteration": mapper.stats.seconds_per_iteration * 1e3,
+        "keyframes": mapper.keyframes.num_keyframes,
+    }
+
+
+def run_tsdf(
+    renderer: RgbdRenderer, poses: np.ndarray, bounds: np.ndarray, args: Args
+) -> tuple[TsdfUncertaintyMapper, dict[str, float]]:
+    mapper = TsdfUncertaintyMapper(bounds, renderer.camera, TsdfMapperConfig(device=args.device))
+    render_seconds = 0.0
+    start = time.perf_counter()
+    for index in tqdm(range(len(poses)), desc="tsdf"):
+        t0 = time.perf_counter()
+        rgb, depth = renderer.render(poses[index])
+        render_seconds += time.perf_counter() - t0
+        mapper.integrate(rgb, depth, poses[index], index)
+    total = time.perf_counter() - start
+    return mapper, {
+        "total_s": total,
+        "render_s": render_seconds,
+        "mapping_s": total - render_seconds,
+        "ms_per_frame": (total - render_seconds) / len(poses) * 1e3,
+    }
+
+
+def main() -> None:
+    args = parse_args()
+    scene_dir = Path(args.scene_dir)
+    if not (scene_dir / "mesh.ply").is_file():
+        sys.exit(f"no mesh.ply in {scene_dir}; pass --scene-dir with the Replica sample")
+    torch.set_num_threads(max(torch.get_num_threads(), 1))
+    scene = load_scene(scene_dir / "mesh.ply", up_axis="z", name="replica_office0")
+    poses = load_trajectory(scene_dir / "traj.txt")[: args.num_frames]
+    camera = PinholeCamera()
+    renderer = RgbdRenderer(scene, camera, max_depth_m=5.0)
+    bounds = scene.bounds + np.array([[-1.0], [1.0]]) * args.bounds_padding_m
+    device = NeuralMapperConfig(device=args.device)
+    from naruto_agent.mapping import resolve_device
+
+    torch_device = resolve_device(device.device)
+    print(f"device: {torch_device}, torch threads: {torch.get_num_threads()}, "
+          f"frames: {len(poses)}", flush=True)
+
+    results: dict[str, object] = {
+        "args": dataclasses.asdict(args),
+        "device": str(torch_device),
+        "torch": torch.__version__,
+        "machine": platform.processor() or platform.machine(),
+        "cpu_threads": torch.get_num_threads(),
+        "variants": {},
+    }
+    if args.speed_iterations > 0:
+        print("speed of one mapping iteration (2048 + 100 rays):", flush=True)
+        speed = time_iteration(scene, renderer, poses, bounds, args)
+        plain = speed["plain per-level hash grid (published 43 samples)"]
+        results["iteration_speed_s"] = speed
+        results["speedup_vs_plain"] = {k: plain / v for k, v in speed.items()}
+
+    for variant in args.variants:
+        if variant in ("neural", "neural_active"):
+            mapper, timing = run_neural(scene, renderer, poses, bounds, args,
+                                        active=variant == "neural_active")
+        elif variant == "tsdf":
+            mapper, timing = run_tsdf(renderer, poses, bounds, args)
+        else:
+            sys.exit(f"unknown variant {variant!r}; use neural, neural_active, tsdf")
+        start = time.perf_counter()
+        mesh = mapper.extract_mesh(args.mesh_voxel_m)
+        mesh_seconds = time.perf_counter() - start
+        metrics = evaluate_reconstruction(
+            mesh, scene, poses=poses, camera=camera, num_samples=args.eval_samples,
+            seed=args.seed, renderer=renderer,
+        )
+        entry = {**timing, "mesh_s": mesh_seconds, "faces": len(mesh.faces),
+                 **metrics.as_dict()}
+        results["variants"][variant] = entry
+        print(f"{variant}: {json.dumps(entry, default=str)}", flush=True)
+        out_dir = Path(args.output).parent
+        out_dir.mkdir(parents=True, exist_ok=True)
+        Path(args.output).write_text(json.dumps(results, indent=2, default=str))
+
+    print_table(results)
+    Path(args.output).write_text(json.dumps(results, indent=2, default=str))
+    print(f"results written to {args.output}")
+
+
+def print_table(results: dict) -> None:
+    print()
+    print("| mapper | accuracy (cm) | completion (cm) | completion ratio (%) "
+          "| ms / iteration | total (s) |")
+    print("|---|---|---|---|---|---|")
+    for name, entry in results["variants"].items():
+        per = entry.get("ms_per_iteration", entry.get("ms_per_frame"))
+        unit = "" if "ms_per_iteration" in entry else " (per frame)"
+        print(f"| {name} | {entry['accuracy_cm']:.2f} | {entry['completion_cm']:.2f} | "
+              f"{entry['completion_ratio_pct']:.2f} | {per:.0f}{unit} | {entry['total_s']:.0f} |")
+    print(f"| published passive Co-SLAM (full mesh) | 1.50 | 1.48 | "
+          f"{PUBLISHED_COMPLETION_RATIO:.2f} | ~30 (V100) | |")
+    if "iteration_speed_s" in results:
+        print()
+        print("| hash grid | ms per iteration (2048 + 100 rays) | speed-up vs plain |")
+        print("|---|---|---|")
+        for name, seconds in results["iteration_speed_s"].items():
+            print(f"| {name} | {seconds * 1e3:.0f} | {results['speedup_vs_plain'][name]:.2f}x |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,85 @@
+"""The neural field: OneBlob + hash-grid encoding and two bias-free MLP decoders (Co-SLAM)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from naruto_agent.mapping.config import NeuralMapperConfig
+from naruto_agent.mapping.encoding import HashGridEncoding, OneBlobEncoding
+
+
+def _mlp(in_dim: int, hidden_dim: int, out_dim: int) -> nn.Sequential:
+    """Two bias-free layers (the published decoders)."""
+    return nn.Sequential(
+        nn.Linear(in_dim, hidden_dim, bias=False),
+        nn.ReLU(inplace=True),
+        nn.Linear(hidden_dim, out_dim, bias=False),
+    )
+
+
+class NeuralField(nn.Module):
+    """SDF (in units of the truncation distance) and colour at world points.
+
+    The geometry MLP reads OneBlob + hash-grid features and outputs one SDF value plus
+    ``geometry_feature_dim`` features; the colour MLP reads OneBlob + those features and
+    outputs RGB through a sigmoid.
+
+    Args:
+        bounds: (2, 3) world box the encodings cover; points outside are clamped to it.
+        config: the mapper settings.
+        hash_encoding_cls: the hash-grid implementation (the naive one, for benchmarks).
+    """
+
+    def __init__(
+        self,
+        bounds: np.ndarray,
+        config: NeuralMapperConfig,
+        hash_encoding_cls: type[HashGridEncoding] = HashGridEncoding,
+    ) -> None:
+        super().__init__()
+        bounds = np.asarray(bounds, dtype=np.float64)
+        extent = bounds[1] - bounds[0]
+        self.register_buffer("lower", torch.tensor(bounds[0], dtype=torch.float32))
+        self.register_buffer("inverse_extent", torch.tensor(1.0 / extent, dtype=torch.float32))
+        finest = max(float(extent.max()) / config.hash_finest_voxel_m, config.hash_base_resolution)
+        self.one_blob = OneBlobEncoding(config.one_blob_bins)
+        self.hash_grid = hash_encoding_cls(
+            num_levels=config.hash_levels,
+            features_per_level=config.hash_features_per_level,
+            log2_table_size=config.hash_log2_table_size,
+            base_resolution=config.hash_base_resolution,
+            finest_resolution=finest,
+        )
+        self.geometry_feature_dim = config.geometry_feature_dim
+        self.geometry_mlp = _mlp(
+            self.one_blob.output_dim + self.hash_grid.output_dim,
+            config.hidden_dim,
+            1 + config.geometry_feature_dim,
+        )
+        self.colour_mlp = _mlp(
+            self.one_blob.output_dim + config.geometry_feature_dim, config.hidden_dim, 3
+        )
+
+    def normalise(self, points: torch.Tensor) -> torch.Tensor:
+        """World points -> [0, 1]^3 inside the bounds (clamped)."""
+        return ((points - self.lower) * self.inverse_extent).clamp(0.0, 1.0)
+
+    def forward(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(N, 3) world points -> (SDF (N,) in truncation units, RGB (N, 3) in [0, 1])."""
+        unit = self.normalise(points)
+        blob = self.one_blob(unit)
+        geometry = self.geometry_mlp(torch.cat([blob, self.hash_grid(unit)], dim=1))
+        rgb = torch.sigmoid(self.colour_mlp(torch.cat([blob, geometry[:, 1:]], dim=1)))
+        return geometry[:, 0], rgb
+
+    def sdf(self, points: torch.Tensor) -> torch.Tensor:
+        """(N,) SDF in truncation units (skips the colour decoder)."""
+        unit = self.normalise(points)
+        geometry = self.geometry_mlp(torch.cat([self.one_blob(unit), self.hash_grid(unit)], 1))
+        return geometry[:, 0]
+
+    def grid_features(self, points: torch.Tensor) -> torch.Tensor:
+        """(N, levels * features) hash-grid features (for the smoothness loss)."""
+        return self.hash_grid(self.normalise(points))

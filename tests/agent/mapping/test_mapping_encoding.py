@@ -1,0 +1,80 @@
+"""The fast hash grid computes what the plain one computes; OneBlob and device handling."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from naruto_agent.mapping import (
+    HashGridEncoding,
+    NaiveHashGridEncoding,
+    OneBlobEncoding,
+    resolve_device,
+)
+from naruto_agent.mapping.encoding import level_resolutions
+
+
+def test_fast_hash_grid_matches_naive_forward_and_backward() -> None:
+    torch.manual_seed(0)
+    fast = HashGridEncoding(num_levels=6, log2_table_size=12, base_resolution=4,
+                            finest_resolution=90.0, init_scale=0.5)
+    naive = NaiveHashGridEncoding(num_levels=6, log2_table_size=12, base_resolution=4,
+                                  finest_resolution=90.0)
+    naive.load_state_dict(fast.state_dict())
+    points = torch.rand(500, 3)
+    points[:5] = torch.tensor([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1.0, 0.0, 0.5],
+                               [0.999, 0.5, 0.0], [0.25, 0.75, 1.0]])
+    out_fast, out_naive = fast(points), naive(points)
+    assert out_fast.shape == (500, 12)
+    torch.testing.assert_close(out_fast, out_naive, rtol=1e-5, atol=1e-6)
+    upstream = torch.randn_like(out_fast)
+    out_fast.backward(upstream)
+    out_naive.backward(upstream)
+    torch.testing.assert_close(fast.table.grad, naive.table.grad, rtol=1e-4, atol=1e-5)
+
+
+def test_dense_levels_have_no_collisions_and_hashed_levels_stay_in_their_rows() -> None:
+    grid = HashGridEncoding(num_levels=4, log2_table_size=15, base_resolution=8,
+                            finest_resolution=64.0)
+    # Every vertex of the coarsest level (8 -> 9 vertices per axis + 1) gets its own row.
+    axis = torch.arange(10, dtype=torch.float32) / 8.0
+    points = torch.stack(torch.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+    indices, _ = grid.corner_indices_and_weights(points.clamp(0, 1))
+    level0 = indices.view(8, grid.num_levels, -1)[0, 0]  # corner (0, 0, 0) of level 0
+    assert len(torch.unique(level0)) == len(torch.unique(points.clamp(0, 1), dim=0))
+    rows = indices.view(8, grid.num_levels, -1)
+    for level in range(grid.num_levels):
+        assert rows[:, level].min() >= level * grid.table_size
+        assert rows[:, level].max() < (level + 1) * grid.table_size
+
+
+def test_trilinear_weights_sum_to_one() -> None:
+    grid = HashGridEncoding(num_levels=3, log2_table_size=10, finest_resolution=40.0)
+    _, weights = grid.corner_indices_and_weights(torch.rand(100, 3))
+    torch.testing.assert_close(weights.sum(0), torch.ones(300))
+
+
+def test_level_resolutions_span_base_to_finest() -> None:
+    res = level_resolutions(16, 16, 250.5)
+    assert res[0] == 16 and res[-1] == 250 and res == sorted(res)
+    with pytest.raises(ValueError, match="num_levels"):
+        level_resolutions(0, 16, 100)
+
+
+def test_one_blob_peaks_at_the_bin_of_the_coordinate() -> None:
+    blob = OneBlobEncoding(16)
+    features = blob(torch.tensor([[0.03, 0.5, 0.97]])).view(3, 16)
+    assert features.argmax(dim=1).tolist() == [0, 7, 15] or features.argmax(dim=1).tolist() == [
+        0, 8, 15
+    ]
+
+
+def test_resolve_device() -> None:
+    expected = "cuda" if torch.cuda.is_available() else "cpu"
+    assert resolve_device("auto").type == expected
+    assert resolve_device("cpu").type == "cpu"
+    with pytest.raises(ValueError, match="device"):
+        resolve_device("tpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="CUDA"):
+            resolve_device("cuda")

@@ -1,0 +1,214 @@
+"""Neural mapper: it learns, it meshes, its uncertainty falls where it looked, and the
+active sampling keeps the most uncertain rays. Small seeded settings that run in seconds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial import cKDTree
+
+from naruto_agent.mapping import NeuralMapper, NeuralMapperConfig, select_active_rays
+from naruto_agent.mapping.rendering import RayBatch, truncated_weights
+from naruto_agent.planning.sdf_volume import SdfVolume
+
+from .conftest import orbit_poses
+
+
+def small_config(**overrides) -> NeuralMapperConfig:
+    settings = dict(
+        hash_levels=8,
+        hash_log2_table_size=12,
+        hash_finest_voxel_m=0.04,
+        first_frame_iterations=40,
+        rays_per_iteration=256,
+        current_frame_rays=32,
+        active_top_rays=64,
+        keyframe_pixel_fraction=0.3,
+        smoothness_points=6,
+        device="cpu",
+        seed=0,
+    )
+    settings.update(overrides)
+    return NeuralMapperConfig(**settings)
+
+
+def map_frames(mapper, renderer, poses) -> None:
+    for index, pose in enumerate(poses):
+        rgb, depth = renderer.render(pose)
+        mapper.integrate(rgb, depth, pose, index)
+
+
+@pytest.fixture(scope="module")
+def mapped_room(room_renderer, small_camera, room_bounds):
+    """A room mapped from 16 frames all around (4 mapping steps)."""
+    mapper = NeuralMapper(room_bounds, small_camera, small_config(active_sampling=False))
+    map_frames(mapper, room_renderer, orbit_poses(16))
+    return mapper
+
+
+def test_loss_goes_down(mapped_room) -> None:
+    totals = [loss["total"] for loss in mapped_room.stats.losses]
+    assert mapped_room.stats.iterations == 40 + 3 * 10
+    assert np.mean(totals[-5:]) < 0.2 * np.mean(totals[:5])
+    assert all(np.isfinite(totals))
+
+
+def test_mesh_of_mapped_room_is_complete(mapped_room, room) -> None:
+    mesh = mapped_room.extract_mesh(voxel_size=0.05)
+    assert len(mesh.faces) > 100
+    assert mesh.visual.vertex_colors.shape == (len(mesh.vertices), 4)
+    truth = room.sample_surface(20_000, seed=1)
+    # The walls at the orbit's height: what the cameras saw well.
+    truth = truth[(truth[:, 2] > 0.4) & (truth[:, 2] < 2.0)]
+    truth = truth[(np.abs(truth[:, 0]) > 1.99) | (np.abs(truth[:, 1]) > 1.49)]
+    distance, _ = cKDTree(mesh.sample(30_000, seed=2)).query(truth)
+    assert np.mean(distance < 0.05) > 0.8
+
+
+def test_sdf_sign_and_scale(mapped_room) -> None:
+    inside_room = mapped_room.sdf(np.array([[0.0, 0.0, 1.3], [-1.5, -1.0, 1.0]]))
+    behind_wall = mapped_room.sdf(np.array([[1.95, 0.0, 1.3]]))  # 5 cm before the x wall
+    assert np.all(inside_room > 0.05)
+    assert abs(behind_wall[0] - 0.05) < 0.05
+
+
+def test_planner_view_types_and_surface_mask(mapped_room) -> None:
+    sdf_volume, uncertainty_volume = mapped_room.planner_view(voxel_size=0.1)
+    assert isinstance(sdf_volume, SdfVolume) and isinstance(uncertainty_volume, SdfVolume)
+    assert sdf_volume.shape == uncertainty_volume.shape
+    np.testing.assert_allclose(sdf_volume.origin, mapped_room.bounds[0])
+    on_surface = (sdf_volume.values >= 0) & (sdf_volume.values <= 0.05)
+    assert np.all(uncertainty_volume.values[~on_surface] == 0.0)
+    assert np.all(uncertainty_volume.values[on_surface] >= 0.01)
+    assert on_surface.sum() > 50
+
+
+def test_observed_surface_is_less_uncertain_than_unobserved(
+    room_renderer, small_camera, room_bounds
+) -> None:
+    mapper = NeuralMapper(room_bounds, small_camera, small_config())
+    # Look only at the +x half of the room: the -x wall is never seen.
+    poses = [p for p in orbit_poses(24) if p[0, 2] > 0.5][:6]
+    map_frames(mapper, room_renderer, poses)
+    seen = np.array([[2.0, y, z] for y in (-0.6, 0.0, 0.6) for z in (0.8, 1.2)])
+    unseen = seen * np.array([-1.0, 1.0, 1.0])
+    assert mapper.variance(seen).max() < mapper.variance(unseen).min()
+    assert mapper.variance(unseen).min() == pytest.approx(np.log1p(np.exp(3.0)) + 0.01,
+                                                          rel=1e-4)
+
+
+def test_uncertainty_grid_axis_order(room_bounds) -> None:
+    from naruto_agent.mapping import UncertaintyGrid
+
+    grid = UncertaintyGrid(room_bounds, voxel_size=0.1)
+    with torch.no_grad():
+        grid.raw.zero_()
+        grid.raw[3, 1, 2] = 5.0  # one cell, x = 3, y = 1, z = 2
+    point = torch.tensor(room_bounds[0] + 0.1 * np.array([3, 1, 2]), dtype=torch.float32)
+    swapped = torch.tensor(room_bounds[0] + 0.1 * np.array([2, 1, 3]), dtype=torch.float32)
+    assert grid.raw_at(point[None]).item() == pytest.approx(5.0)
+    assert grid.raw_at(swapped[None]).item() == pytest.approx(0.0)
+
+
+def test_select_active_rays_keeps_the_most_uncertain() -> None:
+    generator = torch.Generator().manual_seed(0)
+    scores = torch.rand(1000, generator=generator)
+    scores[[5, 50, 900, 999]] = 10.0 + torch.arange(4.0)
+    chosen = select_active_rays(scores, num_keyframe_rays=800, top=20, random_keyframe=100,
+                                current=30, generator=generator)
+    assert len(chosen) == 150 and len(torch.unique(chosen)) == 150
+    top = chosen[:20]
+    assert set(torch.topk(scores, 20).indices.tolist()) == set(top.tolist())
+    assert {5, 50, 900, 999} <= set(top.tolist())
+    rest = chosen[20:]
+    assert (rest[:100] < 800).all() and (rest[100:] >= 800).all()
+
+
+def test_active_sampling_picks_rays_into_the_uncertain_region(
+    room_renderer, small_camera, room_bounds
+) -> None:
+    mapper = NeuralMapper(room_bounds, small_camera, small_config(first_frame_iterations=5))
+    poses = orbit_poses(8)
+    map_frames(mapper, room_renderer, poses[:6])
+    # Make the space x > 1.5 (the +x wall) very uncertain, everything else certain.
+    with torch.no_grad():
+        mapper.uncertainty.raw.fill_(-5.0)
+        cells_x = mapper.bounds[0, 0] + 0.1 * torch.arange(mapper.uncertainty.shape[0])
+        mapper.uncertainty.raw[cells_x > 1.5] = 8.0
+    rgb, depth = room_renderer.render(poses[0])
+    pixels = np.arange(small_camera.width * small_camera.height)
+    pose = torch.tensor(poses[0], dtype=torch.float32)
+    current = NeuralMapper._world_rays(
+        pose, mapper._directions, torch.from_numpy(rgb.reshape(-1, 3)),
+        torch.from_numpy(depth.reshape(-1)),
+    ).select(torch.from_numpy(pixels[:256]))
+    rays = mapper._select_rays(current)
+    cfg = mapper.config
+    assert len(rays) == cfg.rays_per_iteration + cfg.current_frame_rays
+    hit = rays.origins + rays.directions * rays.depth[:, None]
+    top_hits = hit[: cfg.active_top_rays]
+    random_hits = hit[cfg.active_top_rays :]
+    assert (top_hits[:, 0] > 1.45).float().mean() > 0.95
+    assert (top_hits[:, 0] > 1.45).float().mean() > (random_hits[:, 0] > 1.45).float().mean()
+
+
+def test_sparse_integration_equals_full_frames(room_renderer, small_camera, room_bounds) -> None:
+    config = small_config(first_frame_iterations=3, iterations_per_step=2)
+    full = NeuralMapper(room_bounds, small_camera, config)
+    sparse = NeuralMapper(room_bounds, small_camera, config)
+    for index, pose in enumerate(orbit_poses(6)):
+        rgb, depth = room_renderer.render(pose)
+        full.integrate(rgb, depth, pose, index)
+        pixels = sparse.required_pixels(index)
+        assert np.array_equal(pixels, sparse.required_pixels(index))
+        if index % 5 not in (0,) and index != 0:
+            assert len(pixels) == 0
+        sparse.integrate_pixels(
+            pixels, rgb.reshape(-1, 3)[pixels], depth.reshape(-1)[pixels], pose, index
+        )
+    for a, b in zip(full.field.parameters(), sparse.field.parameters(), strict=True):
+        torch.testing.assert_close(a, b)
+    with pytest.raises(ValueError, match="required_pixels"):
+        sparse.integrate_pixels(np.zeros(0, np.int64), np.zeros((0, 3), np.uint8),
+                                np.zeros(0), orbit_poses(1)[0], 10)
+
+
+def test_state_dict_round_trip(mapped_room, tmp_path) -> None:
+    path = tmp_path / "map.pt"
+    torch.save(mapped_room.state_dict(), path)
+    restored = NeuralMapper.from_state_dict(torch.load(path, weights_only=False), device="cpu")
+    points = np.random.default_rng(0).uniform(mapped_room.bounds[0], mapped_room.bounds[1],
+                                              (200, 3))
+    np.testing.assert_allclose(restored.sdf(points), mapped_room.sdf(points), atol=1e-6)
+    np.testing.assert_allclose(restored.variance(points), mapped_room.variance(points))
+    assert restored.keyframes.count == mapped_room.keyframes.count
+
+
+def test_truncated_weights_cut_behind_first_surface() -> None:
+    z = torch.linspace(0.5, 3.0, 26)[None]
+    sdf = ((1.5 - z) / 0.1).clamp(-1, 1)  # surface at 1.5 m, truncation units
+    sdf[:, 20:] = (2.5 - z[:, 20:]) / 0.1  # a second surface further back
+    weights = truncated_weights(sdf, z, 0.1)
+    assert weights.sum().item() == pytest.approx(1.0, abs=1e-5)
+    assert weights[z > 1.65].sum() == 0
+    depth = (weights * z).sum()
+    assert depth.item() == pytest.approx(1.5, abs=0.03)
+
+
+def test_bad_input_is_refused(room_bounds, small_camera) -> None:
+    with pytest.raises(ValueError, match="bounds"):
+        NeuralMapper(np.zeros((2, 3)), small_camera, small_config())
+    with pytest.raises(ValueError, match="active_top_rays"):
+        small_config(active_top_rays=10_000)
+    mapper = NeuralMapper(room_bounds, small_camera, small_config())
+    with pytest.raises(ValueError, match="camera"):
+        mapper.integrate(np.zeros((10, 10, 3), np.uint8), np.zeros((10, 10)), np.eye(4), 0)
+    with pytest.raises(ValueError, match="rgb"):
+        mapper.integrate(np.zeros((68, 120, 3)), np.zeros((68, 120)), np.eye(4), 0)
+
+
+def test_ray_batch_select_and_concatenate() -> None:
+    batch = RayBatch(torch.zeros(4, 3), torch.ones(4, 3), torch.zeros(4, 3), torch.arange(4.0))
+    both = RayBatch.concatenate([batch, batch.select(torch.tensor([1, 3]))])
+    assert both.depth.tolist() == [0, 1, 2, 3, 1, 3]

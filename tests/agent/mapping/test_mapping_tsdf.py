@@ -1,0 +1,61 @@
+"""The TSDF alternative: same interface, a derived uncertainty that falls with observation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from naruto_agent.mapping import Mapper, TsdfMapperConfig, TsdfUncertaintyMapper
+from naruto_agent.planning.sdf_volume import SdfVolume
+
+from .conftest import orbit_poses
+
+
+@pytest.fixture(scope="module")
+def tsdf_room(room_renderer, small_camera, room_bounds):
+    mapper = TsdfUncertaintyMapper(
+        room_bounds, small_camera, TsdfMapperConfig(voxel_size_m=0.04, truncation_m=0.12,
+                                                    device="cpu")
+    )
+    # The +x half of the room, seen 12 times from nearby poses.
+    poses = [p for p in orbit_poses(36) if p[0, 2] > 0.5]
+    for index, pose in enumerate(poses):
+        rgb, depth = room_renderer.render(pose)
+        mapper.integrate(rgb, depth, pose, index)
+    return mapper
+
+
+def test_interface(tsdf_room) -> None:
+    assert isinstance(tsdf_room, Mapper)
+    sdf_volume, uncertainty_volume = tsdf_room.planner_view(0.1)
+    assert isinstance(sdf_volume, SdfVolume) and isinstance(uncertainty_volume, SdfVolume)
+    off_surface = (sdf_volume.values < 0) | (sdf_volume.values > 0.05)
+    assert np.all(uncertainty_volume.values[off_surface] == 0.0)
+    assert (uncertainty_volume.values > 0).sum() > 20
+
+
+def test_mesh_covers_the_seen_walls(tsdf_room, room) -> None:
+    mesh = tsdf_room.extract_mesh(0.04)
+    truth = room.sample_surface(20_000, seed=0)
+    truth = truth[(truth[:, 0] > 1.99) & (np.abs(truth[:, 1]) < 1.0)]  # the +x wall, centre
+    distance, _ = cKDTree(mesh.vertices).query(truth)
+    assert np.mean(distance < 0.05) > 0.9
+    preview = tsdf_room.extract_mesh(0.1)
+    assert 0 < len(preview.faces) < len(mesh.faces)
+
+
+def test_uncertainty_falls_with_observations(tsdf_room) -> None:
+    seen = np.array([[1.95, y, z] for y in (-0.5, 0.0, 0.5) for z in (0.8, 1.2)])
+    unseen = seen * np.array([-1.0, 1.0, 1.0])
+    variance = SdfVolume(tsdf_room.variance_grid(), tsdf_room._grid_origin, 0.1)
+    assert variance.sample(seen).max() < 0.5 * variance.sample(unseen).min()
+    assert variance.sample(unseen).min() == pytest.approx(tsdf_room.config.initial_variance)
+
+
+def test_state_dict_round_trip(tsdf_room, small_camera, room_bounds) -> None:
+    restored = TsdfUncertaintyMapper(room_bounds, small_camera, tsdf_room.config)
+    restored.load_state_dict(tsdf_room.state_dict())
+    points = np.random.default_rng(0).uniform(room_bounds[0], room_bounds[1], (300, 3))
+    np.testing.assert_allclose(restored.sdf(points), tsdf_room.sdf(points))
+    np.testing.assert_array_equal(restored.counts, tsdf_room.counts)
