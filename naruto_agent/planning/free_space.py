@@ -23,7 +23,7 @@ _CELL_CORNERS = np.array(
 )
 
 
-@dataclass
+@dataclass(eq=False)
 class FreeSpaceComponents:
     """Connected components (26-connectivity) of the voxels with SDF > clearance.
 

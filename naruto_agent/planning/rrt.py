@@ -111,6 +111,7 @@ class PlanResult:
         iterations: planner iterations run.
         time_ms: wall time of the request, milliseconds.
         reason: "reached" on success, otherwise why it failed.
+        tree: (nodes, 3) all tree nodes, for inspection and plots.
     """
 
     success: bool
@@ -158,8 +159,9 @@ class _Tree:
 
             self._torch = torch
             device = device.removeprefix("torch:")
-            self._torch_points = torch.empty((capacity, 3), dtype=torch.float32, device=device)
-            self._torch_points[0] = torch.as_tensor(root, dtype=torch.float32)
+            # float64 so that the GPU picks the same neighbour as numpy, ties included.
+            self._torch_points = torch.empty((capacity, 3), dtype=torch.float64, device=device)
+            self._torch_points[0] = torch.as_tensor(root, dtype=torch.float64)
 
     def _grow(self, needed: int) -> None:
         capacity = len(self.points)

@@ -39,7 +39,7 @@ def _fibonacci_directions(count: int) -> np.ndarray:
     return directions / np.linalg.norm(directions, axis=1, keepdims=True)
 
 
-@dataclass
+@dataclass(eq=False)  # arrays make field-wise == ambiguous; volumes compare by identity
 class SdfVolume:
     """Values on a regular voxel grid, read by trilinear interpolation.
 

@@ -67,3 +67,19 @@ def test_guaranteed_margin_value():
 def test_rejects_bad_steps(wall_at_x1):
     with pytest.raises(ValueError, match="positive"):
         free_steps_along_segment(wall_at_x1, np.zeros(3), np.ones(3), step_m=0.0)
+
+
+def test_planner_move_checker_agrees_with_the_public_check(room_sdf):
+    from naruto_agent.planning import PlannerConfig
+    from naruto_agent.planning.rrt import _MoveChecker
+
+    config = PlannerConfig()
+    checker = _MoveChecker(room_sdf, config)
+    rng = np.random.default_rng(7)
+    bounds = room_sdf.bounds
+    for _ in range(200):
+        start, end = rng.uniform(bounds[0], bounds[1], size=(2, 3))
+        length = np.linalg.norm(end - start)
+        steps = int(length / 0.1 + 1e-9)
+        expected = free_steps_along_segment(room_sdf, start, end)
+        assert checker.free_steps(start, (end - start) / length, steps) == expected
