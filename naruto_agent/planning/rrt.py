@@ -106,7 +106,8 @@ class PlanResult:
     Attributes:
         success: whether a path to the goal was found.
         path: (K, 3) waypoints from the start (exactly) to within one step of the goal;
-            (0, 3) on failure. Consecutive waypoints are at most one step apart.
+            (0, 3) on failure. Consecutive waypoints are at most one step apart (the goal,
+            appended when its last short segment is free, at most the goal tolerance).
         nodes: number of tree nodes when planning ended (start included).
         iterations: planner iterations run.
         time_ms: wall time of the request, milliseconds.
