@@ -36,9 +36,9 @@ def mesh_from_sdf_function(
         return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
     vertices, faces, _, _ = marching_cubes(values, level=0.0, spacing=(voxel_size,) * 3)
     vertices = vertices.astype(np.float64) + volume.origin
-    # skimage orients faces towards increasing values; the SDF increases into free space,
-    # which is where the normals of a room's surfaces should point.
-    faces = faces[:, ::-1].astype(np.int64)
+    # skimage's winding makes the normals point up the gradient, i.e. into free space (where
+    # the SDF is positive): the orientation of a scanned room's surfaces.
+    faces = faces.astype(np.int64)
     if colour_fn is None:
         colours = np.full((len(vertices), 3), 180, dtype=np.uint8)
     else:

@@ -59,3 +59,16 @@ def test_state_dict_round_trip(tsdf_room, small_camera, room_bounds) -> None:
     points = np.random.default_rng(0).uniform(room_bounds[0], room_bounds[1], (300, 3))
     np.testing.assert_allclose(restored.sdf(points), tsdf_room.sdf(points))
     np.testing.assert_array_equal(restored.counts, tsdf_room.counts)
+
+
+def test_marching_cubes_normals_face_free_space() -> None:
+    from naruto_agent.mapping.meshing import mesh_from_sdf_function
+
+    # A spherical room of radius 1 m: free (positive) inside.
+    mesh = mesh_from_sdf_function(
+        lambda p: 1.0 - np.linalg.norm(p, axis=1), np.array([[-1.3] * 3, [1.3] * 3]), 0.1
+    )
+    radius = np.linalg.norm(mesh.vertices, axis=1)
+    assert np.all(np.abs(radius - 1.0) < 0.02)
+    inward = np.sum(mesh.face_normals * -mesh.triangles_center, axis=1) > 0
+    assert inward.mean() > 0.95  # the rest are degenerate slivers with no normal
