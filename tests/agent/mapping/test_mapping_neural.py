@@ -196,14 +196,17 @@ def test_state_dict_round_trip(mapped_room, tmp_path) -> None:
 
 
 def test_truncated_weights_cut_behind_first_surface() -> None:
-    z = torch.linspace(0.5, 3.0, 26)[None]
-    sdf = ((1.5 - z) / 0.1).clamp(-1, 1)  # surface at 1.5 m, truncation units
-    sdf[:, 20:] = (2.5 - z[:, 20:]) / 0.1  # a second surface further back
+    z = torch.linspace(0.5, 3.0, 251)[None]  # 1 cm apart
+    sdf = ((1.555 - z) / 0.1).clamp(-1, 1)  # surface at 1.555 m, truncation units
+    back = z > 2.15
+    sdf[back] = ((2.555 - z[back]) / 0.1).clamp(-1, 1)  # a second surface further back
     weights = truncated_weights(sdf, z, 0.1)
     assert weights.sum().item() == pytest.approx(1.0, abs=1e-5)
-    assert weights[z > 1.65].sum() == 0
+    # Cut one truncation behind the sample before the first crossing (1.55 m).
+    assert weights[z > 1.655].sum() == 0
+    assert weights[z < 1.4].sum() < 0.05
     depth = (weights * z).sum()
-    assert depth.item() == pytest.approx(1.5, abs=0.03)
+    assert depth.item() == pytest.approx(1.555, abs=0.01)
 
 
 def test_bad_input_is_refused(room_bounds, small_camera) -> None:
