@@ -61,7 +61,7 @@ class Args:
     device: str = "auto"
     """Open3D device of the reference mapper (auto, cpu, cuda)"""
     policy_kwargs: str = "{}"
-    """JSON dict from policy name to constructor arguments, e.g. '{"frontier": {"voxel_size_m": 0.2}}'"""
+    """JSON dict from policy name to its arguments, e.g. '{"random": {"max_run_steps": 20}}'"""
     env_kwargs: str = "{}"
     """JSON dict of extra env arguments, e.g. '{"max_depth_m": 5.0}'"""
     plots: bool = True

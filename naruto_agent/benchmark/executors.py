@@ -81,7 +81,8 @@ def run_local(
         remaining = list(range(len(specs)))
         context = multiprocessing.get_context("spawn")
         while remaining:
-            with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+            try:
                 futures: dict[Future, int] = {
                     pool.submit(episode_fn, specs[index].as_dict()): index for index in remaining
                 }
@@ -107,6 +108,12 @@ def run_local(
                         except Exception as error:  # noqa: BLE001 (e.g. an unpicklable result)
                             record = failed_record(specs[index], error)
                         reporter.done(specs[index], record)
+            except BaseException:
+                # Ctrl-C or a driver error: drop queued episodes, do not wait for running ones
+                # (finished records are already on disk; a rerun does the rest).
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+            pool.shutdown(wait=True)
         return reporter.failed
     finally:
         reporter.close()

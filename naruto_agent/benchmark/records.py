@@ -47,6 +47,7 @@ def write_json_atomic(path: str | Path, data: Any) -> Path:
             json.dump(_jsonable(data), stream, indent=1)
             stream.flush()
             os.fsync(stream.fileno())
+        os.chmod(temporary, 0o644)  # mkstemp makes it private; records are for everyone
         os.replace(temporary, path)
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
