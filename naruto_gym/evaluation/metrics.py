@@ -184,7 +184,9 @@ def nearest_distances(queries: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """Distance from each query point to its nearest reference point, (N,) float64 metres."""
     queries = _check_points(queries, "query points")
     reference = _check_points(reference, "reference points")
-    distances, _ = cKDTree(reference).query(queries, k=1, workers=-1)
+    # A sliding-midpoint (unbalanced) tree builds about twice as fast and queries as fast on
+    # surface samples, measured on the Replica mesh.
+    distances, _ = cKDTree(reference, balanced_tree=False).query(queries, k=1, workers=-1)
     return distances
 
 
