@@ -55,6 +55,10 @@ class ReconstructionMetrics:
         faces_evaluated: faces of the reconstruction after culling (None for point inputs).
         faces_culled: faces removed by culling (None when no culling ran).
         note: free-text remark (e.g. why culling was skipped).
+        observable_share_pct: % of ground-truth samples that some free viewpoint can see
+            (None when no observability mask was given).
+        observable_completion_ratio_pct: completion ratio over the observable samples only.
+        observable_completion_cm: completion over the observable samples only.
     """
 
     accuracy_cm: float
@@ -68,6 +72,9 @@ class ReconstructionMetrics:
     faces_evaluated: int | None = None
     faces_culled: int | None = None
     note: str = ""
+    observable_share_pct: float | None = None
+    observable_completion_ratio_pct: float | None = None
+    observable_completion_cm: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """Plain ``dict`` (JSON-serialisable) of every field."""
@@ -196,6 +203,7 @@ def reconstruction_metrics(
     threshold_m: float = DEFAULT_THRESHOLD_M,
     num_samples: int = DEFAULT_NUM_SAMPLES,
     seed: int = 0,
+    observable_mask: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> ReconstructionMetrics:
     """Accuracy, completion, completion ratio, precision and F-score of a reconstruction.
 
@@ -209,6 +217,9 @@ def reconstruction_metrics(
         threshold_m: distance under which a sample counts as matched, metres (default 5 cm).
         num_samples: samples per mesh.
         seed: seed of the sampling.
+        observable_mask: maps ground-truth samples to a boolean "some free viewpoint can see
+            it" mask (e.g. ``ObservableSurface.mask``); completion and its ratio are then also
+            reported over the observable samples only.
 
     Returns:
         The :class:`ReconstructionMetrics`.
@@ -228,8 +239,18 @@ def reconstruction_metrics(
     precision = float(np.mean(accuracy < threshold_m))
     recall = float(np.mean(completion < threshold_m))
     fscore = 0.0 if precision + recall == 0.0 else 2.0 * precision * recall / (precision + recall)
+    observable: dict[str, float] = {}
+    if observable_mask is not None:
+        mask = np.asarray(observable_mask(gt_points), dtype=bool)
+        observable["observable_share_pct"] = float(mask.mean() * 100.0)
+        if mask.any():
+            observable["observable_completion_ratio_pct"] = float(
+                np.mean(completion[mask] < threshold_m) * 100.0
+            )
+            observable["observable_completion_cm"] = float(completion[mask].mean() * 100.0)
     arrays = _mesh_arrays(reconstruction)
     return ReconstructionMetrics(
+        **observable,
         accuracy_cm=float(accuracy.mean() * 100.0),
         completion_cm=float(completion.mean() * 100.0),
         completion_ratio_pct=recall * 100.0,

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -61,6 +62,7 @@ def evaluate_reconstruction(
     cull_depth_scale: float | None = DEFAULT_CULL_DEPTH_SCALE,
     renderer: RgbdRenderer | None = None,
     progress: bool = False,
+    observable_mask: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> ReconstructionMetrics:
     """Score a reconstructed mesh against the ground-truth scene, culled by the trajectory.
 
@@ -80,6 +82,8 @@ def evaluate_reconstruction(
             factor of rendered occlusion depth images (see :mod:`.culling`).
         renderer: an existing renderer of ``scene`` to reuse its ray-casting scene.
         progress: show a progress bar while culling.
+        observable_mask: also score completion over the ground-truth samples this mask
+            keeps (e.g. ``ObservableSurface.mask``: surface some free viewpoint can see).
 
     Returns:
         :class:`ReconstructionMetrics`, with ``faces_evaluated`` / ``faces_culled`` filled in.
@@ -121,7 +125,12 @@ def evaluate_reconstruction(
     else:
         note = "not culled (cull=False)"
     metrics = reconstruction_metrics(
-        (vertices, faces), scene, threshold_m=threshold_m, num_samples=num_samples, seed=seed
+        (vertices, faces),
+        scene,
+        threshold_m=threshold_m,
+        num_samples=num_samples,
+        seed=seed,
+        observable_mask=observable_mask,
     )
     return ReconstructionMetrics(
         **{**metrics.as_dict(), "faces_evaluated": len(faces), "faces_culled": culled, "note": note}
@@ -197,6 +206,7 @@ class EpisodeReconstruction:
         threshold_m: float = DEFAULT_THRESHOLD_M,
         cull_every: int = DEFAULT_CULL_EVERY,
         renderer: RgbdRenderer | None = None,
+        observable_mask: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> dict[str, Any]:
         """Metrics of the fused reconstruction, as a flat dict for an env's ``info``.
 
@@ -225,5 +235,6 @@ class EpisodeReconstruction:
             threshold_m=threshold_m,
             cull_every=cull_every,
             renderer=renderer,
+            observable_mask=observable_mask,
         )
         return {**metrics.as_dict(), **base}

@@ -72,6 +72,16 @@ class Scene:
     def extents(self) -> np.ndarray:
         return self.bounds[1] - self.bounds[0]
 
+    @property
+    def face_normals(self) -> np.ndarray:
+        """(F, 3) unit triangle normals by the right-hand rule of each face's corners."""
+        if getattr(self, "_face_normals", None) is None:
+            triangles = self.vertices[self.faces]
+            normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+            length = np.linalg.norm(normals, axis=1, keepdims=True)
+            self._face_normals = normals / np.maximum(length, 1e-20)
+        return self._face_normals
+
     def to_trimesh(self) -> trimesh.Trimesh:
         """A plain trimesh copy with per-vertex colours (corner colours averaged)."""
         colours = np.zeros((len(self.vertices), 3), dtype=np.float64)
