@@ -113,7 +113,10 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
             if reconstruction is not None and step in checkpoints:
                 clock = time.perf_counter()
                 scores = reconstruction.evaluate(
-                    base.scene, num_samples=spec.checkpoint_samples, renderer=base.renderer
+                    base.scene,
+                    num_samples=spec.checkpoint_samples,
+                    renderer=base.renderer,
+                    observable_mask=base.observable_surface.mask,
                 )
                 evaluation_s += time.perf_counter() - clock
                 completion_curve.append({"step": step, **_curve_point(scores)})
@@ -124,7 +127,10 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
         if reconstruction is not None:
             clock = time.perf_counter()
             metrics = reconstruction.evaluate(
-                base.scene, num_samples=spec.eval_samples, renderer=base.renderer
+                base.scene,
+                num_samples=spec.eval_samples,
+                renderer=base.renderer,
+                observable_mask=base.observable_surface.mask,
             )
             evaluation_s += time.perf_counter() - clock
             completion_curve.append({"step": steps_run, **_curve_point(metrics)})
@@ -164,7 +170,13 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
 
 def _curve_point(scores: dict[str, Any]) -> dict[str, Any]:
     return {
-        key: scores.get(key) for key in ("completion_ratio_pct", "completion_cm", "accuracy_cm")
+        key: scores.get(key)
+        for key in (
+            "completion_ratio_pct",
+            "observable_completion_ratio_pct",
+            "completion_cm",
+            "accuracy_cm",
+        )
     }
 
 

@@ -13,6 +13,7 @@ from naruto_agent.benchmark.records import STATUS_OK
 COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("Coverage (%)", "coverage_pct", 1),
     ("Comp. ratio (%)", "metrics.completion_ratio_pct", 1),
+    ("Obs. comp. ratio (%)", "metrics.observable_completion_ratio_pct", 1),
     ("Comp. (cm)", "metrics.completion_cm", 2),
     ("Acc. (cm)", "metrics.accuracy_cm", 2),
     ("Path (m)", "path_length_m", 1),
