@@ -1,0 +1,53 @@
+"""The NARUTO agent (Feng et al., CVPR 2024) as a policy of this project's env.
+
+* :class:`NarutoPolicy` / :class:`NarutoConfig`: the agent (mapper + goal search + E-RRT +
+  rotation planning), acting in the env's ``"pose"`` action mode; ``policy.mesh()`` is its
+  reconstruction.
+* :func:`uncertainty_aware_goal_search` and its parts (:func:`candidate_goals`,
+  :func:`safe_goal_mask`, :func:`select_targets`, :func:`visibility`, :func:`search_goals`):
+  the goal search as pure functions.
+* :class:`NarutoStateMachine`, :class:`State`, :data:`TRANSITIONS`, :class:`Plan`: the
+  planner's state machine.
+
+Run it like any policy::
+
+    policy = NarutoPolicy(mapper="tsdf")
+    policy.bind(EnvContext.from_env(env))
+    obs, info = env.reset(seed=0)
+    policy.reset(obs, info, seed=0)
+    for _ in range(500):
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
+    env.unwrapped.evaluate(policy.mesh())
+"""
+
+from naruto_agent.naruto.agent import MAPPERS, NarutoConfig, NarutoPolicy, build_config
+from naruto_agent.naruto.goal_search import (
+    GoalSearchConfig,
+    GoalSearchResult,
+    candidate_goals,
+    safe_goal_mask,
+    search_goals,
+    select_targets,
+    uncertainty_aware_goal_search,
+    visibility,
+)
+from naruto_agent.naruto.state_machine import TRANSITIONS, NarutoStateMachine, Plan, State
+
+__all__ = [
+    "MAPPERS",
+    "TRANSITIONS",
+    "GoalSearchConfig",
+    "GoalSearchResult",
+    "NarutoConfig",
+    "NarutoPolicy",
+    "NarutoStateMachine",
+    "Plan",
+    "State",
+    "build_config",
+    "candidate_goals",
+    "safe_goal_mask",
+    "search_goals",
+    "select_targets",
+    "uncertainty_aware_goal_search",
+    "visibility",
+]

@@ -1,0 +1,386 @@
+"""The NARUTO agent as a policy: map every frame, search goals by uncertainty, move by E-RRT.
+
+One :meth:`NarutoPolicy.act` call is one iteration of NARUTO's loop (NARUTO_NOTES.md
+section 1):
+
+1. The observation's RGB-D frame and ground-truth pose go to the mapper, which applies its
+   own schedule (a keyframe and a mapping step every 5 frames).
+2. After a mapping step (every ``view_every_mapping_steps``-th) the agent reads the map on
+   the planner grid (0.1 m voxels over the scene's bounding box): an SDF volume and an
+   uncertainty volume that is zero off the surface.
+3. The :class:`~naruto_agent.naruto.state_machine.NarutoStateMachine` picks the next pose.
+   Its planning step runs the uncertainty-aware goal search
+   (:func:`~naruto_agent.naruto.goal_search.uncertainty_aware_goal_search`) and E-RRT
+   (:func:`~naruto_agent.planning.plan_path`) to the best goal.
+
+Mappers (``mapper=``):
+
+* ``"tsdf"`` (default): :class:`~naruto_agent.mapping.TsdfUncertaintyMapper`, TSDF fusion with
+  an uncertainty derived from observation counts. Tens of milliseconds per frame on a CPU.
+* ``"neural"``: :class:`~naruto_agent.mapping.NeuralMapper`, the published system (neural
+  field + NLL-trained uncertainty grid + active ray sampling). On this project's 2-core CPU a
+  mapping step costs seconds (the first frame's 200 iterations tens of seconds, and reading
+  the planner view evaluates the field on every voxel), so a 2000-frame episode takes hours;
+  use it with a GPU (``device="auto"`` picks CUDA).
+
+Choices of this implementation beyond the published description (all switchable):
+
+* Candidate goals must lie in free space connected to the agent (the E-RRT's own
+  connectivity check would reject the others after the search).
+* When the best goal cannot be reached, the next best (``goal_attempts``, 3) are tried
+  before giving up (the published system gives up at once and stays).
+* When the newest map puts the agent itself inside the clearance of a surface (the map
+  sharpened since the path was planned), the path starts with a short straight move to the
+  nearest free voxel within ``escape_radius_m``; otherwise the planner could never start.
+
+What the agent knows: the observations (RGB-D, pose), the env's step info (``collided``) and
+the scene's bounding box from the :class:`~naruto_agent.policies.EnvContext`; never the mesh.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Literal
+
+import numpy as np
+import trimesh
+
+from naruto_agent.mapping import (
+    NeuralMapper,
+    NeuralMapperConfig,
+    TsdfMapperConfig,
+    TsdfUncertaintyMapper,
+)
+from naruto_agent.naruto.goal_search import GoalSearchConfig, uncertainty_aware_goal_search
+from naruto_agent.naruto.state_machine import NarutoStateMachine, Plan, State
+from naruto_agent.planning import FreeSpaceComponents, PlannerConfig, SdfVolume, plan_path
+from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
+
+MAPPERS = ("tsdf", "neural")
+
+
+@dataclass
+class NarutoConfig:
+    """Settings of the NARUTO agent; defaults follow the published system.
+
+    Attributes:
+        planner_voxel_m: voxel of the planner's SDF and uncertainty volumes (0.1 m).
+        view_every_mapping_steps: read the planner view after every n-th mapping step (1:
+            after each, as published).
+        lazy_planner_view: read it only when the state machine needs it (planning, or a
+            move to check), not while the agent turns in place. The same decisions for a
+            mapper whose map changes only at mapping steps; a TSDF fuses every frame, so
+            a view read later holds a few more frames. Saves about half the reads.
+        max_rotation_step_deg: largest turn per frame (10 degrees; the env allows 20).
+        goal_attempts: best goals tried in turn with E-RRT before staying (published: 1).
+        reachable_iterations: extensions of the goal search's fallback tree.
+        check_moves_on_map: check every move against the agent's newest map before sending
+            it (2 cm samples, agent radius 5 cm); a blocked move is a detected collision.
+        escape_radius_m: how far the agent may look for free space when the map puts it
+            inside a surface's clearance (0 switches the escape off).
+        arrival_tolerance_m: a moving agent farther than this from its commanded node was
+            stopped by the env.
+        seed: seed of the agent's randomness when ``reset`` gets none.
+        goal_search: the goal search's settings.
+        planner: E-RRT settings (the time limit, 2 s, is shorter than the planning module's
+            default 5 s: a CPU agent should not stall; the seed is redrawn every request).
+        tsdf: settings of the TSDF mapper (``mapper="tsdf"``).
+        neural: settings of the neural mapper (``mapper="neural"``).
+    """
+
+    planner_voxel_m: float = 0.1
+    view_every_mapping_steps: int = 1
+    lazy_planner_view: bool = True
+    max_rotation_step_deg: float = 10.0
+    goal_attempts: int = 3
+    reachable_iterations: int = 2000
+    check_moves_on_map: bool = True
+    escape_radius_m: float = 0.3
+    arrival_tolerance_m: float = 0.01
+    seed: int = 0
+    goal_search: GoalSearchConfig = field(default_factory=GoalSearchConfig)
+    planner: PlannerConfig = field(default_factory=lambda: PlannerConfig(time_limit_s=2.0))
+    tsdf: TsdfMapperConfig = field(default_factory=TsdfMapperConfig)
+    neural: NeuralMapperConfig = field(default_factory=NeuralMapperConfig)
+
+    def __post_init__(self) -> None:
+        if not self.planner_voxel_m > 0:
+            raise ValueError(f"planner_voxel_m must be positive, got {self.planner_voxel_m}")
+        if self.view_every_mapping_steps < 1 or self.goal_attempts < 1:
+            raise ValueError("view_every_mapping_steps and goal_attempts must be at least 1")
+        if not 0 < self.max_rotation_step_deg <= 180:
+            raise ValueError(f"max_rotation_step_deg must be in (0, 180], got "
+                             f"{self.max_rotation_step_deg}")
+        if self.escape_radius_m < 0 or self.arrival_tolerance_m < 0:
+            raise ValueError("escape_radius_m and arrival_tolerance_m must be >= 0")
+        self.planner.validate()
+
+
+_SECTIONS = {"goal_search": GoalSearchConfig, "planner": PlannerConfig,
+             "tsdf": TsdfMapperConfig, "neural": NeuralMapperConfig}
+
+
+def build_config(config: NarutoConfig | None = None, **settings: Any) -> NarutoConfig:
+    """A :class:`NarutoConfig` with keyword overrides.
+
+    Top-level fields are given by name (``goal_attempts=1``); a section takes a dict of its
+    fields (``goal_search={"top_k": 1}``, ``planner={"time_limit_s": 1.0}``) or an instance.
+    JSON-able, so benchmark specs can carry them.
+    """
+    config = config or NarutoConfig()
+    known = {f.name for f in fields(NarutoConfig)}
+    unknown = set(settings) - known
+    if unknown:
+        raise ValueError(f"unknown NARUTO settings {sorted(unknown)}; known: {sorted(known)}")
+    updates: dict[str, Any] = {}
+    for name, value in settings.items():
+        if name in _SECTIONS and isinstance(value, dict):
+            section = getattr(config, name)
+            section_fields = {f.name for f in fields(_SECTIONS[name])}
+            bad = set(value) - section_fields
+            if bad:
+                raise ValueError(f"unknown {name} settings {sorted(bad)}; known: "
+                                 f"{sorted(section_fields)}")
+            value = replace(section, **value)
+        updates[name] = value
+    return replace(config, **updates)
+
+
+class NarutoPolicy(Policy):
+    """NARUTO: uncertainty-aware goal search + E-RRT on the agent's own map ("pose" actions).
+
+    Args:
+        mapper: ``"tsdf"`` (fast, default) or ``"neural"`` (the published mapper; slow on a
+            CPU, see the module docstring).
+        config: full settings; ``settings`` override its fields (see :func:`build_config`).
+        device: device of the mapper and the planner's nearest-neighbour search ("auto":
+            CUDA when present).
+        **settings: :class:`NarutoConfig` fields.
+
+    Attributes:
+        mapper: the map of the current episode (after ``reset``).
+        machine: the state machine (``machine.history`` holds the state of every action).
+        plans: one dict of diagnostics per planning request.
+        timings: seconds spent per phase (``mapping``, ``planner_view``, ``goal_search``,
+            ``rrt``, ``control``) this episode.
+    """
+
+    action_modes = ("pose",)
+    required_observations = ("rgb", "depth", "pose")
+
+    def __init__(
+        self,
+        mapper: Literal["tsdf", "neural"] = "tsdf",
+        config: NarutoConfig | None = None,
+        device: str = "auto",
+        **settings: Any,
+    ) -> None:
+        super().__init__()
+        if mapper not in MAPPERS:
+            raise ValueError(f"mapper must be one of {MAPPERS}, got {mapper!r}")
+        self.mapper_name = mapper
+        self.device = device
+        self.config = build_config(config, **settings)
+        self.mapper: TsdfUncertaintyMapper | NeuralMapper | None = None
+        self.machine = NarutoStateMachine(self.config.max_rotation_step_deg,
+                                          self.config.arrival_tolerance_m)
+        self.plans: list[dict[str, Any]] = []
+        self.timings: dict[str, float] = {}
+        self.sdf: SdfVolume | None = None
+        self.uncertainty: SdfVolume | None = None
+        self._components: FreeSpaceComponents | None = None
+        self._rng = np.random.default_rng(self.config.seed)
+        self._frame_index = 0
+        self._mapping_steps = 0
+        self._new_map = False
+        self._view_stale = False
+
+    # -- mapping -----------------------------------------------------------------------------
+    def _make_mapper(self) -> TsdfUncertaintyMapper | NeuralMapper:
+        context = self.context
+        if self.mapper_name == "tsdf":
+            return TsdfUncertaintyMapper(context.bounds, context.camera,
+                                         replace(self.config.tsdf, device=self.device))
+        neural = replace(self.config.neural, device=self.device,
+                         seed=int(self._rng.integers(2**31 - 1)))
+        return NeuralMapper(context.bounds, context.camera, neural)
+
+    def _integrate(self, observation: Observation) -> None:
+        clock = time.perf_counter()
+        changed = self.mapper.integrate(
+            observation["rgb"], observation["depth"],
+            np.asarray(observation["pose"], dtype=np.float64), self._frame_index,
+        )
+        self.timings["mapping"] += time.perf_counter() - clock
+        if changed:
+            self._mapping_steps += 1
+            if (self._mapping_steps - 1) % self.config.view_every_mapping_steps == 0:
+                self._view_stale = True
+                self._new_map = True
+                if not self.config.lazy_planner_view:
+                    self._read_view()
+
+    def _read_view(self) -> None:
+        """Read the planner view if a mapping step made the one held stale."""
+        if not self._view_stale:
+            return
+        clock = time.perf_counter()
+        self.sdf, self.uncertainty = self.mapper.planner_view(self.config.planner_voxel_m)
+        self._components = None
+        self._view_stale = False
+        self.timings["planner_view"] += time.perf_counter() - clock
+
+    # -- episode -----------------------------------------------------------------------------
+    def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
+        super().reset(observation, info, seed)
+        self._rng = np.random.default_rng(self.config.seed if seed is None else seed)
+        self.mapper = self._make_mapper()
+        self.machine.reset()
+        self.plans = []
+        self.timings = dict.fromkeys(
+            ("mapping", "planner_view", "goal_search", "rrt", "control"), 0.0
+        )
+        self.sdf = self.uncertainty = None
+        self._components = None
+        self._frame_index = 0
+        self._mapping_steps = 0
+        self._new_map = False
+        self._view_stale = False
+        self._integrate(observation)
+
+    def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
+        if self.mapper is None:
+            raise RuntimeError("call reset() with the first observation before act()")
+        self._frame_index += 1
+        self._integrate(observation)
+        clock = time.perf_counter()
+        inner = ("goal_search", "rrt", "planner_view")
+        before = sum(self.timings[name] for name in inner)
+        new_map, self._new_map = self._new_map, False
+        pose = self.machine.step(
+            np.asarray(observation["pose"], dtype=np.float64),
+            new_map=new_map,
+            collided=bool((info or {}).get("collided", False)),
+            plan=self._plan,
+            move_is_free=self._move_is_free,
+        )
+        # Control is the state machine's own work; the phases it called are timed apart.
+        called = sum(self.timings[name] for name in inner) - before
+        self.timings["control"] += time.perf_counter() - clock - called
+        return clip_pose_action(pose_action(pose), self.context.action_space)
+
+    @property
+    def state(self) -> State:
+        """The state machine's current state."""
+        return self.machine.state
+
+    def mesh(self, voxel_size: float = 0.02) -> trimesh.Trimesh:
+        """The agent's reconstruction (for ``env.unwrapped.evaluate(policy.mesh())``)."""
+        if self.mapper is None:
+            raise RuntimeError("the agent has no map yet: call reset() first")
+        return self.mapper.extract_mesh(voxel_size)
+
+    # -- planning ----------------------------------------------------------------------------
+    @property
+    def _clearance(self) -> float:
+        return self.config.planner.clearance_m
+
+    def _move_is_free(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """The move's samples (every 2 cm, the start excluded) keep the agent's clearance.
+
+        When a sharper map has put the agent itself within a surface's clearance, the move
+        only has to get no closer to the surface than the agent already is, so that it can
+        move away.
+        """
+        if not self.config.check_moves_on_map:
+            return True
+        self._read_view()
+        sample = self.config.planner.collision_sample_m
+        count = max(1, math.ceil(float(np.linalg.norm(end - start)) / sample - 1e-9))
+        fractions = np.arange(0, count + 1) / count
+        values = self.sdf.sample(start + fractions[:, None] * (end - start))
+        threshold = min(self._clearance, float(values[0]) - 1e-3)
+        return bool(np.all(values[1:] > threshold))
+
+    def _escape(self, position: np.ndarray) -> np.ndarray | None:
+        """Straight nodes (0.1 m apart) to the nearest voxel well inside free space, or None."""
+        sdf = self.sdf
+        radius = self.config.escape_radius_m
+        if radius <= 0:
+            return None
+        span = math.ceil(radius / sdf.voxel_size)
+        centre = np.rint(sdf.world_to_voxel(position)).astype(np.int64)
+        axis = np.arange(-span, span + 1)
+        block = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+        voxels = centre + block
+        inside = np.all((voxels >= 0) & (voxels < np.asarray(sdf.shape)), axis=1)
+        voxels = voxels[inside]
+        points = sdf.voxel_to_world(voxels)
+        distance = np.linalg.norm(points - position, axis=1)
+        # Well inside: clearance plus one collision sample, so the planner accepts the start.
+        free = (sdf.values[voxels[:, 0], voxels[:, 1], voxels[:, 2]]
+                > self._clearance + self.config.planner.collision_sample_m)
+        candidates = np.flatnonzero(free & (distance <= radius) & (distance > 1e-9))
+        if len(candidates) == 0:
+            return None
+        target = points[candidates[np.lexsort((candidates, distance[candidates]))[0]]]
+        steps = max(1, math.ceil(float(np.linalg.norm(target - position)) / 0.1 - 1e-9))
+        return position + (np.arange(0, steps + 1) / steps)[:, None] * (target - position)
+
+    def _plan(self, position: np.ndarray, rotation: np.ndarray) -> Plan | None:
+        """Goal search + E-RRT from ``position`` on the newest planner view."""
+        self._read_view()
+        sdf, uncertainty = self.sdf, self.uncertainty
+        record: dict[str, Any] = {"frame": self._frame_index, "position": position.tolist()}
+        self.plans.append(record)
+        prefix = position[None]
+        start = position
+        if sdf.sample(position)[0] <= self._clearance:
+            escape = self._escape(position)
+            record["escape"] = escape is not None
+            if escape is None:
+                record["outcome"] = "start not free"
+                return None
+            prefix, start = escape, escape[-1]
+        if self._components is None:
+            self._components = FreeSpaceComponents.from_sdf(sdf, self._clearance)
+        labels = self._components.labels_near(start)
+        goal_mask = np.isin(self._components.labels, sorted(labels)) if labels else None
+
+        clock = time.perf_counter()
+        search = uncertainty_aware_goal_search(
+            sdf, uncertainty, start, self._rng,
+            replace(self.config.goal_search, top_k=self.config.goal_attempts),
+            goal_mask=goal_mask,
+            planner_config=replace(self.config.planner, device=str(self.device)),
+            reachable_iterations=self.config.reachable_iterations,
+        )
+        self.timings["goal_search"] += time.perf_counter() - clock
+        record.update(
+            search_ms=search.diagnostics.get("time_ms", 0.0),
+            fallback=search.used_reachable_mask,
+            targets=int(len(search.targets)),
+            goal_scores=[round(float(s), 4) for s in search.goal_scores],
+        )
+        if not search.found:
+            record["outcome"] = "no goal sees a target"
+            return None
+        clock = time.perf_counter()
+        try:
+            for rank, (goal, views) in enumerate(zip(search.goals, search.goal_views, strict=True)):
+                planner = replace(self.config.planner, seed=int(self._rng.integers(2**31 - 1)),
+                                  device=str(self.device))
+                result = plan_path(sdf, start, goal, planner, self._components)
+                if result.success:
+                    path = np.vstack([prefix[:-1], result.path])
+                    record.update(outcome="planned", goal=goal.tolist(), rank=rank,
+                                  score=float(search.goal_scores[rank]),
+                                  path_nodes=int(len(path)), rrt_ms=result.time_ms)
+                    return Plan(path, views, goal.copy(), record)
+            record["outcome"] = f"no goal reachable ({result.reason})"
+            return None
+        finally:
+            self.timings["rrt"] += time.perf_counter() - clock
+
