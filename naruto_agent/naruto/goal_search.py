@@ -15,7 +15,8 @@ uncertainty:
    surface can dip below 0 a few centimetres in front of it): the 30 samples therefore span
    the line from the goal to ``visibility_stop_m`` (one planner voxel, 0.1 m) *before* the
    target. A target on the far side of a wall is still not seen: the wall, with its
-   negative SDF, lies on the checked part of the line.
+   negative SDF, lies on the checked part of the line (for walls at least that thick, which
+   is all a 0.1 m planner grid resolves anyway).
 4. The score of a goal is the sum of the uncertainty of the targets it sees; the best goal
    wins, and its 10 most uncertain visible targets are the views to take there.
 5. If no goal sees any target, the caller grows a goal-free RRT from the agent

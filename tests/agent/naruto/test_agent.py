@@ -1,0 +1,163 @@
+"""The NARUTO agent acting in the env (shipped ``replica_like_room``, small images)."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import naruto_gym  # noqa: F401  (registers the env)
+from naruto_agent.naruto import TRANSITIONS, NarutoPolicy, State, build_config
+from naruto_agent.policies import EnvContext, make_policy, pose_action
+from naruto_gym.geometry.transforms import rotation_angle_between
+
+SCENE = "replica_like_room"
+SCALE = 0.2
+STEPS = 150
+
+
+@dataclass
+class Episode:
+    policy: NarutoPolicy
+    env: gym.Env
+    actions: np.ndarray
+    poses: np.ndarray
+    coverage: np.ndarray
+    collisions: int
+
+
+def run_episode(steps: int, seed: int = 0, **settings) -> Episode:
+    # One step more than run, so no truncation triggers the 200,000-sample final scoring;
+    # reconstruct=True fuses the env's reference TSDF map to compare the agent's own with.
+    env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=SCALE, panorama_shape=None,
+                   max_episode_steps=steps + 1, reconstruct=True)
+    policy = NarutoPolicy(mapper="tsdf", device="cpu", **settings)
+    policy.bind(EnvContext.from_env(env))
+    observation, info = env.reset(seed=seed, options=policy.reset_options())
+    policy.reset(observation, info, seed=seed)
+    actions, poses, coverage, collisions = [], [observation["pose"]], [info["coverage"]], 0
+    for _ in range(steps):
+        action = policy.act(observation, info)
+        actions.append(action)
+        observation, _, terminated, truncated, info = env.step(action)
+        poses.append(observation["pose"])
+        coverage.append(info["coverage"])
+        collisions += int(info["collided"])
+        if terminated or truncated:
+            break
+    return Episode(policy, env, np.array(actions), np.array(poses, np.float64),
+                   np.array(coverage), collisions)
+
+
+@pytest.fixture(scope="module")
+def episode() -> Episode:
+    return run_episode(STEPS)
+
+
+def test_coverage_grows_clearly_and_beats_standing_still(episode):
+    # A policy that stays still (commands its start pose) keeps the start view's coverage.
+    env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=SCALE, panorama_shape=None)
+    observation, info = env.reset(seed=0)
+    for _ in range(5):
+        _, _, _, _, info = env.step(pose_action(observation["pose"]))
+    still_coverage = info["coverage"]
+    assert still_coverage == pytest.approx(episode.coverage[0])
+    assert episode.coverage[-1] > episode.coverage[0] + 0.25
+    assert episode.coverage[-1] > still_coverage + 0.2
+    assert episode.collisions <= 2
+
+
+def test_actions_are_finite_pose_actions_in_the_space(episode):
+    assert episode.actions.shape == (STEPS, 7) and episode.actions.dtype == np.float32
+    assert np.all(np.isfinite(episode.actions))
+    assert all(episode.env.action_space.contains(a) for a in episode.actions)
+
+
+def test_turns_stay_within_10_degrees_and_moves_within_a_step(episode):
+    rotations = episode.poses[:, :3, :3]
+    angles = [rotation_angle_between(a, b) for a, b in zip(rotations[:-1], rotations[1:],
+                                                            strict=True)]
+    assert max(angles) <= np.deg2rad(10.0) + 1e-3  # float32 poses
+    moves = np.linalg.norm(np.diff(episode.poses[:, :3, 3], axis=0), axis=1)
+    assert moves.max() <= 0.1 + 1e-4
+
+
+def test_states_run_in_the_published_order(episode):
+    machine = episode.policy.machine
+    assert all(b in TRANSITIONS[a] for a, b in machine.transitions)
+    assert machine.transitions[:5] == [
+        (State.STAYING, State.PLANNING),
+        (State.PLANNING, State.ROTATING_AT_START),
+        (State.ROTATING_AT_START, State.MOVING),
+        (State.MOVING, State.ROTATING_AT_GOAL),
+        (State.ROTATING_AT_GOAL, State.PLANNING),
+    ]
+    counts = Counter(machine.history)
+    assert counts[State.MOVING] >= 20 and counts[State.ROTATING_AT_GOAL] >= 10
+    planned = [plan for plan in episode.policy.plans if plan["outcome"] == "planned"]
+    assert len(planned) >= 2
+    assert all(plan["score"] > 0 for plan in planned)
+    assert set(episode.policy.timings) == {"mapping", "planner_view", "goal_search", "rrt",
+                                           "control"}
+
+
+def test_the_agents_mesh_scores_in_the_env(episode):
+    mesh = episode.policy.mesh()
+    assert len(mesh.faces) > 1000
+    metrics = episode.env.unwrapped.evaluate(mesh, num_samples=20_000)
+    reference = episode.env.unwrapped.reconstruction_metrics(num_samples=20_000)
+    assert metrics["completion_ratio_pct"] > 20.0
+    # The agent maps the same frames as the env's reference TSDF, so it scores about as well.
+    assert metrics["completion_ratio_pct"] > reference["completion_ratio_pct"] - 3.0
+    assert metrics["accuracy_cm"] < reference["accuracy_cm"] + 1.0
+
+
+def test_same_seed_same_actions(episode):
+    again = run_episode(40)
+    assert np.array_equal(again.actions, episode.actions[:40])
+
+
+def test_settings_and_errors():
+    policy = make_policy("naruto_agent.naruto:NarutoPolicy", goal_attempts=1,
+                         goal_search={"top_k": 2}, planner={"time_limit_s": 1.0})
+    assert isinstance(policy, NarutoPolicy)
+    assert policy.config.goal_attempts == 1 and policy.config.planner.time_limit_s == 1.0
+    assert build_config().goal_search.target_subset == 300
+    with pytest.raises(ValueError, match="mapper"):
+        NarutoPolicy(mapper="octomap")
+    with pytest.raises(ValueError, match="unknown NARUTO settings"):
+        NarutoPolicy(speed=3)
+    with pytest.raises(ValueError, match="unknown goal_search settings"):
+        NarutoPolicy(goal_search={"radius": 1})
+    with pytest.raises(RuntimeError, match="reset"):
+        NarutoPolicy().act({"rgb": None, "depth": None, "pose": np.eye(4)})
+    env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=0.1, action_mode="discrete")
+    with pytest.raises(ValueError, match="pose"):
+        NarutoPolicy().bind(EnvContext.from_env(env))
+
+
+@pytest.mark.slow
+def test_neural_mapper_runs_the_same_loop():
+    """The published mapper, cut down to run in seconds on a CPU."""
+    env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=0.1, panorama_shape=None)
+    policy = NarutoPolicy(
+        mapper="neural", device="cpu",
+        neural={"first_frame_iterations": 10, "iterations_per_step": 2, "rays_per_iteration": 256,
+                "current_frame_rays": 32, "active_top_rays": 64, "hash_log2_table_size": 12,
+                "active_score": "surface"},
+    )
+    policy.bind(EnvContext.from_env(env))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    start = info["coverage"]
+    for _ in range(15):
+        action = policy.act(observation, info)
+        assert np.all(np.isfinite(action))
+        observation, _, _, _, info = env.step(action)
+    assert policy.plans and policy.plans[0]["outcome"] == "planned"
+    assert State.MOVING in policy.machine.history
+    assert info["coverage"] > start
+    assert len(policy.mesh(voxel_size=0.1).faces) > 0
