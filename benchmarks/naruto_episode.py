@@ -1,0 +1,221 @@
+"""One NARUTO episode in the env: coverage, reconstruction metrics, path length, timings.
+
+Runs :class:`~naruto_agent.naruto.NarutoPolicy` for a step budget on a scene and reports
+
+* the coverage curve and the final coverage (share of the ground-truth surface seen);
+* the metrics of the env's reference TSDF map of the episode's frames
+  (``gym.make(..., reconstruct=True)``, ``env.unwrapped.reconstruction_metrics()``);
+* the metrics of the agent's own map (``env.unwrapped.evaluate(policy.mesh())``);
+* the trajectory length, collisions, the planner's requests and its state counts;
+* the time per step by phase: mapping (frame integration + reading the planner view),
+  planning (goal search + E-RRT + the state machine) and the env (motion, rendering,
+  coverage, and the reference TSDF fusion that ``reconstruct=True`` adds), next to the
+  published per-frame figures on a V100 (NARUTO_NOTES.md section 1) for scale.
+
+It writes a JSON record and two PNGs (the env's top-down render of the trajectory, and the
+coverage curve) under ``benchmarks/results/``. The machine's load average is recorded at the
+start and the end: on a shared 2-core CPU the timings move with it.
+
+Usage::
+
+    python benchmarks/naruto_episode.py                          # replica_like_room, 500 steps
+    python benchmarks/naruto_episode.py --steps 200 --image-scale 0.25 --scene two_rooms
+    python benchmarks/naruto_episode.py --mapper neural --device cuda   # the published mapper
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import time
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from PIL import Image  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+import naruto_gym  # noqa: E402,F401  (registers the env)
+from naruto_agent.naruto import NarutoPolicy  # noqa: E402
+from naruto_agent.policies import EnvContext  # noqa: E402
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+# NARUTO paper, Replica room0 on a V100: per-frame averages (NARUTO_NOTES.md section 1).
+PUBLISHED_MS_PER_FRAME = {"simulator": 24.4, "mapping": 60.5, "planning": 2.1}
+
+
+@dataclass
+class Args:
+    """Benchmark settings."""
+
+    scene: str = "replica_like_room"
+    """catalogue name or mesh path"""
+    up_axis: str = "z"
+    """up axis of a mesh file"""
+    steps: int = 500
+    """step budget of the episode"""
+    image_scale: float = 0.5
+    """camera resolution factor (0.5 gives 340 x 600)"""
+    mapper: str = "tsdf"
+    """the agent's mapper: tsdf (fast) or neural (the published one; slow on a CPU)"""
+    seed: int = 0
+    """seed of the env's start pose and of the agent"""
+    device: str = "auto"
+    """device of the agent's mapper and planner"""
+    eval_samples: int = 200_000
+    """surface samples per mesh for the metrics (200,000 as published)"""
+    output_dir: str = str(REPO_ROOT / "benchmarks" / "results")
+    """where the JSON and PNGs go"""
+    tag: str = ""
+    """suffix of the output names (default: scene, mapper and steps)"""
+
+
+def parse_args() -> Args:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    for f in dataclasses.fields(Args):
+        flag = "--" + f.name.replace("_", "-")
+        parser.add_argument(flag, type=type(f.default), default=f.default)
+    return Args(**vars(parser.parse_args()))
+
+
+def scalar_metrics(metrics: dict) -> dict:
+    """The numbers of a metrics dict (drops arrays and nested data)."""
+    return {k: v for k, v in metrics.items() if isinstance(v, (int, float, str, bool))}
+
+
+def save_curve(coverage: list[float], path: Path, title: str) -> None:
+    figure, axes = plt.subplots(figsize=(6, 3.5))
+    axes.plot(np.arange(len(coverage)), 100.0 * np.asarray(coverage))
+    axes.set_xlabel("step")
+    axes.set_ylabel("coverage (%)")
+    axes.set_ylim(0, 100)
+    axes.grid(alpha=0.3)
+    axes.set_title(title)
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+def main(args: Args) -> dict:
+    load_start = os.getloadavg()
+    # One step more than the budget, so the env's final-metrics wrapper (which scores on
+    # truncation) does not run inside a timed step; the metrics are computed below.
+    env = gym.make(
+        "NarutoRecon-v0", scene=args.scene, up_axis=args.up_axis, image_scale=args.image_scale,
+        max_episode_steps=args.steps + 1, reconstruct=True, render_mode="rgb_array",
+    )
+    base = env.unwrapped
+    policy = NarutoPolicy(mapper=args.mapper, device=args.device)
+    policy.bind(EnvContext.from_env(env, step_budget=args.steps))
+    started = time.perf_counter()
+    observation, info = env.reset(seed=args.seed, options=policy.reset_options())
+    clock = time.perf_counter()
+    policy.reset(observation, info, seed=args.seed)
+    reset_s = time.perf_counter() - clock
+
+    coverage = [float(info["coverage"])]
+    env_s = 0.0
+    collisions = 0
+    for _ in tqdm(range(args.steps), desc=f"NARUTO {args.scene}"):
+        action = policy.act(observation, info)
+        clock = time.perf_counter()
+        observation, _, terminated, truncated, info = env.step(action)
+        env_s += time.perf_counter() - clock
+        coverage.append(float(info["coverage"]))
+        collisions += int(info["collided"])
+        if terminated or truncated:
+            break
+    episode_s = time.perf_counter() - started
+    steps_run = len(coverage) - 1
+
+    clock = time.perf_counter()
+    reference = base.reconstruction_metrics(num_samples=args.eval_samples)
+    clock_mesh = time.perf_counter()
+    mesh = policy.mesh()
+    mesh_s = time.perf_counter() - clock_mesh
+    own = base.evaluate(mesh, num_samples=args.eval_samples)
+    evaluation_s = time.perf_counter() - clock - mesh_s
+
+    timings = policy.timings
+    per_step = 1000.0 / max(steps_run, 1)
+    phases_ms = {
+        "mapping": per_step * (timings["mapping"] + timings["planner_view"]),
+        "planning": per_step * (timings["goal_search"] + timings["rrt"] + timings["control"]),
+        "env": per_step * env_s,
+    }
+    detail_ms = {name: per_step * seconds for name, seconds in timings.items()}
+    plans = policy.plans
+    outcomes = Counter(plan.get("outcome", "?") for plan in plans)
+    planned = [plan for plan in plans if plan.get("outcome") == "planned"]
+    tag = args.tag or f"{Path(args.scene).stem}_{args.mapper}_{args.steps}steps"
+    output_dir = Path(args.output_dir)
+    output_dir.mkdir(parents=True, exist_ok=True)
+    record = {
+        "args": dataclasses.asdict(args),
+        "steps_run": steps_run,
+        "camera": base.camera.as_dict(),
+        "coverage_start": coverage[0],
+        "coverage_final": coverage[-1],
+        "coverage_curve": np.round(coverage, 5).tolist(),
+        "reference_tsdf_metrics": scalar_metrics(reference),
+        "agent_mesh_metrics": scalar_metrics(own),
+        "agent_mesh_faces": int(len(mesh.faces)),
+        "path_length_m": float(info.get("path_length_m", 0.0)),
+        "collisions": collisions,
+        "agent_detected_collisions": policy.machine.collisions,
+        "states": {state.value: count for state, count in Counter(policy.machine.history).items()},
+        "planning_requests": len(plans),
+        "planning_outcomes": dict(outcomes),
+        "fallback_searches": sum(bool(plan.get("fallback")) for plan in plans),
+        "mean_goal_search_ms": float(np.mean([p["search_ms"] for p in plans if "search_ms" in p]))
+        if plans else 0.0,
+        "mean_rrt_ms": float(np.mean([p["rrt_ms"] for p in planned])) if planned else 0.0,
+        "time_per_step_ms": phases_ms,
+        "time_per_step_detail_ms": detail_ms,
+        "published_v100_ms_per_frame": PUBLISHED_MS_PER_FRAME,
+        "reset_s": reset_s,
+        "episode_s": episode_s,
+        "mesh_s": mesh_s,
+        "evaluation_s": evaluation_s,
+        "load_average_start": load_start,
+        "load_average_end": os.getloadavg(),
+        "cpu_count": os.cpu_count(),
+        "host": platform.node(),
+    }
+    json_path = output_dir / f"naruto_episode_{tag}.json"
+    json_path.write_text(json.dumps(record, indent=2))
+    Image.fromarray(env.render()).save(output_dir / f"naruto_episode_{tag}_topdown.png")
+    save_curve(coverage, output_dir / f"naruto_episode_{tag}_coverage.png",
+               f"NARUTO ({args.mapper}) on {args.scene}")
+    env.close()
+
+    print(f"\nNARUTO ({args.mapper} mapper) on {args.scene}, {steps_run} steps, "
+          f"image scale {args.image_scale} ({base.camera.width} x {base.camera.height})")
+    marks = np.linspace(0, steps_run, 6).astype(int)
+    print("coverage (%): " + ", ".join(f"step {m}: {100 * coverage[m]:.1f}" for m in marks))
+    for name, metrics in (("reference TSDF", reference), ("agent's own mesh", own)):
+        print(f"{name:>17}: accuracy {metrics['accuracy_cm']:.2f} cm, completion "
+              f"{metrics['completion_cm']:.2f} cm, completion ratio "
+              f"{metrics['completion_ratio_pct']:.2f} %")
+    print(f"path length {record['path_length_m']:.2f} m, env collisions {collisions}, "
+          f"planning requests {len(plans)} {dict(outcomes)}")
+    print("time per step (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in phases_ms.items())
+          + "  | published V100: " + ", ".join(f"{k} {v}" for k, v in
+                                              PUBLISHED_MS_PER_FRAME.items()))
+    print("  detail: " + ", ".join(f"{k} {v:.1f}" for k, v in detail_ms.items()))
+    print(f"load average start {load_start[0]:.2f}, end {record['load_average_end'][0]:.2f} "
+          f"on {os.cpu_count()} cores; written {json_path}")
+    return record
+
+
+if __name__ == "__main__":
+    main(parse_args())
