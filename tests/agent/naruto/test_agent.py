@@ -126,6 +126,7 @@ def test_settings_and_errors():
     assert isinstance(policy, NarutoPolicy)
     assert policy.config.goal_attempts == 1 and policy.config.planner.time_limit_s == 1.0
     assert build_config().goal_search.target_subset == 300
+    assert isinstance(make_policy("naruto"), NarutoPolicy)  # the harness's registry name
     with pytest.raises(ValueError, match="mapper"):
         NarutoPolicy(mapper="octomap")
     with pytest.raises(ValueError, match="unknown NARUTO settings"):
