@@ -34,11 +34,15 @@ POLICIES: dict[str, type[Policy]] = {
     "frontier": FrontierPolicy,
 }
 
+#: Registry names resolved by import path on first use (their modules import torch).
+LAZY_POLICIES: dict[str, str] = {"naruto": "naruto_agent.naruto:NarutoPolicy"}
+
 
 def policy_class(name: str) -> type[Policy]:
     """The policy class of a registry name or a ``"package.module:ClassName"`` import path."""
     if name in POLICIES:
         return POLICIES[name]
+    name = LAZY_POLICIES.get(name, name)
     if ":" in name:
         module_name, _, attribute = name.partition(":")
         try:
