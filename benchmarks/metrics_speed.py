@@ -11,16 +11,16 @@ reconstruction by a trajectory, which an episode's final scoring pays too.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.evaluation import (
     TsdfFusionMapper,
     cull_mesh,
@@ -44,11 +44,7 @@ class Args:
 
 
 def parse_args() -> Args:
-    parser = argparse.ArgumentParser(description="Reconstruction-metrics speed")
-    for f in fields(Args):
-        flag = f"--{f.name.replace('_', '-')}"
-        parser.add_argument(flag, type=type(f.default), default=f.default)
-    return Args(**vars(parser.parse_args()))
+    return parse_dataclass_args(Args, description=__doc__.splitlines()[0])
 
 
 def median_s(function: Callable[[], object], repeats: int) -> float:

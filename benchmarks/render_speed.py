@@ -10,10 +10,9 @@ the 2-core CI machine (the published simulator: 24.4 ms on a V100).
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import gymnasium as gym
@@ -21,6 +20,7 @@ import numpy as np
 import open3d as o3d
 
 import naruto_gym  # noqa: F401
+from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.sensors.panorama import EquirectangularCamera, render_panorama
 from naruto_gym.sensors.raycaster import RayCaster
 
@@ -37,16 +37,7 @@ class Args:
 
 
 def parse_args() -> Args:
-    parser = argparse.ArgumentParser(description="RGB-D / panorama / env.step speed")
-    for f in fields(Args):
-        if f.name == "scenes":
-            parser.add_argument("--scenes", nargs="+", default=f.default_factory())
-        elif f.type in ("bool", bool):
-            parser.add_argument(f"--{f.name.replace('_', '-')}", type=int, default=int(f.default))
-        else:
-            flag = f"--{f.name.replace('_', '-')}"
-            parser.add_argument(flag, type=type(f.default), default=f.default)
-    return Args(**vars(parser.parse_args()))
+    return parse_dataclass_args(Args, description="RGB-D / panorama / env.step speed")
 
 
 def median_ms(function, repeats: int) -> float:

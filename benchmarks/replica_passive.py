@@ -15,10 +15,9 @@ Writes ``benchmarks/results/replica_passive.json`` and prints a Markdown table.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import gymnasium as gym
@@ -26,6 +25,7 @@ import numpy as np
 from tqdm import tqdm
 
 import naruto_gym  # noqa: F401  (registers the envs)
+from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.evaluation import (
     EpisodeReconstruction,
     cull_mesh,
@@ -63,11 +63,7 @@ class Args:
 
 
 def parse_args() -> Args:
-    parser = argparse.ArgumentParser(description="Replica office0 passive scan, TSDF-fused")
-    for f in fields(Args):
-        flag = f"--{f.name.replace('_', '-')}"
-        parser.add_argument(flag, type=type(f.default), default=f.default)
-    return Args(**vars(parser.parse_args()))
+    return parse_dataclass_args(Args, description=__doc__.splitlines()[0])
 
 
 def pose_action(pose: np.ndarray) -> np.ndarray:

@@ -31,18 +31,18 @@ once per map and shared by all requests, as an agent would; its cost is printed 
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
 import time
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from naruto_agent.planning import FreeSpaceComponents, PlannerConfig, SdfVolume, plan_path
+from naruto_gym.cli_args import parse_dataclass_args
 
 REPO = Path(__file__).resolve().parents[1]
 REPLICA_MESH = REPO.parent / "shared" / "scenes" / "replica_office0" / "mesh.ply"
@@ -82,11 +82,7 @@ class Args:
 
 
 def parse_args() -> Args:
-    parser = argparse.ArgumentParser(description="NARUTO Table 3: RRT / E-RRT ablation")
-    for f in fields(Args):
-        parser.add_argument(f"--{f.name.replace('_', '-')}", type=type(f.default),
-                            default=f.default)
-    return Args(**vars(parser.parse_args()))
+    return parse_dataclass_args(Args, description="NARUTO Table 3: RRT / E-RRT ablation")
 
 
 def load_scene_sdf(name: str, voxel_size: float) -> tuple[SdfVolume, str] | None:

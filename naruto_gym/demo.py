@@ -14,11 +14,10 @@ in ``benchmarks/``.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import time
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
@@ -27,6 +26,7 @@ from PIL import Image
 from tqdm import tqdm
 
 import naruto_gym  # noqa: F401  (registers the env ids)
+from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.motion.actions import DISCRETE_ACTIONS
 
 FORWARD = DISCRETE_ACTIONS.index("move_forward")
@@ -45,12 +45,7 @@ class DemoArgs:
 
 
 def parse_args(argv: list[str] | None = None) -> DemoArgs:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for field in fields(DemoArgs):
-        parser.add_argument(
-            f"--{field.name.replace('_', '-')}", type=type(field.default), default=field.default
-        )
-    return DemoArgs(**vars(parser.parse_args(argv)))
+    return parse_dataclass_args(DemoArgs, argv, __doc__.splitlines()[0])
 
 
 class WanderExplorer:

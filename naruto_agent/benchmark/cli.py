@@ -15,19 +15,19 @@ Example::
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, get_args, get_origin, get_type_hints
+from typing import Any
 
 from naruto_agent.benchmark.executors import pending_specs, run_local, run_ray
 from naruto_agent.benchmark.plots import plot_curves, plot_trajectories
 from naruto_agent.benchmark.records import load_records, write_json_atomic
 from naruto_agent.benchmark.spec import build_specs
 from naruto_agent.benchmark.tables import markdown_table, summarise
+from naruto_gym.cli_args import dataclass_parser
 
 
 @dataclass
@@ -70,54 +70,10 @@ class Args:
     """show a progress bar"""
 
 
-def _field_docs() -> dict[str, str]:
-    """The string literal under each ``Args`` field (its help text)."""
-    import ast
-    import inspect
-
-    tree = ast.parse(inspect.getsource(Args))
-    body = tree.body[0].body  # type: ignore[attr-defined]
-    docs = {}
-    for node, following in zip(body, body[1:], strict=False):
-        if (
-            isinstance(node, ast.AnnAssign)
-            and isinstance(following, ast.Expr)
-            and isinstance(following.value, ast.Constant)
-        ):
-            docs[node.target.id] = str(following.value.value)  # type: ignore[union-attr]
-    return docs
-
-
 def build_parser() -> argparse.ArgumentParser:
     """An ``argparse`` parser made from the fields of :class:`Args`."""
-    parser = argparse.ArgumentParser(
-        prog="naruto-benchmark",
-        description=__doc__.split("\n\n")[1].replace("\n", " "),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
-    hints = get_type_hints(Args)
-    try:
-        docs = _field_docs()
-    except (OSError, TypeError):  # no source available (frozen app)
-        docs = {}
-    for item in dataclasses.fields(Args):
-        flag = "--" + item.name.replace("_", "-")
-        kind = hints[item.name]
-        default = (
-            item.default if item.default is not dataclasses.MISSING else item.default_factory()
-        )
-        help_text = docs.get(item.name, "")
-        if kind is bool:
-            parser.add_argument(
-                flag, action=argparse.BooleanOptionalAction, default=default, help=help_text
-            )
-        elif get_origin(kind) is list:
-            (element,) = get_args(kind)
-            parser.add_argument(flag, nargs="+", type=element, default=default, help=help_text)
-        else:
-            element = next((a for a in get_args(kind) if a is not type(None)), kind)
-            parser.add_argument(flag, type=element, default=default, help=help_text)
-    return parser
+    description = __doc__.split("\n\n")[1].replace("\n", " ")
+    return dataclass_parser(Args, description=description, prog="naruto-benchmark")
 
 
 def parse_args(argv: list[str] | None = None) -> Args:
