@@ -27,7 +27,6 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import platform
@@ -47,6 +46,7 @@ from naruto_agent.mapping import (
     TsdfMapperConfig,
     TsdfUncertaintyMapper,
 )
+from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.evaluation import evaluate_reconstruction
 from naruto_gym.scenes.mesh_scene import Scene, load_scene
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
@@ -82,15 +82,7 @@ class Args:
 
 
 def parse_args() -> Args:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    for f in dataclasses.fields(Args):
-        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
-        flag = "--" + f.name.replace("_", "-")
-        if isinstance(default, list):
-            parser.add_argument(flag, nargs="+", default=default)
-        else:
-            parser.add_argument(flag, type=type(default), default=default)
-    return Args(**vars(parser.parse_args()))
+    return parse_dataclass_args(Args, description=__doc__.split("\n")[0])
 
 
 def load_trajectory(path: Path) -> np.ndarray:

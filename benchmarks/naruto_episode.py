@@ -25,7 +25,6 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import os
@@ -47,6 +46,7 @@ from tqdm import tqdm  # noqa: E402
 import naruto_gym  # noqa: E402,F401  (registers the env)
 from naruto_agent.naruto import NarutoPolicy  # noqa: E402
 from naruto_agent.policies import EnvContext  # noqa: E402
+from naruto_gym.cli_args import parse_dataclass_args
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # NARUTO paper, Replica room0 on a V100: per-frame averages (NARUTO_NOTES.md section 1).
@@ -80,11 +80,7 @@ class Args:
 
 
 def parse_args() -> Args:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    for f in dataclasses.fields(Args):
-        flag = "--" + f.name.replace("_", "-")
-        parser.add_argument(flag, type=type(f.default), default=f.default)
-    return Args(**vars(parser.parse_args()))
+    return parse_dataclass_args(Args, description=__doc__.split("\n")[0])
 
 
 def scalar_metrics(metrics: dict) -> dict:
