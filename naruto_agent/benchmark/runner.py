@@ -112,12 +112,7 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
                 reasons[info.get("collision_reason", "") or "unknown"] += 1
             if reconstruction is not None and step in checkpoints:
                 clock = time.perf_counter()
-                scores = reconstruction.evaluate(
-                    base.scene,
-                    num_samples=spec.checkpoint_samples,
-                    renderer=base.renderer,
-                    observable_mask=base.observable_surface.mask,
-                )
+                scores = _score(reconstruction, base, spec.checkpoint_samples)
                 evaluation_s += time.perf_counter() - clock
                 completion_curve.append({"step": step, **_curve_point(scores)})
             if terminated or truncated:
@@ -126,12 +121,7 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
         metrics: dict[str, Any] = {}
         if reconstruction is not None:
             clock = time.perf_counter()
-            metrics = reconstruction.evaluate(
-                base.scene,
-                num_samples=spec.eval_samples,
-                renderer=base.renderer,
-                observable_mask=base.observable_surface.mask,
-            )
+            metrics = _score(reconstruction, base, spec.eval_samples)
             evaluation_s += time.perf_counter() - clock
             completion_curve.append({"step": steps_run, **_curve_point(metrics)})
         per_step = max(steps_run, 1)
@@ -166,6 +156,16 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
     finally:
         policy.close()
         env.close()
+
+
+def _score(reconstruction: Any, env: Any, num_samples: int) -> dict[str, Any]:
+    """Metrics of the episode's reference map, on the whole and on the observable surface."""
+    return reconstruction.evaluate(
+        env.scene,
+        num_samples=num_samples,
+        renderer=env.renderer,
+        observable_mask=env.observable_surface.mask,
+    )
 
 
 def _curve_point(scores: dict[str, Any]) -> dict[str, Any]:
