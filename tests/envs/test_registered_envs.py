@@ -13,7 +13,9 @@ from gymnasium.utils.env_checker import check_env
 import naruto_gym  # noqa: F401
 
 NARUTO_ENV_IDS = sorted(
-    env_id for env_id, spec in gym.registry.items() if str(spec.entry_point).startswith("naruto_gym")
+    env_id
+    for env_id, spec in gym.registry.items()
+    if str(spec.entry_point).startswith("naruto_gym")
 )
 # Small frames keep the checkers fast; the full-size default is covered by the Replica fixture.
 SMALL = {"image_scale": 0.1, "coverage_samples": 2000}
