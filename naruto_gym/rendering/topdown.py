@@ -41,10 +41,7 @@ class TopDownMap:
         hit = hits.hit_mask
         image[hit] = scene.colour_at(hits.triangle_ids[hit], hits.barycentric_uv[hit])
         # A downward ray that hits a face whose normal points down started inside a solid.
-        triangles = scene.vertices[scene.faces[np.maximum(hits.triangle_ids, 0)]]
-        normal_z = np.cross(
-            triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
-        )[:, 2]
+        normal_z = scene.face_normals[np.maximum(hits.triangle_ids, 0), 2]
         height = np.where(hit, cut_z - hits.distance, bounds[0, 2])
         # Floors of files with flipped normals stay floors.
         image[hit & (normal_z < 0) & (height > bounds[0, 2] + 0.05)] = WALL_RGB

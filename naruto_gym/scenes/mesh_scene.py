@@ -9,6 +9,7 @@ index for textured triangles, so that the colour of a ray hit is one barycentric
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Literal
 
@@ -72,15 +73,13 @@ class Scene:
     def extents(self) -> np.ndarray:
         return self.bounds[1] - self.bounds[0]
 
-    @property
+    @cached_property
     def face_normals(self) -> np.ndarray:
         """(F, 3) unit triangle normals by the right-hand rule of each face's corners."""
-        if getattr(self, "_face_normals", None) is None:
-            triangles = self.vertices[self.faces]
-            normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-            length = np.linalg.norm(normals, axis=1, keepdims=True)
-            self._face_normals = normals / np.maximum(length, 1e-20)
-        return self._face_normals
+        triangles = self.vertices[self.faces]
+        normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+        length = np.linalg.norm(normals, axis=1, keepdims=True)
+        return normals / np.maximum(length, 1e-20)
 
     def to_trimesh(self) -> trimesh.Trimesh:
         """A plain trimesh copy with per-vertex colours (corner colours averaged)."""

@@ -222,25 +222,3 @@ class RayCaster:
         if first_blocked == 0:
             return 0.0
         return float(fractions[first_blocked - 1])
-
-    def count_surface_crossings(
-        self, origins: np.ndarray, directions: np.ndarray, max_crossings: int = 64
-    ) -> np.ndarray:
-        """Number of surface crossings of each ray (for inside/outside tests)."""
-        origins, directions = _as_rays(origins, directions)
-        if self.backend == "open3d":
-            rays = self._o3d.core.Tensor(np.concatenate([origins, directions], axis=1))
-            return self.native_scene.count_intersections(rays).numpy().astype(np.int64)
-        counts = np.zeros(len(origins), dtype=np.int64)
-        current = origins.copy()
-        active = np.ones(len(origins), dtype=bool)
-        for _ in range(max_crossings):
-            if not active.any():
-                break
-            hits = self.cast(current[active], directions[active])
-            hit = hits.hit_mask
-            index = np.flatnonzero(active)
-            counts[index[hit]] += 1
-            current[index[hit]] += directions[index[hit]] * (hits.distance[hit, None] + 1e-4)
-            active[index[~hit]] = False
-        return counts
