@@ -59,6 +59,9 @@ class NeuralMapperConfig:
     Device and seed:
         device: "auto" (CUDA when present), "cpu", "cuda[:N]".
         seed: seeds the parameter initialisation and every ray draw.
+        tune_cpu_allocator: on a CPU, let glibc keep freed tensor memory for reuse
+            (:mod:`naruto_agent.mapping.cpu_allocator`; process-wide, about 10 % faster
+            iterations). A CPU speed-up.
     """
 
     one_blob_bins: int = 16
@@ -110,6 +113,7 @@ class NeuralMapperConfig:
 
     device: str = "auto"
     seed: int = 0
+    tune_cpu_allocator: bool = True
 
     def __post_init__(self) -> None:
         positive = (

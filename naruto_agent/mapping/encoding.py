@@ -3,24 +3,23 @@
 The published system uses tiny-cuda-nn's fused CUDA kernels. Here both encodings are plain
 PyTorch, so they run on a CPU and on CUDA with nothing to compile.
 
-:class:`HashGridEncoding` is the fast one. It has no Python loop over levels: the eight cell
-corners of every level are indexed in one pass, gathered in one lookup per feature channel
-and blended with their trilinear weights in one ``einsum``:
+:class:`HashGridEncoding` is the fast one. One table holds all levels (level ``l`` owns rows
+``[l * T, (l + 1) * T)``), feature-major ``(F, L * T)``. Levels come in two kinds:
 
-* one table for all levels (level ``l`` owns rows ``[l * T, (l + 1) * T)``);
-* a corner's index is ``(x * m0) ^ (y * m1) ^ (z * m2)`` masked to the table size. For a
-  hashed level ``(m0, m1, m2)`` are the usual primes (1, 2654435761, 805459861); for a coarse
-  level whose vertices fit in the table, the multipliers are powers of two that pack the three
-  coordinates into disjoint bits, which makes the same formula a collision-free dense index.
-  So dense and hashed levels share one code path, and the per-axis products are computed
-  once per axis and corner side, not once per corner;
-* indices and weights are built corner-major (``[8, L, N]``, N contiguous, which PyTorch's
-  element-wise kernels run fast, where a point-major layout with a size-8 inner dimension
-  runs several times slower);
-* the backward pass scatters with ``torch.bincount`` (one weighted histogram per feature
-  channel), which on a CPU is several times faster than ``index_add_`` or the stock
-  ``embedding_bag`` backward (that one sorts the indices). On CUDA ``index_add_`` is used.
-* the table is feature-major, (F, L * T), so each feature is one 1-D ``index_select``.
+* **dense** coarse levels, whose ``(resolution + 2)^3`` vertices fit in ``T`` rows: each
+  vertex has its own row (``x + S y + S^2 z`` with one side ``S`` for all dense levels), so
+  the level is a small ``S^3`` volume. All dense levels are interpolated together by one
+  batched ``torch.grid_sampler`` call, whose fused trilinear kernel (and its backward) beats
+  gathering the eight corners one by one;
+* **hashed** finer levels: a corner's row is ``(x * m0) ^ (y * m1) ^ (z * m2)`` masked to the
+  table size, with the usual primes (1, 2654435761, 805459861). These have no Python loop
+  over levels: the eight cell corners of every hashed level are indexed in one pass
+  (corner-major ``[8, L, N]``, N contiguous, which PyTorch's element-wise kernels run fast),
+  gathered with one 1-D ``index_select`` per feature and blended corner by corner.
+  Only the multipliers' low bits matter after the mask, so the products run in int32.
+  The backward pass scatters with ``torch.bincount`` (one weighted histogram per feature),
+  which on a CPU is several times faster than ``index_add_`` or the stock ``embedding_bag``
+  backward (that one sorts the indices); on CUDA ``index_add_`` is used.
 
 No gradient flows to the positions: the mapper has known poses, so none is needed.
 
@@ -60,16 +59,24 @@ def level_resolutions(
     return [int(math.floor(base_resolution * scale**level + 1e-6)) for level in range(num_levels)]
 
 
+def dense_level_layout(resolutions: list[int], log2_table_size: int) -> tuple[int, int]:
+    """(number of dense levels, side S of their volumes).
+
+    A level is dense when its ``(resolution + 2)^3`` vertices (corner coordinates run up to
+    resolution + 1) fit in the level's ``2^log2_table_size`` rows. Resolutions grow, so the
+    dense levels are the first ones; they all use the side of the finest of them.
+    """
+    table_size = 1 << log2_table_size
+    sides = [resolution + 2 for resolution in resolutions if (resolution + 2) ** 3 <= table_size]
+    return len(sides), max(sides, default=0)
+
+
 def _level_multipliers(resolutions: list[int], log2_table_size: int) -> torch.Tensor:
-    """(3, L) int64 per-axis multipliers: bit packing for dense levels, primes for hashed."""
+    """(3, L) int64 per-axis multipliers: (1, S, S^2) for dense levels, primes for hashed."""
+    num_dense, side = dense_level_layout(resolutions, log2_table_size)
     multipliers = torch.zeros(3, len(resolutions), dtype=torch.int64)
-    for level, resolution in enumerate(resolutions):
-        # Corner coordinates run over 0 .. resolution + 1 (the +1 corner of the last cell).
-        bits = max(1, math.ceil(math.log2(resolution + 2)))
-        if 3 * bits <= log2_table_size:
-            multipliers[:, level] = torch.tensor([1, 1 << bits, 1 << (2 * bits)])
-        else:
-            multipliers[:, level] = torch.tensor(_HASH_PRIMES)
+    multipliers[:, :num_dense] = torch.tensor([1, side, side * side])[:, None]
+    multipliers[:, num_dense:] = torch.tensor(_HASH_PRIMES)[:, None]
     return multipliers
 
 
@@ -104,50 +111,87 @@ class OneBlobEncoding(nn.Module):
         return values.reshape(unit_positions.shape[0], -1)
 
 
-class _CornerGather(torch.autograd.Function):
-    """out[f, b] = sum_c weights[c, b] * table[f, indices[c, b]]; gradient to the table only.
+class _HashGridFunction(torch.autograd.Function):
+    """Features ``(F, L, N)`` of all levels; the gradient goes to the table only.
 
-    Corner-major layout (``indices`` and ``weights`` are (8, B)) so that nothing has to be
-    transposed; the table is feature-major (F, rows) so each feature is a 1-D gather.
+    Dense levels: one batched ``torch.grid_sampler`` over their ``S^3`` volumes. Hashed levels:
+    ``out[f, b] = sum_c weights[c, b] * table[f, indices[c, b]]`` over the eight corners.
     """
 
     @staticmethod
-    def forward(ctx, table, indices, weights):  # noqa: ANN001, ANN205
-        ctx.save_for_backward(indices, weights)
+    def forward(ctx, table, unit_positions, encoding):  # noqa: ANN001, ANN205
+        features, num_levels = table.shape[0], encoding.num_levels
+        count = unit_positions.shape[0]
+        num_dense = encoding.num_dense_levels
+        out = table.new_empty((features, num_levels, count))
         ctx.table_rows = table.shape[1]
-        flat = indices.reshape(-1)
-        out = torch.empty((table.shape[0], weights.shape[1]), dtype=table.dtype,
-                          device=table.device)
-        for f in range(table.shape[0]):
-            corners = table[f].index_select(0, flat).view_as(weights)
-            # Accumulating corner by corner is about 2x faster than an einsum (a strided bmm).
-            torch.mul(corners[0], weights[0], out=out[f])
-            for c in range(1, corners.shape[0]):
-                out[f].addcmul_(corners[c], weights[c])
+        ctx.encoding = encoding
+        saved: list[torch.Tensor] = []
+        if num_dense < num_levels:
+            indices, weights = encoding.corner_indices_and_weights(unit_positions)
+            weights = weights.to(table.dtype)
+            flat = indices.reshape(-1)
+            hashed = out[:, num_dense:].view(features, -1)
+            for f in range(features):
+                corners = table[f].index_select(0, flat).view_as(weights)
+                # Accumulating corner by corner is about 2x faster than an einsum (a strided
+                # bmm) here.
+                torch.mul(corners[0], weights[0], out=hashed[f])
+                for c in range(1, corners.shape[0]):
+                    hashed[f].addcmul_(corners[c], weights[c])
+            saved += [indices, weights]
+        if num_dense:
+            volumes = encoding.dense_volumes(table)
+            grid = encoding.dense_sampling_grid(unit_positions)
+            sampled = torch.grid_sampler(volumes, grid, 0, 0, True)  # bilinear, zeros, corners
+            out[:, :num_dense] = sampled.view(num_dense, features, count).transpose(0, 1)
+            saved += [volumes, grid]
+        ctx.save_for_backward(*saved)
         return out
 
     @staticmethod
     def backward(ctx, grad_output):  # noqa: ANN001, ANN205
-        indices, weights = ctx.saved_tensors
-        flat = indices.reshape(-1)
-        values = [
-            (weights * grad_output[f][None, :]).reshape(-1) for f in range(grad_output.shape[0])
-        ]
-        if grad_output.is_cuda:
-            grad_table = torch.zeros((len(values), ctx.table_rows), device=grad_output.device,
-                                     dtype=grad_output.dtype)
-            for f, value in enumerate(values):
-                grad_table[f].index_add_(0, flat.long(), value)
-            return grad_table, None, None
-        # A weighted histogram per feature: on a CPU several times faster than index_add_.
-        # (Running the features' histograms in Python threads was tried: slower, because the
-        # threads fight the idle-spinning OpenMP workers for the cores.)
-        rows = [torch.bincount(flat, weights=value, minlength=ctx.table_rows) for value in values]
-        return torch.stack([row.to(grad_output.dtype) for row in rows]), None, None
+        encoding = ctx.encoding
+        num_dense, num_levels = encoding.num_dense_levels, encoding.num_levels
+        features, _, count = grad_output.shape
+        saved = list(ctx.saved_tensors)
+        if num_dense < num_levels:
+            indices, weights = saved[:2]
+            saved = saved[2:]
+            flat = indices.reshape(-1)
+            grad_hashed = grad_output[:, num_dense:].reshape(features, -1)
+            values = [(weights * grad_hashed[f][None, :]).reshape(-1) for f in range(features)]
+            if grad_output.is_cuda:
+                grad_table = grad_output.new_zeros((features, ctx.table_rows))
+                for f, value in enumerate(values):
+                    grad_table[f].index_add_(0, flat.long(), value)
+            else:
+                # A weighted histogram per feature: on a CPU several times faster than
+                # index_add_. (Running the features' histograms in Python threads was tried:
+                # slower, as the threads fight the idle-spinning OpenMP workers for the cores.)
+                grad_table = torch.stack([
+                    torch.bincount(flat, weights=value, minlength=ctx.table_rows)
+                    .to(grad_output.dtype)
+                    for value in values
+                ])
+        else:
+            grad_table = grad_output.new_zeros((features, ctx.table_rows))
+        if num_dense:
+            volumes, grid = saved
+            grad_dense = grad_output[:, :num_dense].transpose(0, 1).reshape(
+                num_dense, features, 1, 1, count
+            )
+            grad_volumes, _ = torch.ops.aten.grid_sampler_3d_backward(
+                grad_dense, volumes, grid, 0, 0, True, [True, False]
+            )
+            side_cubed = volumes.shape[-1] ** 3
+            dense_rows = grad_table.view(features, num_levels, -1)[:, :num_dense, :side_cubed]
+            dense_rows += grad_volumes.view(num_dense, features, side_cubed).transpose(0, 1)
+        return grad_table, None, None
 
 
 class HashGridEncoding(nn.Module):
-    """Multi-resolution hash-grid encoding (Instant-NGP style), batched over all levels.
+    """Multi-resolution hash-grid encoding (Instant-NGP style) with dense coarse levels.
 
     Args:
         num_levels: number of levels (16).
@@ -175,25 +219,28 @@ class HashGridEncoding(nn.Module):
         self.log2_table_size = int(log2_table_size)
         self.table_size = 1 << self.log2_table_size
         self.resolutions = level_resolutions(num_levels, base_resolution, finest_resolution)
+        self.num_dense_levels, self.dense_side = dense_level_layout(
+            self.resolutions, self.log2_table_size
+        )
         # Feature-major (F, L * T): each feature channel is gathered as one 1-D lookup.
         self.table = nn.Parameter(
             (torch.rand(self.features_per_level, self.num_levels * self.table_size) * 2.0 - 1.0)
             * init_scale
         )
-        self.register_buffer(
-            "scales", torch.tensor(self.resolutions, dtype=torch.float32).view(1, -1, 1)
-        )
-        self.register_buffer(
-            "multipliers", _level_multipliers(self.resolutions, self.log2_table_size)[:, :, None]
-        )
+        # The layout below follows from the settings, so it is not part of the state dict.
+        resolutions = torch.tensor(self.resolutions, dtype=torch.float32)
+        multipliers = _level_multipliers(self.resolutions, self.log2_table_size)
+        self.register_buffer("multipliers", multipliers[:, :, None], persistent=False)
         self.register_buffer(
             "level_offsets",
             (torch.arange(self.num_levels, dtype=torch.int64) * self.table_size)[:, None],
+            persistent=False,
         )
-        # The hash needs only the multipliers' low bits, (c * m) mod T == (c * (m mod T)) mod T,
-        # so with reduced multipliers the products of corner coordinates (< 2^coordinate_bits)
-        # fit in int32 whenever log2(T) + coordinate_bits <= 31. int32 halves the memory
-        # traffic of every index array; the summed table must fit too.
+        # Hashed levels: the hash needs only the multipliers' low bits,
+        # (c * m) mod T == (c * (m mod T)) mod T, so with reduced multipliers the products of
+        # corner coordinates (< 2^coordinate_bits) fit in int32 whenever
+        # log2(T) + coordinate_bits <= 31. int32 halves the traffic of every index array.
+        hashed = slice(self.num_dense_levels, None)
         coordinate_bits = math.ceil(math.log2(max(self.resolutions) + 2))
         fits_int32 = (
             self.log2_table_size + coordinate_bits <= 31
@@ -201,32 +248,67 @@ class HashGridEncoding(nn.Module):
         )
         self._index_dtype = torch.int32 if fits_int32 else torch.int64
         self.register_buffer(
-            "reduced_multipliers",
-            (self.multipliers & (self.table_size - 1)).to(self._index_dtype),
+            "hashed_scales", resolutions[hashed].view(1, -1, 1).clone(), persistent=False
+        )
+        self.register_buffer(
+            "hashed_multipliers",
+            (multipliers[:, hashed, None] & (self.table_size - 1)).to(self._index_dtype),
             persistent=False,
         )
         self.register_buffer(
-            "index_level_offsets", self.level_offsets.to(self._index_dtype), persistent=False
+            "hashed_offsets",
+            self.level_offsets[hashed].to(self._index_dtype).clone(),
+            persistent=False,
+        )
+        # Dense levels: grid_sampler's align_corners coordinate of vertex index i is
+        # 2 i / (S - 1) - 1, and a point's vertex index is unit * resolution.
+        self.register_buffer(
+            "dense_grid_scales",
+            (resolutions[: self.num_dense_levels] * 2.0 / max(self.dense_side - 1, 1)).view(
+                -1, 1, 1, 1, 1
+            ),
+            persistent=False,
         )
 
     @property
     def output_dim(self) -> int:
         return self.num_levels * self.features_per_level
 
+    def vertex_rows(self, level: int, vertices: torch.Tensor) -> torch.Tensor:
+        """Table rows of integer grid vertices ``(M, 3)`` of one level (the reference layout)."""
+        multipliers = self.multipliers[:, level, 0].to(vertices.device)
+        scaled = vertices.long() * multipliers
+        if level < self.num_dense_levels:
+            local = scaled.sum(dim=1)
+        else:
+            local = (scaled[:, 0] ^ scaled[:, 1] ^ scaled[:, 2]) & (self.table_size - 1)
+        return local + level * self.table_size
+
+    def dense_volumes(self, table: torch.Tensor) -> torch.Tensor:
+        """The dense levels' rows as ``(levels, F, S, S, S)`` volumes, z slowest."""
+        side, count = self.dense_side, self.num_dense_levels
+        rows = table.view(self.features_per_level, self.num_levels, -1)[:, :count, : side**3]
+        return rows.transpose(0, 1).reshape(count, self.features_per_level, side, side, side)
+
+    def dense_sampling_grid(self, unit_positions: torch.Tensor) -> torch.Tensor:
+        """``(levels, 1, 1, N, 3)`` grid_sampler coordinates of points in every dense level."""
+        return unit_positions[None, None, None] * self.dense_grid_scales - 1.0
+
     def corner_indices_and_weights(
         self, unit_positions: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Table rows and trilinear weights of every corner: two (8, L * N) tensors."""
-        scaled = unit_positions.t().contiguous()[:, None, :] * self.scales  # (3, L, N)
+        """Table rows and trilinear weights of every corner of the hashed levels: two
+        ``(8, hashed_levels * N)`` tensors."""
+        scaled = unit_positions.t().contiguous()[:, None, :] * self.hashed_scales  # (3, L, N)
         floor = torch.floor(scaled)
         fraction = scaled - floor
         corner = floor.to(self._index_dtype)
         mask = self.table_size - 1
-        low = (corner * self.reduced_multipliers) & mask
-        high = ((corner + 1) * self.reduced_multipliers) & mask
+        low = (corner * self.hashed_multipliers) & mask
+        high = ((corner + 1) * self.hashed_multipliers) & mask
         # The level offset is added on the x term only: XOR with bits above the mask is a sum.
-        low[0] += self.index_level_offsets
-        high[0] += self.index_level_offsets
+        low[0] += self.hashed_offsets
+        high[0] += self.hashed_offsets
         sides = (low, high)
         weights_per_side = (1.0 - fraction, fraction)
         # Pair x and y first (4 combinations), then z: 12 element-wise ops instead of 16,
@@ -247,15 +329,10 @@ class HashGridEncoding(nn.Module):
     def forward(self, unit_positions: torch.Tensor) -> torch.Tensor:
         """(N, 3) positions in [0, 1] -> (N, num_levels * features_per_level) features."""
         count = unit_positions.shape[0]
-        unit_positions = unit_positions.clamp(0.0, 1.0)
-        indices, weights = self.corner_indices_and_weights(unit_positions)
-        features = _CornerGather.apply(self.table, indices, weights.to(self.table.dtype))
+        unit_positions = unit_positions.clamp(0.0, 1.0).to(self.table.dtype)
+        features = _HashGridFunction.apply(self.table, unit_positions, self)
         # (F, L, N) -> (N, L * F), level-major like tiny-cuda-nn's output.
-        return (
-            features.view(self.features_per_level, self.num_levels, count)
-            .permute(2, 1, 0)
-            .reshape(count, self.output_dim)
-        )
+        return features.permute(2, 1, 0).reshape(count, self.output_dim)
 
 
 class NaiveHashGridEncoding(HashGridEncoding):
@@ -267,25 +344,21 @@ class NaiveHashGridEncoding(HashGridEncoding):
 
     def forward(self, unit_positions: torch.Tensor) -> torch.Tensor:
         unit_positions = unit_positions.clamp(0.0, 1.0)
-        mask = self.table_size - 1
         outputs = []
         for level, resolution in enumerate(self.resolutions):
             scaled = unit_positions * resolution
             floor = torch.floor(scaled)
             fraction = scaled - floor
             corner = floor.long()
-            multipliers = self.multipliers[:, level, 0]
             level_features = 0.0
             for i, j, k in _CORNERS:
                 offset = torch.tensor([i, j, k], device=corner.device)
-                hashed = (corner + offset) * multipliers
-                index = (hashed[:, 0] ^ hashed[:, 1] ^ hashed[:, 2]) & mask
+                rows = self.table[:, self.vertex_rows(level, corner + offset)].t()
                 weight = (
                     (fraction[:, 0] if i else 1.0 - fraction[:, 0])
                     * (fraction[:, 1] if j else 1.0 - fraction[:, 1])
                     * (fraction[:, 2] if k else 1.0 - fraction[:, 2])
                 )
-                rows = self.table[:, index + level * self.table_size].t()
                 level_features = level_features + weight[:, None] * rows
             outputs.append(level_features)
         return torch.cat(outputs, dim=1)

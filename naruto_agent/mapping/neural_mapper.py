@@ -26,6 +26,7 @@ import trimesh
 
 from naruto_agent.mapping.base import check_bounds, check_frame, resolve_device
 from naruto_agent.mapping.config import NeuralMapperConfig
+from naruto_agent.mapping.cpu_allocator import keep_freed_memory_for_reuse
 from naruto_agent.mapping.encoding import HashGridEncoding
 from naruto_agent.mapping.field import NeuralField
 from naruto_agent.mapping.keyframes import KeyframeRays
@@ -102,6 +103,8 @@ class NeuralMapper:
         self.bounds = check_bounds(bounds)
         self.camera = camera
         self._device = resolve_device(self.config.device)
+        if self._device.type == "cpu" and self.config.tune_cpu_allocator:
+            keep_freed_memory_for_reuse()
         torch.manual_seed(self.config.seed)
         self.field = NeuralField(self.bounds, self.config, hash_encoding_cls).to(self._device)
         self.uncertainty = UncertaintyGrid(

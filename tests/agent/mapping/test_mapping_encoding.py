@@ -21,6 +21,7 @@ def test_fast_hash_grid_matches_naive_forward_and_backward() -> None:
     naive = NaiveHashGridEncoding(num_levels=6, log2_table_size=12, base_resolution=4,
                                   finest_resolution=90.0)
     naive.load_state_dict(fast.state_dict())
+    assert 0 < fast.num_dense_levels < fast.num_levels  # both paths are exercised
     points = torch.rand(500, 3)
     points[:5] = torch.tensor([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1.0, 0.0, 0.5],
                                [0.999, 0.5, 0.0], [0.25, 0.75, 1.0]])
@@ -33,25 +34,43 @@ def test_fast_hash_grid_matches_naive_forward_and_backward() -> None:
     torch.testing.assert_close(fast.table.grad, naive.table.grad, rtol=1e-4, atol=1e-5)
 
 
-def test_dense_levels_have_no_collisions_and_hashed_levels_stay_in_their_rows() -> None:
-    grid = HashGridEncoding(num_levels=4, log2_table_size=15, base_resolution=8,
+def test_dense_levels_have_no_collisions_and_every_level_stays_in_its_rows() -> None:
+    grid = HashGridEncoding(num_levels=4, log2_table_size=12, base_resolution=8,
                             finest_resolution=64.0)
-    # Every vertex of the coarsest level (8 -> 9 vertices per axis + 1) gets its own row.
-    axis = torch.arange(10, dtype=torch.float32) / 8.0
-    points = torch.stack(torch.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
-    indices, _ = grid.corner_indices_and_weights(points.clamp(0, 1))
-    level0 = indices.view(8, grid.num_levels, -1)[0, 0]  # corner (0, 0, 0) of level 0
-    assert len(torch.unique(level0)) == len(torch.unique(points.clamp(0, 1), dim=0))
-    rows = indices.view(8, grid.num_levels, -1)
-    for level in range(grid.num_levels):
-        assert rows[:, level].min() >= level * grid.table_size
-        assert rows[:, level].max() < (level + 1) * grid.table_size
+    assert grid.num_dense_levels == 1 and grid.dense_side == 10  # (8 + 2)^3 <= 4096 < 15^3
+    for level, resolution in enumerate(grid.resolutions):
+        axis = torch.arange(resolution + 2)
+        vertices = torch.stack(torch.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+        rows = grid.vertex_rows(level, vertices)
+        assert rows.min() >= level * grid.table_size
+        assert rows.max() < (level + 1) * grid.table_size
+        if level < grid.num_dense_levels:
+            assert len(torch.unique(rows)) == len(vertices)
+
+
+def test_fast_hash_grid_handles_all_dense_and_all_hashed_layouts() -> None:
+    torch.manual_seed(1)
+    points = torch.rand(300, 3)
+    for log2_table_size, expected_dense in ((20, 3), (6, 0)):
+        fast = HashGridEncoding(num_levels=3, log2_table_size=log2_table_size,
+                                base_resolution=4, finest_resolution=20.0, init_scale=0.5)
+        naive = NaiveHashGridEncoding(num_levels=3, log2_table_size=log2_table_size,
+                                      base_resolution=4, finest_resolution=20.0)
+        naive.load_state_dict(fast.state_dict())
+        assert fast.num_dense_levels == expected_dense
+        out_fast, out_naive = fast(points), naive(points)
+        torch.testing.assert_close(out_fast, out_naive, rtol=1e-5, atol=1e-6)
+        upstream = torch.randn_like(out_fast)
+        out_fast.backward(upstream)
+        out_naive.backward(upstream)
+        torch.testing.assert_close(fast.table.grad, naive.table.grad, rtol=1e-4, atol=1e-5)
 
 
 def test_trilinear_weights_sum_to_one() -> None:
     grid = HashGridEncoding(num_levels=3, log2_table_size=10, finest_resolution=40.0)
     _, weights = grid.corner_indices_and_weights(torch.rand(100, 3))
-    torch.testing.assert_close(weights.sum(0), torch.ones(300))
+    hashed_levels = grid.num_levels - grid.num_dense_levels
+    torch.testing.assert_close(weights.sum(0), torch.ones(100 * hashed_levels))
 
 
 def test_level_resolutions_span_base_to_finest() -> None:
