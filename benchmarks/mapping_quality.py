@@ -69,6 +69,9 @@ class Args:
     """timed iterations per hash-grid implementation in the speed test (0 skips it)"""
     device: str = "auto"
     """torch device of the neural mapper"""
+    active_score: str = "surface"
+    """how neural_active scores its ray pool: "surface" (the 11 samples around the measured
+    depth, cheap) or "rendered" (every sample, the published scoring, about 3x the cost)"""
     mesh_voxel_m: float = 0.02
     """marching-cubes voxel of the final meshes"""
     eval_samples: int = 200_000
@@ -147,7 +150,9 @@ def run_neural(
     scene: Scene, renderer: RgbdRenderer, poses: np.ndarray, bounds: np.ndarray, args: Args,
     active: bool,
 ) -> tuple[NeuralMapper, dict[str, float]]:
-    config = NeuralMapperConfig(device=args.device, seed=args.seed, active_sampling=active)
+    config = NeuralMapperConfig(
+        device=args.device, seed=args.seed, active_sampling=active, active_score=args.active_score
+    )
     mapper = NeuralMapper(bounds, renderer.camera, config)
     render_seconds = 0.0
     start = time.perf_counter()
