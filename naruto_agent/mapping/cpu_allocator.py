@@ -36,9 +36,10 @@ def _glibc() -> ctypes.CDLL | None:
         return None
     try:
         libc = ctypes.CDLL(name)
-        libc.gnu_get_libc_version  # noqa: B018 (only glibc has it)
-        libc.mallopt
-    except (OSError, AttributeError):
+    except OSError:
+        return None
+    # Only glibc has gnu_get_libc_version; mallopt's parameter numbers are glibc's.
+    if not (hasattr(libc, "gnu_get_libc_version") and hasattr(libc, "mallopt")):
         return None
     return libc
 
