@@ -91,7 +91,7 @@ class TsdfFusionMapper:
         self.device = resolve_open3d_device(device)
         self.num_frames = 0
         self._grid: o3d.t.geometry.VoxelBlockGrid | None = None
-        self._sdf_index: ObservedVoxelLookup | None = None
+        self._sdf_index: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
         self.reset()
 
     @property
@@ -208,7 +208,7 @@ class TsdfFusionMapper:
         colours = np.clip(cloud.point.colors.numpy() * 255.0 + 0.5, 0, 255).astype(np.uint8)
         return points, colours
 
-    def _build_sdf_index(self) -> ObservedVoxelLookup:
+    def _build_sdf_index(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         coordinates, flat_index = self._grid.voxel_coordinates_and_flattened_indices()
         flat_index = flat_index.cpu().numpy()
         tsdf = self._grid.attribute("tsdf").cpu().numpy().reshape(-1)[flat_index]
@@ -216,7 +216,17 @@ class TsdfFusionMapper:
         observed = weight >= self.min_weight
         # Voxel samples sit at integer multiples of the voxel size.
         cells = np.round(coordinates.cpu().numpy()[observed] / self.voxel_size_m).astype(np.int64)
-        return ObservedVoxelLookup(cells, tsdf[observed].astype(np.float64) * self.truncation_m)
+        origin = cells.min(axis=0) - 1
+        span = cells.max(axis=0) - origin + 2
+        keys = self._keys(cells, origin, span)
+        order = np.argsort(keys)
+        values = tsdf[observed][order].astype(np.float64) * self.truncation_m
+        return keys[order], values, origin, span
+
+    @staticmethod
+    def _keys(cells: np.ndarray, origin: np.ndarray, span: np.ndarray) -> np.ndarray:
+        shifted = cells - origin
+        return (shifted[:, 0] * span[1] + shifted[:, 1]) * span[2] + shifted[:, 2]
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """Signed distance of the fused map at world points, metres (positive in free space).
@@ -238,8 +248,8 @@ class TsdfFusionMapper:
             return result
         if self._sdf_index is None:
             self._sdf_index = self._build_sdf_index()
-        lookup = self._sdf_index
-        if lookup.is_empty:
+        keys, values, origin, span = self._sdf_index
+        if len(keys) == 0:
             return result
         grid = points / self.voxel_size_m
         base = np.floor(grid).astype(np.int64)
@@ -248,59 +258,14 @@ class TsdfFusionMapper:
         weight_sum = np.zeros(len(points))
         for corner in np.ndindex(2, 2, 2):
             offset = np.array(corner)
-            values, found = lookup.values_at(base + offset)
+            cells = base + offset
+            inside = np.all((cells > origin) & (cells < origin + span), axis=1)
+            query = self._keys(np.where(inside[:, None], cells, origin + 1), origin, span)
+            slot = np.minimum(np.searchsorted(keys, query), len(keys) - 1)
+            found = inside & (keys[slot] == query)
             weight = np.prod(np.where(offset == 1, fraction, 1.0 - fraction), axis=1) * found
-            total += weight * values
+            total += weight * values[slot]
             weight_sum += weight
         known = weight_sum > 1e-12
         result[known] = total[known] / weight_sum[known]
         return result
-
-
-class ObservedVoxelLookup:
-    """Signed distances of the observed voxels, looked up by integer voxel coordinates.
-
-    A dense array over the observed box when it has at most ``max_dense_cells`` cells (one
-    array read per query; a room at 2 cm needs about 10 M cells, 40 MB), else sorted voxel
-    keys and a binary search (memory in proportion to the observed voxels only).
-
-    Args:
-        cells: (M, 3) int64 voxel coordinates of the observed voxels.
-        values: (M,) their signed distances.
-        max_dense_cells: largest box stored densely.
-    """
-
-    def __init__(
-        self, cells: np.ndarray, values: np.ndarray, max_dense_cells: int = 64_000_000
-    ) -> None:
-        self.is_empty = len(cells) == 0
-        if self.is_empty:
-            return
-        self.origin = cells.min(axis=0) - 1
-        self.span = cells.max(axis=0) - self.origin + 2
-        keys = self._keys(cells)
-        self.dense = int(np.prod(self.span)) <= max_dense_cells
-        if self.dense:
-            # float32 halves the memory; NaN marks cells never observed.
-            self.table = np.full(int(np.prod(self.span)), np.nan, dtype=np.float32)
-            self.table[keys] = values
-        else:
-            order = np.argsort(keys)
-            self.keys, self.sorted_values = keys[order], values[order]
-
-    def _keys(self, cells: np.ndarray) -> np.ndarray:
-        shifted = cells - self.origin
-        return (shifted[:, 0] * self.span[1] + shifted[:, 1]) * self.span[2] + shifted[:, 2]
-
-    def values_at(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(values, found) at (N, 3) voxel coordinates; values are 0 where not found."""
-        inside = np.all((cells > self.origin) & (cells < self.origin + self.span), axis=1)
-        keys = self._keys(np.where(inside[:, None], cells, self.origin + 1))
-        if self.dense:
-            values = self.table[keys].astype(np.float64)
-            found = inside & ~np.isnan(values)
-        else:
-            slot = np.minimum(np.searchsorted(self.keys, keys), len(self.keys) - 1)
-            found = inside & (self.keys[slot] == keys)
-            values = self.sorted_values[slot]
-        return np.where(found, values, 0.0), found

@@ -198,22 +198,3 @@ def test_real_scene_against_itself_and_a_few_fused_frames():
     result = episode.evaluate(scene, renderer=renderer, cull_every=1)
     assert result["accuracy_cm"] < 2.0
     assert 20.0 < result["completion_ratio_pct"] < 99.0  # 8 frames cannot see everything
-
-
-def test_dense_and_sorted_voxel_lookups_agree():
-    from naruto_gym.evaluation.tsdf_mapper import ObservedVoxelLookup
-
-    rng = np.random.default_rng(0)
-    cells = np.unique(rng.integers(-20, 20, size=(3000, 3)), axis=0)
-    values = rng.normal(size=len(cells))
-    dense = ObservedVoxelLookup(cells, values)
-    sorted_keys = ObservedVoxelLookup(cells, values, max_dense_cells=0)
-    assert dense.dense and not sorted_keys.dense
-    queries = np.concatenate([cells, rng.integers(-30, 30, size=(5000, 3))])
-    dense_values, dense_found = dense.values_at(queries)
-    sorted_values, sorted_found = sorted_keys.values_at(queries)
-    np.testing.assert_array_equal(dense_found, sorted_found)
-    assert dense_found[: len(cells)].all()
-    np.testing.assert_allclose(dense_values[: len(cells)], values, rtol=1e-6, atol=1e-6)
-    np.testing.assert_allclose(dense_values, sorted_values, rtol=1e-6, atol=1e-6)
-    assert ObservedVoxelLookup(np.zeros((0, 3), np.int64), np.zeros(0)).is_empty
