@@ -53,8 +53,6 @@ def keep_freed_memory_for_reuse(
     Returns False, changing nothing, on a C library other than glibc.
     """
     global _applied
-    if _applied:
-        return True
     if not 0 < mmap_threshold_bytes <= MAX_MMAP_THRESHOLD_BYTES:
         raise ValueError(
             f"mmap_threshold_bytes must be in 1..{MAX_MMAP_THRESHOLD_BYTES} (glibc's maximum), "
@@ -62,6 +60,8 @@ def keep_freed_memory_for_reuse(
         )
     if trim_threshold_bytes <= 0:
         raise ValueError(f"trim_threshold_bytes must be positive, got {trim_threshold_bytes}")
+    if _applied:
+        return True
     libc = _glibc()
     if libc is None:
         return False

@@ -129,7 +129,6 @@ class _HashGridFunction(torch.autograd.Function):
         saved: list[torch.Tensor] = []
         if num_dense < num_levels:
             indices, weights = encoding.corner_indices_and_weights(unit_positions)
-            weights = weights.to(table.dtype)
             flat = indices.reshape(-1)
             hashed = out[:, num_dense:].view(features, -1)
             for f in range(features):

@@ -270,20 +270,28 @@ class NeuralMapper:
             return RayBatch.concatenate(
                 [self.keyframes.sample(cfg.rays_per_iteration, self.generator), current]
             )
-        pool_kf = self.keyframes.sample(cfg.rays_per_iteration * cfg.active_oversample,
-                                        self.generator)
-        pool = RayBatch.concatenate([pool_kf, current])
+        pool, num_keyframe_rays = self.active_ray_pool(current)
         scores = self.ray_uncertainty(pool)
         return pool.select(
             select_active_rays(
                 scores,
-                num_keyframe_rays=len(pool_kf),
+                num_keyframe_rays=num_keyframe_rays,
                 top=cfg.active_top_rays,
                 random_keyframe=cfg.rays_per_iteration - cfg.active_top_rays,
                 current=cfg.current_frame_rays,
                 generator=self.generator,
             )
         )
+
+    def active_ray_pool(self, current: RayBatch) -> tuple[RayBatch, int]:
+        """The oversampled pool active sampling scores: ``active_oversample`` x
+        ``rays_per_iteration`` keyframe rays, then the current-frame rays. Returns the pool and
+        how many of its rays (the first ones) come from keyframes."""
+        cfg = self.config
+        keyframe_rays = self.keyframes.sample(
+            cfg.rays_per_iteration * cfg.active_oversample, self.generator
+        )
+        return RayBatch.concatenate([keyframe_rays, current]), len(keyframe_rays)
 
     @torch.no_grad()
     def ray_uncertainty(self, rays: RayBatch) -> torch.Tensor:

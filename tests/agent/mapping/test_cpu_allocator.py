@@ -34,13 +34,7 @@ def test_freed_blocks_are_reused_without_page_faults() -> None:
 
 
 def test_bad_thresholds_are_refused_with_the_limit() -> None:
-    import naruto_agent.mapping.cpu_allocator as allocator
-
-    applied, allocator._applied = allocator._applied, False
-    try:
-        with pytest.raises(ValueError, match="glibc's maximum"):
-            keep_freed_memory_for_reuse(mmap_threshold_bytes=MAX_MMAP_THRESHOLD_BYTES + 1)
-        with pytest.raises(ValueError, match="trim_threshold_bytes"):
-            keep_freed_memory_for_reuse(trim_threshold_bytes=0)
-    finally:
-        allocator._applied = applied
+    with pytest.raises(ValueError, match="glibc's maximum"):
+        keep_freed_memory_for_reuse(mmap_threshold_bytes=MAX_MMAP_THRESHOLD_BYTES + 1)
+    with pytest.raises(ValueError, match="trim_threshold_bytes"):
+        keep_freed_memory_for_reuse(trim_threshold_bytes=0)
