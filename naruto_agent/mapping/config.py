@@ -56,6 +56,14 @@ class NeuralMapperConfig:
             sample set (the published scoring); "surface" renders it with the 11 samples
             around the measured depth only (cheaper on a CPU; the weights sit there).
 
+    Unexplored space (planner view):
+        unknown_space: frontier voxels (measured free space next to space no frame has
+            measured) are goal-search targets at the initial variance, as in the TSDF
+            mapper (:mod:`naruto_agent.mapping.observed_space`). Fed by :meth:`integrate`'s
+            full frames (and panoramas), not by ``integrate_pixels``.
+        frontier_min_cluster_voxels: frontier clusters smaller than this are ignored (8).
+        observed_rays_per_frame: pixels per frame integrated into the observed space (8192).
+
     Device and seed:
         device: "auto" (CUDA when present), "cpu", "cuda[:N]".
         seed: seeds the parameter initialisation and every ray draw.
@@ -111,6 +119,10 @@ class NeuralMapperConfig:
     active_top_rays: int = 500
     active_score: Literal["rendered", "surface"] = "rendered"
 
+    unknown_space: bool = True
+    frontier_min_cluster_voxels: int = 8
+    observed_rays_per_frame: int = 8192
+
     device: str = "auto"
     seed: int = 0
     tune_cpu_allocator: bool = True
@@ -122,7 +134,8 @@ class NeuralMapperConfig:
             "smoothness_points", "iterations_per_step", "keyframe_every", "map_every",
             "rays_per_iteration", "active_oversample", "hash_finest_voxel_m", "truncation_m",
             "surface_range_m", "learning_rate", "uncertainty_voxel_m",
-            "uncertainty_learning_rate", "smoothness_voxel_m",
+            "uncertainty_learning_rate", "smoothness_voxel_m", "frontier_min_cluster_voxels",
+            "observed_rays_per_frame",
         )
         for name in positive:
             if not getattr(self, name) > 0:

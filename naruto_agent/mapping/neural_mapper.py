@@ -31,6 +31,11 @@ from naruto_agent.mapping.encoding import HashGridEncoding
 from naruto_agent.mapping.field import NeuralField
 from naruto_agent.mapping.keyframes import KeyframeRays
 from naruto_agent.mapping.meshing import mesh_from_sdf_function
+from naruto_agent.mapping.observed_space import (
+    ObservedSpace,
+    ObservedSpaceConfig,
+    add_unknown_space_uncertainty,
+)
 from naruto_agent.mapping.rendering import (
     RayBatch,
     mapping_losses,
@@ -124,6 +129,12 @@ class NeuralMapper:
         self._directions = torch.from_numpy(camera.ray_directions).to(self._device)
         self._plan: _FramePlan | None = None
         self.frames_integrated = 0
+        self.observed_space = ObservedSpace(self.bounds, ObservedSpaceConfig(
+            voxel_size_m=self.config.uncertainty_voxel_m,
+            max_range_m=self.config.far_m,
+            rays_per_frame=self.config.observed_rays_per_frame,
+            min_cluster_voxels=self.config.frontier_min_cluster_voxels,
+        ))
         self.stats = MappingStats()
 
     def _adam(self, parameters, lr: float) -> torch.optim.Optimizer:  # noqa: ANN001
@@ -187,6 +198,8 @@ class NeuralMapper:
                 f"frame is {depth.shape} but the mapper's camera is "
                 f"{self.camera.height} x {self.camera.width}; pass the camera the frames use"
             )
+        if self.config.unknown_space:
+            self.observed_space.integrate_depth(depth, pose, self.camera)
         pixels = self.required_pixels(frame_index)
         return self.integrate_pixels(
             pixels, rgb.reshape(-1, 3)[pixels], depth.reshape(-1)[pixels], pose, frame_index
@@ -376,7 +389,8 @@ class NeuralMapper:
         """The planner's map: (SDF volume, uncertainty volume) on a grid over the bounds.
 
         The SDF is in metres. The uncertainty volume holds the grid's variance sigma^2 on
-        surface voxels (SDF between 0 and half a truncation) and 0 everywhere else.
+        surface voxels (SDF between 0 and half a truncation), the initial variance on the
+        frontier of unexplored space (``unknown_space``), and 0 everywhere else.
         """
         sdf_volume = SdfVolume.from_function(self.sdf, self.bounds, voxel_size)
         variance = self.variance(sdf_volume.grid_points()).reshape(sdf_volume.shape)
@@ -386,7 +400,22 @@ class NeuralMapper:
         uncertainty_volume = SdfVolume(
             np.where(on_surface, variance, 0.0), sdf_volume.origin, voxel_size
         )
+        if self.config.unknown_space:
+            uncertainty_volume = add_unknown_space_uncertainty(
+                uncertainty_volume, self.observed_space, self.initial_variance
+            )
         return sdf_volume, uncertainty_volume
+
+    @property
+    def initial_variance(self) -> float:
+        """The variance of a voxel nothing has measured: softplus(init) + min variance."""
+        return float(np.logaddexp(0.0, self.config.uncertainty_init)
+                     + self.config.uncertainty_min_variance)
+
+    def integrate_panorama(self, panorama: np.ndarray, position: np.ndarray) -> None:
+        """Add a depth panorama's rays to the observed space (free space all around)."""
+        if self.config.unknown_space:
+            self.observed_space.integrate_panorama(panorama, position)
 
     query_volumes = planner_view
 
@@ -406,6 +435,7 @@ class NeuralMapper:
             "optimiser": self.optimiser.state_dict(),
             "uncertainty_optimiser": self.uncertainty_optimiser.state_dict(),
             "frames_integrated": self.frames_integrated,
+            "observed_space": self.observed_space.state_dict(),
         }
         if include_keyframes:
             state["keyframes"] = self.keyframes.state_dict()
@@ -423,6 +453,8 @@ class NeuralMapper:
         self.optimiser.load_state_dict(state["optimiser"])
         self.uncertainty_optimiser.load_state_dict(state["uncertainty_optimiser"])
         self.frames_integrated = int(state["frames_integrated"])
+        if "observed_space" in state:
+            self.observed_space.load_state_dict(state["observed_space"])
         if "keyframes" in state:
             self.keyframes.load_state_dict(state["keyframes"])
         self._plan = None

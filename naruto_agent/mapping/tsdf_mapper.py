@@ -8,6 +8,17 @@ measured surface. The derived variance of a voxel is ``initial_variance / (1 + n
 neural mapper's initial variance (softplus(3.0) + 0.01) for a surface never seen, halving
 with the second view, and so on, which is the shape the NLL-trained grid takes too (a surface
 seen often is certain).
+
+Two additions give the uncertainty the published meaning beyond seen surfaces (both
+switchable):
+
+* ``unknown_space``: an :class:`~naruto_agent.mapping.observed_space.ObservedSpace` of every
+  frame's rays marks the frontier between measured free space and space nothing has
+  measured; frontier voxels get the initial (largest) variance, so the goal search heads
+  into unexplored rooms before it polishes what it has.
+* ``grazing_weighting``: an observation counts by the cosine between the viewing ray and the
+  surface normal (from the depth image), so a surface seen only at grazing angles stays
+  uncertain.
 """
 
 from __future__ import annotations
@@ -24,6 +35,11 @@ import trimesh
 
 from naruto_agent.mapping.base import check_bounds, check_frame, resolve_device
 from naruto_agent.mapping.meshing import mesh_from_sdf_function
+from naruto_agent.mapping.observed_space import (
+    ObservedSpace,
+    ObservedSpaceConfig,
+    add_unknown_space_uncertainty,
+)
 from naruto_agent.planning.sdf_volume import SdfVolume
 from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper
 from naruto_gym.sensors.pinhole import PinholeCamera
@@ -46,6 +62,13 @@ class TsdfMapperConfig:
         planner_surface_m: the uncertainty volume keeps voxels with SDF in [0, this]
             (half the neural mapper's truncation, 0.05 m).
         device: "auto", "cpu" or "cuda[:N]" (Open3D's device for the TSDF).
+        unknown_space: frontier voxels (measured free space next to unmeasured space) are
+            targets at the initial variance (see the module docstring).
+        frontier_min_cluster_voxels: frontier clusters smaller than this are ignored.
+        observed_rays_per_frame: pixels per frame integrated into the observed-space grid.
+        grazing_weighting: an observation of a surface counts |cos| of its incidence angle
+            (at least ``min_observation_weight``); False counts every view as 1.
+        min_observation_weight: the least a single view counts with ``grazing_weighting``.
     """
 
     voxel_size_m: float = 0.02
@@ -58,8 +81,16 @@ class TsdfMapperConfig:
     surface_band_m: float = 0.05
     planner_surface_m: float = 0.05
     device: str = "auto"
+    unknown_space: bool = True
+    frontier_min_cluster_voxels: int = 8
+    observed_rays_per_frame: int = 8192
+    grazing_weighting: bool = True
+    min_observation_weight: float = 0.1
 
     def __post_init__(self) -> None:
+        if not 0 < self.min_observation_weight <= 1:
+            raise ValueError(f"min_observation_weight must be in (0, 1], got "
+                             f"{self.min_observation_weight}")
         for name in ("voxel_size_m", "truncation_m", "max_depth_m", "uncertainty_voxel_m",
                      "initial_variance", "surface_band_m", "planner_surface_m"):
             if not getattr(self, name) > 0:
@@ -96,8 +127,14 @@ class TsdfUncertaintyMapper:
         )
         self._grid_origin = template.origin
         self._grid_points = template.grid_points()
-        self.counts = np.zeros(template.shape, dtype=np.int32)
+        self.counts = np.zeros(template.shape, dtype=np.float32)
         self.frames_integrated = 0
+        self.observed_space = ObservedSpace(self.bounds, ObservedSpaceConfig(
+            voxel_size_m=self.config.uncertainty_voxel_m,
+            max_range_m=self.config.max_depth_m,
+            rays_per_frame=self.config.observed_rays_per_frame,
+            min_cluster_voxels=self.config.frontier_min_cluster_voxels,
+        ))
 
     @property
     def device(self) -> torch.device:
@@ -111,6 +148,7 @@ class TsdfUncertaintyMapper:
         if frame_index % self.config.integrate_every == 0:
             self.tsdf.integrate(rgb, depth, pose, self.camera)
             self._count_observations(depth, pose)
+            self.observed_space.integrate_depth(depth, pose, self.camera)
             self.frames_integrated += 1
         return frame_index % self.config.map_every == 0
 
@@ -124,7 +162,17 @@ class TsdfUncertaintyMapper:
         index = np.flatnonzero(inside)
         measured = depth[v[index], u[index]]
         seen = (measured > 0) & (np.abs(z[index] - measured) <= self.config.surface_band_m)
-        self.counts.reshape(-1)[index[seen]] += 1
+        weight = 1.0
+        if self.config.grazing_weighting:
+            weight = np.maximum(
+                incidence_cosine(depth, self.camera, u[index[seen]], v[index[seen]]),
+                self.config.min_observation_weight,
+            )
+        self.counts.reshape(-1)[index[seen]] += weight  # grid points are distinct
+
+    def integrate_panorama(self, panorama: np.ndarray, position: np.ndarray) -> None:
+        """Add a depth panorama's rays to the observed space (free space all around)."""
+        self.observed_space.integrate_panorama(panorama, position)
 
     def variance_grid(self) -> np.ndarray:
         """(nx, ny, nz) derived variance on the count grid."""
@@ -146,8 +194,13 @@ class TsdfUncertaintyMapper:
         on_surface = (sdf_volume.values >= 0.0) & (
             sdf_volume.values <= self.config.planner_surface_m
         )
-        return sdf_volume, SdfVolume(np.where(on_surface, values, 0.0), sdf_volume.origin,
-                                     voxel_size)
+        uncertainty = SdfVolume(np.where(on_surface, values, 0.0), sdf_volume.origin,
+                                voxel_size)
+        if self.config.unknown_space:
+            uncertainty = add_unknown_space_uncertainty(
+                uncertainty, self.observed_space, self.config.initial_variance
+            )
+        return sdf_volume, uncertainty
 
     query_volumes = planner_view
 
@@ -170,6 +223,7 @@ class TsdfUncertaintyMapper:
             "camera": self.camera.as_dict(),
             "grid": grid_bytes,
             "counts": self.counts.copy(),
+            "observed_space": self.observed_space.state_dict(),
             "frames_integrated": self.frames_integrated,
             "tsdf_frames": self.tsdf.num_frames,
         }
@@ -185,5 +239,41 @@ class TsdfUncertaintyMapper:
             self.tsdf._grid = o3d.t.geometry.VoxelBlockGrid.load(path).to(self.tsdf.device)
         self.tsdf._sdf_index = None
         self.tsdf.num_frames = int(state["tsdf_frames"])
-        self.counts = np.asarray(state["counts"], dtype=np.int32).copy()
+        self.counts = np.asarray(state["counts"], dtype=np.float32).copy()
+        if "observed_space" in state:
+            self.observed_space.load_state_dict(state["observed_space"])
         self.frames_integrated = int(state["frames_integrated"])
+
+
+def incidence_cosine(
+    depth: np.ndarray, camera: PinholeCamera, u: np.ndarray, v: np.ndarray
+) -> np.ndarray:
+    """(N,) |cos| of the angle between each pixel's viewing ray and the surface normal there.
+
+    The normal comes from the depth image: the cross product of the back-projected
+    neighbours to the right and below (left and above at the image border). Pixels whose
+    neighbours have no depth, or lie across a depth jump of more than 10 %, read 1 (a view
+    counted in full: no evidence of a grazing angle).
+    """
+    u = np.asarray(u, np.int64)
+    v = np.asarray(v, np.int64)
+    if len(u) == 0:
+        return np.zeros(0)
+    du = np.where(u + 1 < camera.width, 1, -1)
+    dv = np.where(v + 1 < camera.height, 1, -1)
+
+    def back_project(uu: np.ndarray, vv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        z = depth[vv, uu].astype(np.float64)
+        x = (uu - camera.cx) / camera.fx * z
+        y = (vv - camera.cy) / camera.fy * z
+        return np.stack([x, y, z], axis=1), z
+
+    centre, z0 = back_project(u, v)
+    right, z1 = back_project(u + du, v)
+    below, z2 = back_project(u, v + dv)
+    normal = np.cross((right - centre) * du[:, None], (below - centre) * dv[:, None])
+    length = np.linalg.norm(normal, axis=1)
+    ray = centre / np.maximum(np.linalg.norm(centre, axis=1, keepdims=True), 1e-12)
+    cosine = np.abs(np.einsum("ij,ij->i", normal, ray)) / np.maximum(length, 1e-12)
+    smooth = (z1 > 0) & (z2 > 0) & (np.abs(z1 - z0) < 0.1 * z0) & (np.abs(z2 - z0) < 0.1 * z0)
+    return np.where(smooth & (length > 0), cosine, 1.0)

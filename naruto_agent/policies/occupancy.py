@@ -171,14 +171,30 @@ class OccupancyGrid:
         sampled = depth[start :: self.pixel_stride, start :: self.pixel_stride].reshape(-1)
         rays_camera = self._camera_rays(camera)
         norms = np.linalg.norm(rays_camera, axis=1)
-        ranges = sampled * norms  # z-depth -> distance along the ray
+        rotation = np.asarray(camera_to_world, np.float64)[:3, :3]
+        directions = (rays_camera / norms[:, None]) @ rotation.T
+        # z-depth -> distance along the ray; 0 (no hit) stays 0.
+        self.integrate_rays(np.asarray(camera_to_world, np.float64)[:3, 3], directions,
+                            sampled * norms)
+
+    def integrate_rays(
+        self, origin: np.ndarray, directions: np.ndarray, ranges: np.ndarray
+    ) -> None:
+        """Integrate rays from one origin: unit world ``directions`` (R, 3) and the distance
+        to their hit ``ranges`` (R,), 0 where a ray hit nothing (e.g. a depth panorama).
+
+        A ray with no hit within ``max_range_m`` clears its whole length up to that range;
+        a ray with a non-finite or negative range is ignored.
+        """
+        origin = np.asarray(origin, np.float64).reshape(3)
+        directions = np.asarray(directions, np.float64).reshape(-1, 3)
+        ranges = np.asarray(ranges, np.float64).reshape(-1)
+        if len(ranges) != len(directions):
+            raise ValueError(f"{len(directions)} directions but {len(ranges)} ranges")
         valid = np.isfinite(ranges) & (ranges > 0.0)
         hit = valid & (ranges <= self.max_range_m)
         free_length = np.where(hit, ranges - self.voxel_size_m, self.max_range_m)
-        free_length = np.where(valid | (sampled == 0.0), free_length, 0.0)
-        rotation = np.asarray(camera_to_world, np.float64)[:3, :3]
-        origin = np.asarray(camera_to_world, np.float64)[:3, 3]
-        directions = (rays_camera / norms[:, None]) @ rotation.T
+        free_length = np.where(valid | (ranges == 0.0), free_length, 0.0)
 
         spacing = self.voxel_size_m / 2.0
         steps = np.arange(1, int(np.ceil(self.max_range_m / spacing)) + 1) * spacing

@@ -31,8 +31,49 @@ def test_interface(tsdf_room) -> None:
     sdf_volume, uncertainty_volume = tsdf_room.planner_view(0.1)
     assert isinstance(sdf_volume, SdfVolume) and isinstance(uncertainty_volume, SdfVolume)
     off_surface = (sdf_volume.values < 0) | (sdf_volume.values > 0.05)
-    assert np.all(uncertainty_volume.values[off_surface] == 0.0)
+    # Off the seen surfaces only the frontier is uncertain, at the initial (largest) variance.
+    off_values = uncertainty_volume.values[off_surface]
+    assert np.all((off_values == 0.0) | np.isclose(off_values, tsdf_room.config.initial_variance))
     assert (uncertainty_volume.values > 0).sum() > 20
+
+
+def test_unknown_space_is_a_target_only_at_the_frontier(tsdf_room) -> None:
+    sdf_volume, uncertainty_volume = tsdf_room.planner_view(0.1)
+    frontier = np.isclose(uncertainty_volume.values, tsdf_room.config.initial_variance)
+    assert frontier.sum() > 20
+    points = uncertainty_volume.grid_points()[frontier.reshape(-1)]
+    observed = tsdf_room.observed_space
+    # Every frontier target lies in measured free space next to unmeasured space.
+    free = observed.sample(observed.grid.free, points)
+    assert free.mean() > 0.95
+    # The cameras looked at the +x half only: the frontier faces the unseen -x half.
+    assert np.median(points[:, 0]) < 1.5
+    # Switched off, only seen surfaces are uncertain.
+    from dataclasses import replace
+
+    plain = TsdfUncertaintyMapper(tsdf_room.bounds, tsdf_room.camera,
+                                  replace(tsdf_room.config, unknown_space=False))
+    plain.load_state_dict(tsdf_room.state_dict())
+    sdf_plain, uncertainty_plain = plain.planner_view(0.1)
+    off_surface = (sdf_plain.values < 0) | (sdf_plain.values > 0.05)
+    assert np.all(uncertainty_plain.values[off_surface] == 0.0)
+
+
+def test_incidence_cosine_of_tilted_planes(small_camera) -> None:
+    from naruto_agent.mapping.tsdf_mapper import incidence_cosine
+
+    camera = small_camera
+    v, u = np.mgrid[0 : camera.height, 0 : camera.width]
+    rays_x = (u - camera.cx) / camera.fx
+    for tilt_deg in (0.0, 60.0, 80.0):
+        # Plane through (0, 0, 2) with normal (sin t, 0, -cos t): z (1 + tan t * x/z) = 2.
+        tilt = np.deg2rad(tilt_deg)
+        depth = (2.0 / (1.0 - np.tan(tilt) * rays_x)).astype(np.float32)
+        depth[depth <= 0] = 0.0
+        centre_u = np.array([int(camera.cx)])
+        centre_v = np.array([int(camera.cy)])
+        cosine = incidence_cosine(depth, camera, centre_u, centre_v)[0]
+        assert cosine == pytest.approx(np.cos(tilt), abs=0.02)
 
 
 def test_mesh_covers_the_seen_walls(tsdf_room, room) -> None:
