@@ -9,6 +9,8 @@ least one of a few hundred free viewpoints spread over the scene's interior.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from naruto_gym.sensors.panorama import EquirectangularCamera
@@ -47,12 +49,20 @@ def sample_free_positions(
     rng: np.random.Generator,
     max_no_hit_share: float = 0.5,
     max_candidates: int = 200_000,
+    is_inside: Callable[[np.ndarray], bool] | None = None,
 ) -> np.ndarray:
     """Up to ``count`` positions inside the scene, at least ``clearance_m`` from any surface.
 
     Candidates are drawn uniformly in the bounds (shrunk by the clearance) in batches; fewer
-    than ``count`` come back when ``max_candidates`` draws do not find enough.
+    than ``count`` come back when ``max_candidates`` draws do not find enough. ``is_inside``
+    decides which clear candidates lie inside the scene (default: :func:`is_inside_free_space`
+    with ``max_no_hit_share``; the env passes its escape rule's test). The candidates drawn
+    do not depend on it, so two tests that agree give the same positions.
     """
+    if is_inside is None:
+        def is_inside(position: np.ndarray) -> bool:
+            return is_inside_free_space(raycaster, face_normals, position, max_no_hit_share)
+
     low = np.asarray(bounds[0], np.float64) + clearance_m
     high = np.asarray(bounds[1], np.float64) - clearance_m
     if np.any(high <= low):
@@ -65,7 +75,7 @@ def sample_free_positions(
         drawn += batch
         clear = raycaster.unsigned_distance(candidates) >= clearance_m
         for position in candidates[clear]:
-            if is_inside_free_space(raycaster, face_normals, position, max_no_hit_share):
+            if is_inside(position):
                 found.append(position)
                 if len(found) == count:
                     break
@@ -114,8 +124,11 @@ class ObservableSurface:
         clearance_m: their minimum distance to any surface (0.1 m, so that they reach under
             tables and between furniture).
         max_range_m: longest line of sight that counts (None: unlimited).
-        max_no_hit_share: how open a viewpoint may be (0.5, as the escape check).
+        max_no_hit_share: how open a viewpoint may be (0.5, as the published escape check).
         seed: seed of the viewpoints (fixed per scene, not per episode).
+        is_inside: which clear points count as inside the scene (default: the whole-sphere
+            test with ``max_no_hit_share``; the env passes its escape rule's test, so that
+            open scans get viewpoints where the agent may go).
     """
 
     def __init__(
@@ -128,6 +141,7 @@ class ObservableSurface:
         max_range_m: float | None = None,
         max_no_hit_share: float = 0.5,
         seed: int = 0,
+        is_inside: Callable[[np.ndarray], bool] | None = None,
     ) -> None:
         self.raycaster = raycaster
         self.max_range_m = max_range_m
@@ -139,6 +153,7 @@ class ObservableSurface:
             clearance_m,
             np.random.default_rng(seed),
             max_no_hit_share,
+            is_inside=is_inside,
         )
         if len(self.viewpoints) == 0:
             raise ValueError(

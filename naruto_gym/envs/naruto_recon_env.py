@@ -83,9 +83,11 @@ class NarutoReconEnv(gym.Env):
 
     ## Starting State
     ``reset(seed=...)`` draws a position in free space at least ``start_clearance_m`` from every
-    surface and inside the scene (it sees walls all around), looking horizontally in a random
-    direction. ``reset(options={"pose": c2w})`` starts exactly at a 4x4 pose (not
-    collision-checked, so recorded trajectories replay exactly; it must lie inside the bounds).
+    surface and inside the scanned space (as the escape rule judges it, exactly at that point),
+    looking horizontally in a random direction. ``reset(options={"pose": c2w})`` starts
+    exactly at a 4x4 pose (not collision-checked, so recorded trajectories replay exactly; it
+    must lie inside the bounds; if it lies outside the scanned space, moves that go no
+    further out are still allowed).
 
     ## Episode End
     The env never terminates by itself; ``gymnasium.make`` adds a ``TimeLimit`` of 2000 steps
@@ -107,8 +109,21 @@ class NarutoReconEnv(gym.Env):
     * ``panorama_shape``: ``(h, w)`` of the panorama observation, None to switch it off.
     * ``agent_radius_m``, ``max_translation_m``, ``max_rotation_deg``: body and step limits
       (0.05 m, 0.1 m, 20 degrees).
-    * ``escape_no_hit_threshold``: refuse moves that see more than this share of no-hit
-      panorama pixels (0.5), None to switch off.
+    * ``escape_rule``: how a move that would leave the scanned space is told apart
+      (``collision_reason == "escape"``; see ``naruto_gym.motion.collision``):
+      ``"scanned_space"`` (default) refuses a move whose end has no scanned surface below it
+      (more than half of a 60-degree downward cone of rays hits nothing), lies behind a
+      surface, or is above the scan (above the height under which 99 % of its area lies,
+      plus 0.1 m). It needs no ceiling and no walls around, so real scans (no ceiling, holes,
+      missing walls) stay explorable, while walking off the scanned floor, out of a wall hole
+      or down a floor hole is refused. It is answered from a lattice (0.1 m) filled lazily
+      the first time a cell is visited: no extra ray cast per step afterwards.
+      ``"published"``: NARUTO's rule, refuse a move whose end sees more than
+      ``escape_no_hit_threshold`` no-hit pixels on a whole-sphere panorama (right for closed
+      meshes; it refuses moves anywhere in a room without a ceiling). ``"off"``: no check.
+      Start poses and the observable surface's viewpoints use the same rule.
+    * ``escape_no_hit_threshold``: the published rule's share (0.5); None switches every
+      escape check off.
     * ``collision_penalty``: reward subtracted for a blocked move (0.1).
     * ``coverage_samples``, ``coverage_range_m``: surface samples for coverage (20,000) and the
       range within which a sample counts as seen (5 m, the mapping range).
@@ -148,6 +163,7 @@ class NarutoReconEnv(gym.Env):
         max_translation_m: float = 0.1,
         max_rotation_deg: float = 20.0,
         escape_no_hit_threshold: float | None = 0.5,
+        escape_rule: str = "scanned_space",
         collision_penalty: float = 0.1,
         coverage_samples: int = 20_000,
         coverage_range_m: float = 5.0,
@@ -191,7 +207,12 @@ class NarutoReconEnv(gym.Env):
             EquirectangularCamera(*panorama_shape) if panorama_shape is not None else None
         )
         self.collision = CollisionChecker(
-            self.raycaster, self.bounds, self.agent_radius_m, escape_no_hit_threshold
+            self.raycaster,
+            self.bounds,
+            self.agent_radius_m,
+            escape_no_hit_threshold,
+            escape_rule=escape_rule,
+            face_normals=self.scene.face_normals,
         )
         self.coverage_samples = int(coverage_samples)
         self.coverage_range_m = float(coverage_range_m)
@@ -252,7 +273,8 @@ class NarutoReconEnv(gym.Env):
                 self.raycaster,
                 self.scene.face_normals,
                 self.bounds,
-                max_no_hit_share=self._max_no_hit_share,
+                max_no_hit_share=self.collision.max_no_hit_share,
+                is_inside=self.collision.start_test(),
             )
         return self._observable
 
@@ -440,12 +462,6 @@ class NarutoReconEnv(gym.Env):
             info["panorama_no_hit_share"] = no_hit_share(self._panorama)
         return info
 
-    @property
-    def _max_no_hit_share(self) -> float:
-        # Scans without a ceiling see the sky upwards: accept what a move would accept.
-        threshold = self.collision.escape_no_hit_threshold
-        return 0.5 if threshold is None else threshold
-
     def _sample_start_pose(self) -> np.ndarray:
         found = sample_free_positions(
             self.raycaster,
@@ -454,8 +470,9 @@ class NarutoReconEnv(gym.Env):
             1,
             self.start_clearance_m,
             self.np_random,
-            self._max_no_hit_share,
+            self.collision.max_no_hit_share,
             max_candidates=START_CANDIDATES,
+            is_inside=self.collision.start_test(),
         )
         if len(found) == 0:
             raise RuntimeError(

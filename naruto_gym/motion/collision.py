@@ -1,18 +1,35 @@
 """Collision handling of the agent, a sphere carrying the camera.
 
 A move is checked along its whole segment against the ground-truth mesh (never against a
-map), clipped to the scene bounds, and refused when the new position would see mostly
-nothing around it (an agent slipping out of a scan with holes).
+map), clipped to the scene bounds, and refused when it would leave the scanned space (an
+agent slipping out of a scan with holes). Two escape rules are available:
+
+* ``"scanned_space"`` (default): the end of the move must be supported by scanned surface
+  below it, not behind a surface and not above the scan
+  (:mod:`naruto_gym.motion.scanned_space`). It is answered from a lazily filled lattice, so
+  a step casts no extra ray once its cell has been visited, and it does not refuse moves in
+  a scan that merely lacks a ceiling.
+* ``"published"``: NARUTO's rule, refuse a move whose end sees more than
+  ``escape_no_hit_threshold`` (50 %) no-hit pixels on a whole-sphere panorama. It works on
+  closed meshes; without a ceiling half of every panorama is empty, so it refuses moves
+  inside the room.
+
+``"off"`` (or ``escape_no_hit_threshold=None``) switches the check off.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from naruto_gym.motion.scanned_space import ScannedSpace, ScannedSpaceConfig
+from naruto_gym.observability import is_inside_free_space
 from naruto_gym.sensors.panorama import EquirectangularCamera, no_hit_share, render_panorama
 from naruto_gym.sensors.raycaster import RayCaster
+
+ESCAPE_RULES = ("scanned_space", "published", "off")
 
 
 @dataclass(frozen=True)
@@ -38,6 +55,13 @@ def segment_fraction_inside_box(
     return float(np.clip(fraction, 0.0, 1.0))
 
 
+def face_normals_of(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 3) unit triangle normals by the right-hand rule of each face's corners."""
+    triangles = np.asarray(vertices, np.float64)[np.asarray(faces)]
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-20)
+
+
 class CollisionChecker:
     """Moves a sphere of ``radius_m`` through a scene without touching its surfaces.
 
@@ -45,9 +69,14 @@ class CollisionChecker:
         raycaster: the ground-truth scene.
         bounds: (2, 3) scene bounds; the sphere's centre stays ``radius_m`` inside them.
         radius_m: agent radius (0.05 m in the published system).
-        escape_no_hit_threshold: refuse a move whose end sees more than this share of
-            no-hit panorama pixels (0.5 in the published system); None switches it off.
-        escape_panorama: the (small) panorama used for that check.
+        escape_no_hit_threshold: the published rule refuses a move whose end sees more than
+            this share of no-hit panorama pixels (0.5 in the published system); None
+            switches every escape check off.
+        escape_panorama: the (small) panorama used by the published rule.
+        escape_rule: ``"scanned_space"`` (default), ``"published"`` or ``"off"`` (see the
+            module docstring).
+        face_normals: (F, 3) triangle normals (computed from the caster's mesh when None).
+        scanned_space_config: settings of the scanned-space rule.
     """
 
     def __init__(
@@ -57,15 +86,46 @@ class CollisionChecker:
         radius_m: float = 0.05,
         escape_no_hit_threshold: float | None = 0.5,
         escape_panorama: EquirectangularCamera | None = None,
+        escape_rule: str = "scanned_space",
+        face_normals: np.ndarray | None = None,
+        scanned_space_config: ScannedSpaceConfig | None = None,
     ) -> None:
         if radius_m <= 0:
             raise ValueError(f"agent radius must be positive, got {radius_m}")
+        if escape_rule not in ESCAPE_RULES:
+            raise ValueError(f"escape_rule must be one of {ESCAPE_RULES}, got {escape_rule!r}")
+        if escape_no_hit_threshold is not None and not 0 <= escape_no_hit_threshold <= 1:
+            raise ValueError(
+                "escape_no_hit_threshold must be a share in [0, 1] or None, got "
+                f"{escape_no_hit_threshold}"
+            )
         self.raycaster = raycaster
         self.radius_m = float(radius_m)
         self.box_min = np.asarray(bounds[0], np.float64) + radius_m
         self.box_max = np.asarray(bounds[1], np.float64) - radius_m
         self.escape_no_hit_threshold = escape_no_hit_threshold
         self.escape_panorama = escape_panorama or EquirectangularCamera(32, 64)
+        self.escape_rule = "off" if escape_no_hit_threshold is None else escape_rule
+        self.face_normals = (
+            face_normals if face_normals is not None
+            else face_normals_of(raycaster.vertices, raycaster.faces)
+        )
+        self.scanned_space = ScannedSpace(
+            raycaster, self.face_normals, bounds, scanned_space_config
+        )
+
+    @property
+    def max_no_hit_share(self) -> float:
+        """Whole-sphere no-hit share the published free-space test accepts."""
+        threshold = self.escape_no_hit_threshold
+        return 0.5 if threshold is None else float(threshold)
+
+    def start_test(self) -> Callable[[np.ndarray], bool]:
+        """The exact free-space test for start poses and viewpoints under this rule."""
+        if self.escape_rule == "scanned_space":
+            return self.scanned_space.is_inside
+        normals, share = self.face_normals, self.max_no_hit_share
+        return lambda position: is_inside_free_space(self.raycaster, normals, position, share)
 
     def clearance(self, position: np.ndarray) -> float:
         """Distance from ``position`` to the nearest surface, metres."""
@@ -75,11 +135,30 @@ class CollisionChecker:
         return bool(np.all(position >= self.box_min) and np.all(position <= self.box_max))
 
     def sees_escape(self, position: np.ndarray) -> bool:
-        """True when ``position`` sees more no-hit pixels than the escape threshold allows."""
-        if self.escape_no_hit_threshold is None:
+        """True when ``position`` lies outside the scanned space under the escape rule."""
+        if self.escape_rule == "off":
             return False
+        if self.escape_rule == "scanned_space":
+            return not self.scanned_space.contains(position)
         panorama = render_panorama(self.raycaster, self.escape_panorama, position)
         return no_hit_share(panorama) > self.escape_no_hit_threshold
+
+    def refuses_escape(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """Whether the escape rule refuses a move from ``start`` to ``end``.
+
+        Under the scanned-space rule an agent that is already outside (an exact start pose
+        put it there) may still move, as long as it goes no further out: no less support
+        below and no higher above the scan. It is never trapped where it was placed.
+        """
+        if not self.sees_escape(end):
+            return False
+        if self.escape_rule != "scanned_space" or not self.sees_escape(start):
+            return True
+        space = self.scanned_space
+        return not (
+            space.unsupported_share(end) <= space.unsupported_share(start) + 1e-9
+            and end[2] <= max(start[2], space.top_m)
+        )
 
     def move(self, start: np.ndarray, target: np.ndarray) -> MoveResult:
         """Move from ``start`` towards ``target`` as far as the sphere fits."""
@@ -100,6 +179,6 @@ class CollisionChecker:
             reason = "bounds"
         else:
             reason = ""
-        if not np.allclose(position, start) and self.sees_escape(position):
+        if not np.allclose(position, start) and self.refuses_escape(start, position):
             return MoveResult(start.copy(), True, "escape")
         return MoveResult(position, reason != "", reason)

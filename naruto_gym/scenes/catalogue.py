@@ -295,8 +295,10 @@ def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z"
     """Turn what a user passed as ``scene=`` into a :class:`Scene`.
 
     Args:
-        name_or_path: a catalogue name (see :func:`available_scenes`), a path to a mesh
-            file, or a :class:`Scene` (returned unchanged).
+        name_or_path: a catalogue name (see :func:`available_scenes`), a catalogue name with
+            scan openings (``"replica_like_room:no_ceiling+holes"``, see
+            :mod:`naruto_gym.scenes.open_scans`), a path to a mesh file, or a :class:`Scene`
+            (returned unchanged).
         up_axis: the up axis of a mesh *file*; catalogue scenes are always z-up and ignore it.
 
     Raises:
@@ -307,6 +309,10 @@ def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z"
         return name_or_path
     if isinstance(name_or_path, str) and name_or_path in _ENTRIES:
         return load_catalogue_scene(name_or_path)
+    if isinstance(name_or_path, str) and name_or_path.partition(":")[0] in _ENTRIES:
+        from naruto_gym.scenes.open_scans import catalogue_open_scan
+
+        return catalogue_open_scan(name_or_path)  # "NAME:OPENINGS", an open-scan variant
     if not isinstance(name_or_path, (str, os.PathLike)):
         raise ValueError(
             f"scene must be a catalogue name, a mesh path or a Scene, got "
