@@ -1,15 +1,34 @@
-"""Pinhole RGB-D camera: intrinsics and the renderer that ray-casts a frame."""
+"""Pinhole RGB-D camera: intrinsics and the renderer that makes a frame.
+
+The renderer finds the first hit of every pixel ray either by Embree ray casting (the
+reference, and the default) or by rasterizing (:mod:`naruto_gym.sensors.rasterizer`), which
+yields the same per-pixel hits several times faster on full frames; both feed the same colour
+lookup.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from functools import cached_property
+from typing import Literal
 
 import numpy as np
 
 from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.kernels import fill_world_rays
+from naruto_gym.sensors.rasterizer import PinholeRasterizer, default_thread_count, run_parallel
 from naruto_gym.sensors.raycaster import RayCaster, RayHits
+
+PinholeBackend = Literal["raycast", "raster", "auto"]
+PINHOLE_BACKENDS: tuple[str, ...] = ("raycast", "raster", "auto")
+
+# "auto" rasterizes when the mesh has at most this many triangles per pixel of the frame:
+# rasterizing pays a per-triangle setup on every frame, the ray cast a per-pixel cost
+# (benchmarks/render_speed.py measures where the two cross).
+AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL = 1.0
+
+# Pixels per thread below which the colour lookup stays in the calling thread.
+_PARALLEL_SHADING_MIN_PIXELS = 65_536
 
 
 @dataclass(frozen=True)
@@ -82,11 +101,41 @@ class PinholeCamera:
         return np.stack([u, v], axis=1), z
 
 
+@dataclass(frozen=True)
+class PixelHits:
+    """The first hit of every pixel ray of a frame.
+
+    Attributes:
+        depth: (H, W) float32 z-depth in metres, 0 where there is no hit or the hit lies
+            beyond the renderer's range.
+        triangle_ids: (H * W,) int32 index of the hit triangle, -1 where the depth is 0.
+        barycentric_uv: (H * W, 2) float32 barycentric (u, v) of the hit inside its triangle:
+            point = (1 - u - v) * v0 + u * v1 + v * v2.
+    """
+
+    depth: np.ndarray
+    triangle_ids: np.ndarray
+    barycentric_uv: np.ndarray
+
+
 class RgbdRenderer:
-    """Ray-casts pinhole RGB-D frames of a scene.
+    """Renders pinhole RGB-D frames of a scene.
 
     Depth is z-depth in metres (float32), 0 where there is no hit or the hit lies beyond
     ``max_depth_m``; RGB is uint8 (H, W, 3), black where depth is 0.
+
+    Args:
+        scene: the scene to render.
+        camera: intrinsics (default :class:`PinholeCamera`).
+        max_depth_m: sensor range.
+        raycaster: an existing ray caster of ``scene`` to share (built if None).
+        backend: how pixel hits are found. ``"raycast"`` (default, the reference): Embree
+            casts every pixel ray. ``"raster"``: the pinhole rasterizer, the same hits
+            (z-depth of the exact pixel ray, triangle, barycentrics) several times faster on
+            full frames. ``"auto"``: the rasterizer when the mesh has at most
+            ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL`` triangles per pixel, else the ray cast.
+        threads: threads for the rasterizer and the colour lookup (default: the CPUs this
+            process may use, at most 2).
     """
 
     def __init__(
@@ -95,25 +144,83 @@ class RgbdRenderer:
         camera: PinholeCamera | None = None,
         max_depth_m: float = 10.0,
         raycaster: RayCaster | None = None,
+        backend: PinholeBackend = "raycast",
+        threads: int | None = None,
     ) -> None:
+        if backend not in PINHOLE_BACKENDS:
+            raise ValueError(
+                f"unknown pinhole backend {backend!r}; use one of {PINHOLE_BACKENDS} "
+                "('raycast' is the reference, 'raster' the fast rasterizer)"
+            )
+        if threads is not None and threads < 1:
+            raise ValueError(f"threads must be at least 1 (or None for the default), got {threads}")
         self.scene = scene
         self.camera = camera or PinholeCamera()
         self.max_depth_m = float(max_depth_m)
         self.raycaster = raycaster or RayCaster(scene.vertices, scene.faces)
+        self.backend: PinholeBackend = backend
+        self.threads = int(threads) if threads is not None else default_thread_count()
+        self._rasterizer: PinholeRasterizer | None = None
 
         self._rays = np.empty((self.camera.width * self.camera.height, 6), dtype=np.float32)
 
+    @property
+    def frame_backend(self) -> Literal["raycast", "raster"]:
+        """The method this renderer's frames use ("auto" resolved for its mesh and camera)."""
+        if self.backend != "auto":
+            return self.backend
+        pixels = self.camera.width * self.camera.height
+        triangles = len(self.raycaster.faces)
+        return "raster" if triangles <= AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL * pixels else "raycast"
+
+    @property
+    def rasterizer(self) -> PinholeRasterizer:
+        """The pinhole rasterizer of the ray caster's triangles (built on first use)."""
+        if self._rasterizer is None:
+            camera = self.camera
+            self._rasterizer = PinholeRasterizer(
+                self.raycaster.vertices, self.raycaster.faces, camera.width, camera.height,
+                camera.fx, camera.fy, camera.cx, camera.cy, threads=self.threads,
+            )
+        return self._rasterizer
+
     def render_depth(self, camera_to_world: np.ndarray) -> np.ndarray:
         """(H, W) float32 z-depth only (skips colour)."""
+        if self.frame_backend == "raster":
+            return self.rasterizer.render(camera_to_world, self.max_depth_m, False)[0]
         return self._cast(camera_to_world)[0]
 
     def render(self, camera_to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(rgb (H, W, 3) uint8, depth (H, W) float32) at a camera-to-world pose."""
+        hits = self.render_hits(camera_to_world)
+        rgb = self.shade(hits.triangle_ids, hits.barycentric_uv)
+        return rgb.reshape(self.camera.height, self.camera.width, 3), hits.depth
+
+    def render_hits(self, camera_to_world: np.ndarray) -> PixelHits:
+        """Depth, hit triangle and barycentrics of every pixel at a camera-to-world pose."""
+        if self.frame_backend == "raster":
+            return PixelHits(*self.rasterizer.render(camera_to_world, self.max_depth_m))
         depth, hits = self._cast(camera_to_world)
         # Pixels beyond the range are black like misses.
-        triangle_ids = np.where(depth.ravel() > 0, hits.triangle_ids, -1)
-        rgb = self.scene.colour_at(triangle_ids, hits.barycentric_uv)
-        return rgb.reshape(self.camera.height, self.camera.width, 3), depth
+        triangle_ids = np.where(depth.ravel() > 0, hits.triangle_ids, -1).astype(np.int32)
+        return PixelHits(depth, triangle_ids, hits.barycentric_uv)
+
+    def shade(self, triangle_ids: np.ndarray, barycentric_uv: np.ndarray) -> np.ndarray:
+        """(N, 3) uint8 colours of hits (black for id -1): the scene's colour lookup, split
+        between the renderer's threads on large frames."""
+        pixels = len(triangle_ids)
+        parts = min(self.threads, max(pixels // _PARALLEL_SHADING_MIN_PIXELS, 1))
+        if parts == 1:
+            return self.scene.colour_at(triangle_ids, barycentric_uv)
+        rgb = np.empty((pixels, 3), np.uint8)
+        bounds = np.linspace(0, pixels, parts + 1).astype(np.int64)
+
+        def shade_part(part: int) -> None:
+            chunk = slice(bounds[part], bounds[part + 1])
+            rgb[chunk] = self.scene.colour_at(triangle_ids[chunk], barycentric_uv[chunk])
+
+        run_parallel(shade_part, parts)
+        return rgb
 
     def _cast(self, camera_to_world: np.ndarray) -> tuple[np.ndarray, RayHits]:
         pose = np.asarray(camera_to_world, dtype=np.float32)

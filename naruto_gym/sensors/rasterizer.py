@@ -1,0 +1,566 @@
+"""Pinhole frames by rasterizing: the same per-pixel hits as the ray cast, without casting rays.
+
+For a pinhole camera every pixel ray starts at the camera centre, so whether the ray of pixel
+(u, v) crosses a triangle is decided by three planes through the centre and the triangle's
+edges: with camera-frame corners ``p0, p1, p2`` and the pixel ray ``d = ((u - cx) / fx,
+(v - cy) / fy, 1)``, the ray hits the triangle in front of the camera exactly when the three
+triple products ``d . (p1 x p2)``, ``d . (p2 x p0)``, ``d . (p0 x p1)`` share the sign of
+``det = p0 . ((p1 - p0) x (p2 - p0))``. Their shares of the sum are the hit's barycentric
+coordinates, and ``det / (d . n)`` with ``n = (p1 - p0) x (p2 - p0)`` its z-depth: the ray
+parameter of the exact pixel ray, as the ray caster reports it. Nothing is interpolated in screen
+space, so triangles that cross the camera plane need no geometric clipping (points behind the
+camera fail the sign test), and the depth is that of the ray-plane intersection in float64.
+
+A frame is made in three passes over the triangles and pixels:
+
+1. setup (triangles split between the threads): the edge planes, the plane normal, ``det``
+   and the image rows the triangle can cover (its corners clipped to ``z >= NEAR_PLANE_M``
+   and projected); triangles behind the camera, outside the image or entirely beyond the
+   depth range are dropped, the others packed into a list;
+2. raster (image rows interleaved between the threads, so both get a like share of the
+   image): per row of a triangle, the span of columns where all three edge planes are
+   non-negative, every pixel of it tested exactly and kept when nearer than the z-buffer;
+3. resolve (same rows): barycentric coordinates of the winning triangle, depth as float32,
+   the range cut, -1 for pixels without a hit.
+
+The kernels release the GIL and run in a small pool of Python threads, not numba's threading
+layer, which would have to coexist with torch's and with spawned env workers. Triangles share
+edge planes exactly (the cross product of two corners only changes sign when they swap), so a
+ray through a shared edge is claimed by both neighbours and the image has no cracks; which of
+the two wins such an exact tie can differ from Embree.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numba
+import numpy as np
+
+# Hits closer to the camera centre than this (metres) are not drawn; the ray cast starts at 0.
+NEAR_PLANE_M = 1e-6
+
+# Layout of the float64 triangle records made by the setup pass, every plane in pixel units
+# (a * u + b * v + c): the three edge planes (times the sign of det), the inverse-depth plane
+# 1 / z, and the reciprocal of each edge plane's u slope (0 where the slope is 0).
+_INVERSE_DEPTH = 9
+_INVERSE_SLOPES = 12
+_RECORD_FLOATS = 15
+
+# Image rows drawn together: a band's z-buffer (16 x 1200 x 12 bytes) stays in the L2 cache.
+BAND_ROWS = 16
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _cross(ax, ay, az, bx, by, bz):
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _store_plane(records, slot, offset, x, y, z, intrinsics):
+    """Store the plane x * X + y * Y + z (X = (u - cx) / fx, Y = (v - cy) / fy) in pixel units."""
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    a = x / fx
+    b = y / fy
+    records[slot, offset] = a
+    records[slot, offset + 1] = b
+    records[slot, offset + 2] = z - a * cx - b * cy
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def transform_vertices(
+    vertices: np.ndarray,
+    first: int,
+    stop: int,
+    rotation: np.ndarray,
+    origin: np.ndarray,
+    intrinsics: np.ndarray,
+    width: int,
+    height: int,
+    far_cut: float,
+    camera_points: np.ndarray,
+    outcodes: np.ndarray,
+) -> None:
+    """Camera-frame coordinates and view-volume outcodes of vertices ``first .. stop - 1``.
+
+    Args:
+        vertices: (V, 3) float64 world positions.
+        first, stop: the range of vertices.
+        rotation: (3, 3) float64 camera-to-world rotation; origin: (3,) float64 camera centre.
+        intrinsics: float64 (fx, fy, cx, cy).
+        width, height: image size in pixels.
+        far_cut: the farthest z worth drawing.
+        camera_points: (V, 3) float64 output, R^T (p - origin).
+        outcodes: (V,) uint8 output, one bit per side of the view volume the vertex lies
+            outside of (left, right, top, bottom of the image with a pixel of margin, near
+            plane, far cut). A triangle whose three corners share a bit cannot be seen.
+    """
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    for index in range(first, stop):
+        dx = vertices[index, 0] - origin[0]
+        dy = vertices[index, 1] - origin[1]
+        dz = vertices[index, 2] - origin[2]
+        x = rotation[0, 0] * dx + rotation[1, 0] * dy + rotation[2, 0] * dz
+        y = rotation[0, 1] * dx + rotation[1, 1] * dy + rotation[2, 1] * dz
+        z = rotation[0, 2] * dx + rotation[1, 2] * dy + rotation[2, 2] * dz
+        camera_points[index, 0] = x
+        camera_points[index, 1] = y
+        camera_points[index, 2] = z
+        # Planes through the camera centre bounding u in [-1, width], v in [-1, height]; their
+        # intersection lies in front of the camera, so sharing a bit means unseen.
+        code = 0
+        if fx * x + (cx + 1.0) * z < 0.0:
+            code |= 1
+        if (width - cx) * z - fx * x < 0.0:
+            code |= 2
+        if fy * y + (cy + 1.0) * z < 0.0:
+            code |= 4
+        if (height - cy) * z - fy * y < 0.0:
+            code |= 8
+        if z < NEAR_PLANE_M:
+            code |= 16
+        if z > far_cut:
+            code |= 32
+        outcodes[index] = code
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def setup_triangles(
+    camera_points: np.ndarray,
+    outcodes: np.ndarray,
+    faces: np.ndarray,
+    first: int,
+    stop: int,
+    intrinsics: np.ndarray,
+    width: int,
+    height: int,
+    records: np.ndarray,
+    hit_planes: np.ndarray,
+    record_rows: np.ndarray,
+) -> int:
+    """Set up triangles ``first .. stop - 1``; pack the drawable ones from ``records[first]``.
+
+    Args:
+        camera_points, outcodes: :func:`transform_vertices`'s output.
+        faces: (F, 3) int64 corner indices.
+        first, stop: the range of triangles this call sets up.
+        intrinsics: float64 (fx, fy, cx, cy).
+        width, height: image size in pixels.
+        records: (F, 15) float64 output, laid out as described at ``_RECORD_FLOATS``.
+        hit_planes: (F, 6) float64 output: the planes of the barycentric coordinates u and v
+            divided by the z-depth (u = plane(pixel) * z), in pixel units.
+        record_rows: (F, 3) int64 output: triangle id, first row, last row.
+
+    Returns:
+        The number of records written from index ``first``.
+    """
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    count = 0
+    xs = np.empty(3)
+    ys = np.empty(3)
+    zs = np.empty(3)
+    for triangle in range(first, stop):
+        i0, i1, i2 = faces[triangle, 0], faces[triangle, 1], faces[triangle, 2]
+        if outcodes[i0] & outcodes[i1] & outcodes[i2]:
+            continue
+        for corner in range(3):
+            index = faces[triangle, corner]
+            xs[corner] = camera_points[index, 0]
+            ys[corner] = camera_points[index, 1]
+            zs[corner] = camera_points[index, 2]
+        # Image bounding box of the part in front of the near plane: the corners there and the
+        # points where edges cross it.
+        u_min, u_max, v_min, v_max = np.inf, -np.inf, np.inf, -np.inf
+        for corner in range(3):
+            following = (corner + 1) % 3
+            if zs[corner] >= NEAR_PLANE_M:
+                u = fx * xs[corner] / zs[corner] + cx
+                v = fy * ys[corner] / zs[corner] + cy
+                u_min, u_max = min(u_min, u), max(u_max, u)
+                v_min, v_max = min(v_min, v), max(v_max, v)
+            if (zs[corner] >= NEAR_PLANE_M) != (zs[following] >= NEAR_PLANE_M):
+                share = (NEAR_PLANE_M - zs[corner]) / (zs[following] - zs[corner])
+                u = fx * (xs[corner] + share * (xs[following] - xs[corner])) / NEAR_PLANE_M + cx
+                v = fy * (ys[corner] + share * (ys[following] - ys[corner])) / NEAR_PLANE_M + cy
+                u_min, u_max = min(u_min, u), max(u_max, u)
+                v_min, v_max = min(v_min, v), max(v_max, v)
+        if u_max < -1.0 or u_min > width or v_max < -1.0 or v_min > height:
+            continue
+        row_first = max(int(np.floor(max(v_min, -1.0))), 0)
+        row_last = min(int(np.ceil(min(v_max, float(height)))), height - 1)
+        if row_first > row_last:
+            continue
+        nx, ny, nz = _cross(
+            xs[1] - xs[0], ys[1] - ys[0], zs[1] - zs[0], xs[2] - xs[0], ys[2] - ys[0], zs[2] - zs[0]
+        )
+        det = xs[0] * nx + ys[0] * ny + zs[0] * nz
+        if det == 0.0:
+            continue  # the plane passes through the camera centre: seen edge-on
+        sign = 1.0 if det > 0.0 else -1.0
+        slot = first + count
+        for edge in range(3):
+            a, b = (edge + 1) % 3, (edge + 2) % 3
+            px, py, pz = _cross(xs[a], ys[a], zs[a], xs[b], ys[b], zs[b])
+            _store_plane(records, slot, 3 * edge, sign * px, sign * py, sign * pz, intrinsics)
+            slope = records[slot, 3 * edge]
+            records[slot, _INVERSE_SLOPES + edge] = 1.0 / slope if slope != 0.0 else 0.0
+        _store_plane(records, slot, _INVERSE_DEPTH, nx / det, ny / det, nz / det, intrinsics)
+        # u = e1 / (e0 + e1 + e2) with e0 + e1 + e2 = sign * det / z, so u = e1 * z / |det|.
+        scale = 1.0 / abs(det)
+        for coefficient in range(3):
+            hit_planes[slot, coefficient] = records[slot, 3 + coefficient] * scale
+            hit_planes[slot, 3 + coefficient] = records[slot, 6 + coefficient] * scale
+        record_rows[slot, 0] = triangle
+        record_rows[slot, 1] = row_first
+        record_rows[slot, 2] = row_last
+        count += 1
+    return count
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _edge_bounds(
+    slope: float, inverse_slope: float, offset: float, low: float, high: float
+) -> tuple[float, float]:
+    """Narrow [low, high] to where slope * u + offset >= 0 (empty: low > high)."""
+    if slope > 0.0:
+        return max(low, -offset * inverse_slope), high
+    if slope < 0.0:
+        return low, min(high, -offset * inverse_slope)
+    if offset < 0.0:
+        return np.inf, -np.inf
+    return low, high
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def bin_records(
+    record_rows: np.ndarray, segments: np.ndarray, band_rows: int, band_count: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which records touch which band of ``band_rows`` image rows.
+
+    Returns:
+        ``band_starts`` ((band_count + 1,) int64) and ``entries`` (int32 record indices):
+        band ``b`` holds ``entries[band_starts[b]:band_starts[b + 1]]``, in record order.
+    """
+    band_starts = np.zeros(band_count + 1, np.int64)
+    for segment in range(segments.shape[0]):
+        for record in range(segments[segment, 0], segments[segment, 1]):
+            for band in range(record_rows[record, 1] // band_rows,
+                              record_rows[record, 2] // band_rows + 1):
+                band_starts[band + 1] += 1
+    for band in range(band_count):
+        band_starts[band + 1] += band_starts[band]
+    entries = np.empty(band_starts[band_count], np.int32)
+    filled = band_starts[:band_count].copy()
+    for segment in range(segments.shape[0]):
+        for record in range(segments[segment, 0], segments[segment, 1]):
+            for band in range(record_rows[record, 1] // band_rows,
+                              record_rows[record, 2] // band_rows + 1):
+                entries[filled[band]] = record
+                filled[band] += 1
+    return band_starts, entries
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def rasterize_band(
+    records: np.ndarray,
+    record_rows: np.ndarray,
+    entries: np.ndarray,
+    row_first_band: int,
+    nearest: float,
+    inverse_depth: np.ndarray,
+    winners: np.ndarray,
+) -> None:
+    """Z-buffer the records ``entries`` over the band of rows starting at ``row_first_band``.
+
+    Args:
+        records, record_rows: the setup pass's output.
+        entries: record indices of the triangles that touch the band.
+        row_first_band: the image row of the band's first row.
+        nearest: 1 / the farthest depth worth drawing (0 for no limit).
+        inverse_depth: (band rows, W) float64 1 / z-depth of the nearest hit (reset here).
+        winners: (band rows, W) int32 record index of the nearest hit, -1 for none (reset here).
+    """
+    band_height, width = inverse_depth.shape
+    inverse_depth[:, :] = nearest
+    winners[:, :] = -1
+    row_last_band = row_first_band + band_height - 1
+    for entry in range(entries.shape[0]):
+        record = entries[entry]
+        a0, b0, c0 = records[record, 0], records[record, 1], records[record, 2]
+        a1, b1, c1 = records[record, 3], records[record, 4], records[record, 5]
+        a2, b2, c2 = records[record, 6], records[record, 7], records[record, 8]
+        qa, qb, qc = records[record, 9], records[record, 10], records[record, 11]
+        i0, i1, i2 = records[record, 12], records[record, 13], records[record, 14]
+        for row in range(max(record_rows[record, 1], row_first_band),
+                         min(record_rows[record, 2], row_last_band) + 1):
+            v = float(row)
+            k0 = b0 * v + c0
+            k1 = b1 * v + c1
+            k2 = b2 * v + c2
+            low, high = _edge_bounds(a0, i0, k0, -np.inf, np.inf)
+            low, high = _edge_bounds(a1, i1, k1, low, high)
+            low, high = _edge_bounds(a2, i2, k2, low, high)
+            # The columns with all three edge planes >= 0. Two triangles sharing an edge compute
+            # its bound from exactly negated planes, so they get the same number: a pixel on
+            # it goes to both (an exact tie), never to neither.
+            first_column = max(int(np.ceil(max(low, -1.0))), 0)
+            last_column = min(int(np.floor(min(high, float(width)))), width - 1)
+            kq = qb * v + qc
+            line = row - row_first_band
+            for column in range(first_column, last_column + 1):
+                q = qa * column + kq
+                if q > inverse_depth[line, column]:
+                    inverse_depth[line, column] = q
+                    winners[line, column] = record
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def resolve_band(
+    hit_planes: np.ndarray,
+    record_rows: np.ndarray,
+    row_first_band: int,
+    inverse_depth: np.ndarray,
+    winners: np.ndarray,
+    max_depth: float,
+    want_barycentrics: bool,
+    depth: np.ndarray,
+    triangle_ids: np.ndarray,
+    barycentric_uv: np.ndarray,
+) -> None:
+    """Turn a band's z-buffer into the ray caster's outputs for its rows.
+
+    Writes ``depth`` ((H, W) float32 z-depth, 0 for no hit or beyond ``max_depth``),
+    ``triangle_ids`` ((H * W,) int32, -1 where the depth is 0) and, when asked,
+    ``barycentric_uv`` ((H * W, 2) float32, Embree's (u, v) of the hit).
+    """
+    band_height, width = inverse_depth.shape
+    for line in range(min(band_height, depth.shape[0] - row_first_band)):
+        row = row_first_band + line
+        v = float(row)
+        for column in range(width):
+            pixel = row * width + column
+            record = winners[line, column]
+            z = 1.0 / inverse_depth[line, column]
+            value = np.float32(z)
+            if record < 0 or not value <= max_depth:
+                depth[row, column] = 0.0
+                triangle_ids[pixel] = -1
+                if want_barycentrics:
+                    barycentric_uv[pixel, 0] = 0.0
+                    barycentric_uv[pixel, 1] = 0.0
+                continue
+            depth[row, column] = value
+            triangle_ids[pixel] = record_rows[record, 0]
+            if want_barycentrics:
+                u = float(column)
+                barycentric_uv[pixel, 0] = (
+                    hit_planes[record, 0] * u + hit_planes[record, 1] * v + hit_planes[record, 2]
+                ) * z
+                barycentric_uv[pixel, 1] = (
+                    hit_planes[record, 3] * u + hit_planes[record, 4] * v + hit_planes[record, 5]
+                ) * z
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def draw_bands(
+    records: np.ndarray,
+    hit_planes: np.ndarray,
+    record_rows: np.ndarray,
+    band_starts: np.ndarray,
+    entries: np.ndarray,
+    group: int,
+    groups: int,
+    nearest: float,
+    max_depth: float,
+    want_barycentrics: bool,
+    inverse_depth: np.ndarray,
+    winners: np.ndarray,
+    depth: np.ndarray,
+    triangle_ids: np.ndarray,
+    barycentric_uv: np.ndarray,
+) -> None:
+    """Rasterize and resolve bands ``group, group + groups, ...`` (one thread's share).
+
+    ``inverse_depth`` and ``winners`` are this thread's band-sized z-buffer.
+    """
+    band_height = inverse_depth.shape[0]
+    for band in range(group, band_starts.shape[0] - 1, groups):
+        row_first_band = band * band_height
+        rasterize_band(
+            records, record_rows, entries[band_starts[band]:band_starts[band + 1]],
+            row_first_band, nearest, inverse_depth, winners,
+        )
+        resolve_band(
+            hit_planes, record_rows, row_first_band, inverse_depth, winners, max_depth,
+            want_barycentrics, depth, triangle_ids, barycentric_uv,
+        )
+
+
+# -- thread pool ---------------------------------------------------------------------------
+_POOL_LOCK = threading.Lock()
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    """A thread pool of the current process (a forked child must not reuse its parent's)."""
+    key = (os.getpid(), workers)
+    with _POOL_LOCK:
+        pool = _POOLS.get(key)
+        if pool is None:
+            pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="naruto-raster")
+            _POOLS[key] = pool
+        return pool
+
+
+def run_parallel(function, count: int) -> list:
+    """``[function(0), ..., function(count - 1)]``, the first in this thread, the rest in the
+    pool."""
+    if count == 1:
+        return [function(0)]
+    futures = [_pool(count - 1).submit(function, index) for index in range(1, count)]
+    results = [function(0)]
+    results.extend(future.result() for future in futures)
+    return results
+
+
+def default_thread_count() -> int:
+    """Threads a rasterizer uses by default: the CPUs this process may run on, at most 2.
+
+    More row groups only pay on more cores, and each one re-reads every packed triangle.
+    """
+    try:
+        available = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        available = os.cpu_count() or 1
+    return max(1, min(available, 2))
+
+
+# -- renderer --------------------------------------------------------------------------------
+class PinholeRasterizer:
+    """Rasterizes pinhole frames of one triangle mesh into the ray caster's per-pixel hits.
+
+    Args:
+        vertices: (V, 3) positions in metres. They are rounded to float32 first, as the ray
+            caster stores them, so both draw the same triangles.
+        faces: (F, 3) triangle corner indices.
+        width, height, fx, fy, cx, cy: the pinhole intrinsics; pixel (u, v) looks along
+            ((u - cx) / fx, (v - cy) / fy, 1).
+        threads: row groups drawn in parallel (default: :func:`default_thread_count`).
+    """
+
+    def __init__(
+        self,
+        vertices: np.ndarray,
+        faces: np.ndarray,
+        width: int,
+        height: int,
+        fx: float,
+        fy: float,
+        cx: float,
+        cy: float,
+        threads: int | None = None,
+    ) -> None:
+        self.vertices = np.asarray(vertices, dtype=np.float32).astype(np.float64)
+        self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        if self.vertices.ndim != 2 or self.vertices.shape[1] != 3:
+            raise ValueError(f"vertices must have shape (V, 3), got {self.vertices.shape}")
+        if self.faces.ndim != 2 or self.faces.shape[1] != 3 or len(self.faces) == 0:
+            raise ValueError(f"faces must have shape (F, 3) with F > 0, got {self.faces.shape}")
+        if width <= 0 or height <= 0 or fx <= 0 or fy <= 0:
+            raise ValueError(
+                f"need a positive image size and focal lengths, got {width} x {height}, "
+                f"fx={fx}, fy={fy}"
+            )
+        if threads is not None and threads < 1:
+            raise ValueError(f"threads must be at least 1 (or None for the default), got {threads}")
+        self.width, self.height = int(width), int(height)
+        self.threads = int(threads) if threads is not None else default_thread_count()
+        self.intrinsics = np.array([fx, fy, cx, cy], dtype=np.float64)
+        self._buffers: tuple[np.ndarray, ...] | None = None
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_buffers"] = None  # scratch space, rebuilt on first use
+        return state
+
+    def _scratch(self) -> tuple[np.ndarray, ...]:
+        if self._buffers is None:
+            count = len(self.faces)
+            self._buffers = (
+                np.empty((len(self.vertices), 3), np.float64),
+                np.empty(len(self.vertices), np.uint8),
+                np.empty((count, _RECORD_FLOATS), np.float64),
+                np.empty((count, 6), np.float64),
+                np.empty((count, 3), np.int64),
+                np.empty((self.threads, BAND_ROWS, self.width), np.float64),
+                np.empty((self.threads, BAND_ROWS, self.width), np.int32),
+            )
+        return self._buffers
+
+    def render(
+        self, camera_to_world: np.ndarray, max_depth_m: float = np.inf, barycentrics: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Depth, triangle ids and barycentrics of the first hit of every pixel ray.
+
+        Args:
+            camera_to_world: 4x4 pose (OpenCV camera axes); rounded to float32 like the ray
+                caster's rays.
+            max_depth_m: z-depths beyond this become 0, as in the ray-cast renderer.
+            barycentrics: also return the barycentric (u, v) of each hit.
+
+        Returns:
+            ``depth`` (H, W) float32 z-depth (0: no hit or beyond the range),
+            ``triangle_ids`` (H * W,) int32 (-1 where the depth is 0) and
+            ``barycentric_uv`` (H * W, 2) float32 with point = (1 - u - v) v0 + u v1 + v v2,
+            or None when not asked for.
+        """
+        pose = np.asarray(camera_to_world, dtype=np.float32).astype(np.float64)
+        if pose.shape != (4, 4):
+            raise ValueError(f"camera_to_world must be a 4x4 matrix, got shape {pose.shape}")
+        rotation = np.ascontiguousarray(pose[:3, :3])
+        origin = np.ascontiguousarray(pose[:3, 3])
+        (
+            camera_points, outcodes, records, hit_planes, record_rows, inverse_depth, winners
+        ) = self._scratch()
+        max_depth = float(max_depth_m)
+        # A triangle whose every corner lies beyond the range can only give depth-0 pixels.
+        far_cut = max_depth * (1.0 + 1e-6) + 1e-6 if np.isfinite(max_depth) else np.inf
+        nearest = 1.0 / far_cut
+        groups = self.threads
+        bounds = np.linspace(0, len(self.faces), groups + 1).astype(np.int64)
+
+        vertex_bounds = np.linspace(0, len(self.vertices), groups + 1).astype(np.int64)
+
+        def transform(group: int) -> None:
+            transform_vertices(
+                self.vertices, vertex_bounds[group], vertex_bounds[group + 1], rotation, origin,
+                self.intrinsics, self.width, self.height, far_cut, camera_points, outcodes,
+            )
+
+        def setup(group: int) -> int:
+            return setup_triangles(
+                camera_points, outcodes, self.faces, bounds[group], bounds[group + 1],
+                self.intrinsics, self.width, self.height, records, hit_planes, record_rows,
+            )
+
+        run_parallel(transform, groups)
+        counts = run_parallel(setup, groups)
+        segments = np.stack([bounds[:-1], bounds[:-1] + np.asarray(counts, np.int64)], axis=1)
+        band_count = -(-self.height // BAND_ROWS)
+        band_starts, entries = bin_records(record_rows, segments, BAND_ROWS, band_count)
+
+        depth = np.empty((self.height, self.width), np.float32)
+        triangle_ids = np.empty(self.height * self.width, np.int32)
+        uv = np.empty((self.height * self.width, 2), np.float32)
+
+        def draw(group: int) -> None:
+            draw_bands(
+                records, hit_planes, record_rows, band_starts, entries, group, groups, nearest,
+                max_depth, barycentrics, inverse_depth[group], winners[group], depth,
+                triangle_ids, uv,
+            )
+
+        run_parallel(draw, groups)
+        return depth, triangle_ids, (uv if barycentrics else None)
