@@ -23,6 +23,7 @@ switchable):
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from dataclasses import asdict, dataclass
@@ -129,6 +130,7 @@ class TsdfUncertaintyMapper:
         self._grid_points = template.grid_points()
         self.counts = np.zeros(template.shape, dtype=np.float32)
         self.frames_integrated = 0
+        self._sdf_view: SdfVolume | None = None
         self.observed_space = ObservedSpace(self.bounds, ObservedSpaceConfig(
             voxel_size_m=self.config.uncertainty_voxel_m,
             max_range_m=self.config.max_depth_m,
@@ -185,12 +187,15 @@ class TsdfUncertaintyMapper:
 
     def planner_view(self, voxel_size: float = 0.1) -> tuple[SdfVolume, SdfVolume]:
         """(SDF volume, uncertainty volume: derived variance on surface voxels, else 0)."""
-        sdf_volume = SdfVolume.from_function(self.sdf, self.bounds, voxel_size)
-        variance = SdfVolume(self.variance_grid(), self._grid_origin,
-                             self.config.uncertainty_voxel_m)
-        values = variance.sample(sdf_volume.grid_points(), outside_value=0.0).reshape(
-            sdf_volume.shape
-        )
+        sdf_volume = self._planner_sdf(voxel_size)
+        if math.isclose(voxel_size, self.config.uncertainty_voxel_m):
+            values = self.variance_grid()  # the same grid: no interpolation needed
+        else:
+            variance = SdfVolume(self.variance_grid(), self._grid_origin,
+                                 self.config.uncertainty_voxel_m)
+            values = variance.sample(sdf_volume.grid_points(), outside_value=0.0).reshape(
+                sdf_volume.shape
+            )
         on_surface = (sdf_volume.values >= 0.0) & (
             sdf_volume.values <= self.config.planner_surface_m
         )
@@ -203,6 +208,20 @@ class TsdfUncertaintyMapper:
         return sdf_volume, uncertainty
 
     query_volumes = planner_view
+
+    def _planner_sdf(self, voxel_size: float) -> SdfVolume:
+        """The SDF on the planner grid, re-evaluated only where fused blocks changed."""
+        cached = self._sdf_view
+        if cached is None or not math.isclose(cached.voxel_size, voxel_size):
+            self.tsdf.pop_touched_blocks()
+            cached = self._sdf_view = SdfVolume.from_function(self.sdf, self.bounds, voxel_size)
+            self._view_points = cached.grid_points()
+        else:
+            changed = self.tsdf.points_near_blocks(self._view_points,
+                                                   self.tsdf.pop_touched_blocks())
+            if changed.any():
+                cached.values.reshape(-1)[changed] = self.sdf(self._view_points[changed])
+        return SdfVolume(cached.values.copy(), cached.origin, cached.voxel_size)
 
     def extract_mesh(self, voxel_size: float = 0.02) -> trimesh.Trimesh:
         """Open3D's mesh at the TSDF resolution; a coarser marching-cubes preview otherwise."""
@@ -238,6 +257,8 @@ class TsdfUncertaintyMapper:
                 handle.write(state["grid"])
             self.tsdf._grid = o3d.t.geometry.VoxelBlockGrid.load(path).to(self.tsdf.device)
         self.tsdf._sdf_index = None
+        self.tsdf._touched_blocks = []
+        self._sdf_view = None
         self.tsdf.num_frames = int(state["tsdf_frames"])
         self.counts = np.asarray(state["counts"], dtype=np.float32).copy()
         if "observed_space" in state:

@@ -32,9 +32,21 @@ Choices of this implementation beyond the published description (all switchable)
 * When the newest map puts the agent itself inside the clearance of a surface (the map
   sharpened since the path was planned), the path starts with a short straight move to the
   nearest free voxel within ``escape_radius_m``; otherwise the planner could never start.
+* Unexplored space is uncertain (the mappers' ``unknown_space``): the frontier of what the
+  frames have measured is a target at the initial variance, so the agent heads into rooms
+  it has not seen. Goals must lie in measured free space (``goals_in_observed_space``), so
+  the agent stands where it knows it can stand when it looks into the unknown.
+* The depth panorama, when the env gives one, adds the free space all around the agent to
+  that measure (``use_panorama``).
+* Never stuck (:mod:`naruto_agent.naruto.recovery`): a refused move (``collided`` /
+  ``collision_reason`` in the step info) blocks its target in the agent's own map, goals that
+  failed are not tried again for a while, and when plans keep failing or the agent neither
+  moves nor measures anything new it looks around, moves to reachable space away from where
+  it has been, or retreats along its own trajectory.
 
-What the agent knows: the observations (RGB-D, pose), the env's step info (``collided``) and
-the scene's bounding box from the :class:`~naruto_agent.policies.EnvContext`; never the mesh.
+What the agent knows: the observations (RGB-D, pose, panorama), the env's step info
+(``collided``, ``collision_reason``) and the scene's bounding box from the
+:class:`~naruto_agent.policies.EnvContext`; never the mesh.
 """
 
 from __future__ import annotations
@@ -54,8 +66,17 @@ from naruto_agent.mapping import (
     TsdfUncertaintyMapper,
 )
 from naruto_agent.naruto.goal_search import GoalSearchConfig, uncertainty_aware_goal_search
+from naruto_agent.naruto.recovery import (
+    BlockedSpace,
+    ProgressMonitor,
+    RecoveryConfig,
+    RecoveryKind,
+    densify,
+    look_around_targets,
+)
 from naruto_agent.naruto.state_machine import NarutoStateMachine, Plan, State
 from naruto_agent.planning import FreeSpaceComponents, PlannerConfig, SdfVolume, plan_path
+from naruto_agent.planning.rrt import reachable_voxels
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
 
 MAPPERS = ("tsdf", "neural")
@@ -82,7 +103,12 @@ class NarutoConfig:
             inside a surface's clearance (0 switches the escape off).
         arrival_tolerance_m: a moving agent farther than this from its commanded node was
             stopped by the env.
+        use_panorama: integrate the env's depth panorama (when the observation has one) into
+            the map's measure of explored space.
+        panorama_every: ... every n-th frame (5, the mapping cadence).
+        goals_in_observed_space: candidate goals must lie in space the frames measured free.
         seed: seed of the agent's randomness when ``reset`` gets none.
+        recovery: stall detection and recovery (:class:`RecoveryConfig`).
         goal_search: the goal search's settings.
         planner: E-RRT settings (the time limit, 2 s, is shorter than the planning module's
             default 5 s: a CPU agent should not stall; the seed is redrawn every request).
@@ -99,7 +125,11 @@ class NarutoConfig:
     check_moves_on_map: bool = True
     escape_radius_m: float = 0.3
     arrival_tolerance_m: float = 0.01
+    use_panorama: bool = True
+    panorama_every: int = 5
+    goals_in_observed_space: bool = True
     seed: int = 0
+    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     goal_search: GoalSearchConfig = field(default_factory=GoalSearchConfig)
     planner: PlannerConfig = field(default_factory=lambda: PlannerConfig(time_limit_s=2.0))
     tsdf: TsdfMapperConfig = field(default_factory=TsdfMapperConfig)
@@ -108,8 +138,10 @@ class NarutoConfig:
     def __post_init__(self) -> None:
         if not self.planner_voxel_m > 0:
             raise ValueError(f"planner_voxel_m must be positive, got {self.planner_voxel_m}")
-        if self.view_every_mapping_steps < 1 or self.goal_attempts < 1:
-            raise ValueError("view_every_mapping_steps and goal_attempts must be at least 1")
+        if (self.view_every_mapping_steps < 1 or self.goal_attempts < 1
+                or self.panorama_every < 1):
+            raise ValueError("view_every_mapping_steps, goal_attempts and panorama_every must "
+                             "be at least 1")
         if not 0 < self.max_rotation_step_deg <= 180:
             raise ValueError(f"max_rotation_step_deg must be in (0, 180], got "
                              f"{self.max_rotation_step_deg}")
@@ -119,6 +151,7 @@ class NarutoConfig:
 
 
 _SECTIONS = {"goal_search": GoalSearchConfig, "planner": PlannerConfig,
+             "recovery": RecoveryConfig,
              "tsdf": TsdfMapperConfig, "neural": NeuralMapperConfig}
 
 
@@ -163,6 +196,9 @@ class NarutoPolicy(Policy):
         mapper: the map of the current episode (after ``reset``).
         machine: the state machine (``machine.history`` holds the state of every action).
         plans: one dict of diagnostics per planning request.
+        monitor: progress, failed plans and goals of the episode.
+        blocked: points where the env refused a move.
+        recoveries: (frame, kind) of every recovery this episode.
         timings: seconds spent per phase (``mapping``, ``planner_view``, ``goal_search``,
             ``rrt``, ``control``) this episode.
     """
@@ -196,6 +232,10 @@ class NarutoPolicy(Policy):
         self._mapping_steps = 0
         self._new_map = False
         self._view_stale = False
+        self.monitor = ProgressMonitor(self.config.recovery)
+        self.blocked = BlockedSpace(self.config.recovery.blocked_radius_m)
+        self.recoveries: list[tuple[int, str]] = []
+        self._commanded: np.ndarray | None = None
 
     # -- mapping -----------------------------------------------------------------------------
     def _make_mapper(self) -> TsdfUncertaintyMapper | NeuralMapper:
@@ -209,10 +249,14 @@ class NarutoPolicy(Policy):
 
     def _integrate(self, observation: Observation) -> None:
         clock = time.perf_counter()
+        pose = np.asarray(observation["pose"], dtype=np.float64)
         changed = self.mapper.integrate(
-            observation["rgb"], observation["depth"],
-            np.asarray(observation["pose"], dtype=np.float64), self._frame_index,
+            observation["rgb"], observation["depth"], pose, self._frame_index,
         )
+        panorama = observation.get("panorama")
+        if (self.config.use_panorama and panorama is not None
+                and self._frame_index % self.config.panorama_every == 0):
+            self.mapper.integrate_panorama(panorama, pose[:3, 3])
         self.timings["mapping"] += time.perf_counter() - clock
         if changed:
             self._mapping_steps += 1
@@ -227,7 +271,8 @@ class NarutoPolicy(Policy):
         if not self._view_stale:
             return
         clock = time.perf_counter()
-        self.sdf, self.uncertainty = self.mapper.planner_view(self.config.planner_voxel_m)
+        sdf, self.uncertainty = self.mapper.planner_view(self.config.planner_voxel_m)
+        self.sdf = self.blocked.apply(sdf)
         self._components = None
         self._view_stale = False
         self.timings["planner_view"] += time.perf_counter() - clock
@@ -248,7 +293,25 @@ class NarutoPolicy(Policy):
         self._mapping_steps = 0
         self._new_map = False
         self._view_stale = False
+        self.monitor = ProgressMonitor(self.config.recovery)
+        self.blocked = BlockedSpace(self.config.recovery.blocked_radius_m)
+        self.recoveries = []
+        self._commanded = None
         self._integrate(observation)
+
+    def _note_refused_move(self, position: np.ndarray, info: Info) -> None:
+        """A refused move blocks its target in the agent's map; the plan's goal failed."""
+        if self._commanded is None or not info.get("collided", False):
+            return
+        if np.linalg.norm(self._commanded - position) <= self.config.arrival_tolerance_m:
+            return
+        self.blocked.add(self._commanded)
+        if self.sdf is not None:
+            self.sdf = self.blocked.apply(self.sdf)
+            self._components = None
+        plan = self.machine.plan
+        if plan is not None and not plan.info.get("recovery"):
+            self.monitor.goal_failed(plan.goal)
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         if self.mapper is None:
@@ -256,6 +319,9 @@ class NarutoPolicy(Policy):
         self._frame_index += 1
         self._integrate(observation)
         clock = time.perf_counter()
+        position = np.asarray(observation["pose"], dtype=np.float64)[:3, 3]
+        self._note_refused_move(position, info or {})
+        self.monitor.record(position, self.mapper.observed_space.observed_fraction)
         inner = ("goal_search", "rrt", "planner_view")
         before = sum(self.timings[name] for name in inner)
         new_map, self._new_map = self._new_map, False
@@ -269,6 +335,8 @@ class NarutoPolicy(Policy):
         # Control is the state machine's own work; the phases it called are timed apart.
         called = sum(self.timings[name] for name in inner) - before
         self.timings["control"] += time.perf_counter() - clock - called
+        moved = np.linalg.norm(pose[:3, 3] - position) > 1e-9
+        self._commanded = pose[:3, 3].copy() if moved else None
         return clip_pose_action(pose_action(pose), self.context.action_space)
 
     @property
@@ -294,8 +362,9 @@ class NarutoPolicy(Policy):
         only has to get no closer to the surface than the agent already is, so that it can
         move away.
         """
-        if not self.config.check_moves_on_map:
-            return True
+        plan = self.machine.plan
+        if not self.config.check_moves_on_map or (plan is not None and plan.info.get("trusted")):
+            return True  # a retreat goes back through space the agent has been in
         self._read_view()
         sample = self.config.planner.collision_sample_m
         count = max(1, math.ceil(float(np.linalg.norm(end - start)) / sample - 1e-9))
@@ -335,6 +404,8 @@ class NarutoPolicy(Policy):
         sdf, uncertainty = self.sdf, self.uncertainty
         record: dict[str, Any] = {"frame": self._frame_index, "position": position.tolist()}
         self.plans.append(record)
+        if self.monitor.needs_recovery():
+            return self._recover(position, record)
         prefix = position[None]
         start = position
         if sdf.sample(position)[0] <= self._clearance:
@@ -342,12 +413,12 @@ class NarutoPolicy(Policy):
             record["escape"] = escape is not None
             if escape is None:
                 record["outcome"] = "start not free"
+                self.monitor.plan_failed()
                 return None
             prefix, start = escape, escape[-1]
         if self._components is None:
             self._components = FreeSpaceComponents.from_sdf(sdf, self._clearance)
-        labels = self._components.labels_near(start)
-        goal_mask = np.isin(self._components.labels, sorted(labels)) if labels else None
+        goal_mask = self._goal_mask(start)
 
         clock = time.perf_counter()
         search = uncertainty_aware_goal_search(
@@ -366,6 +437,7 @@ class NarutoPolicy(Policy):
         )
         if not search.found:
             record["outcome"] = "no goal sees a target"
+            self.monitor.plan_failed()
             return None
         clock = time.perf_counter()
         try:
@@ -378,9 +450,99 @@ class NarutoPolicy(Policy):
                     record.update(outcome="planned", goal=goal.tolist(), rank=rank,
                                   score=float(search.goal_scores[rank]),
                                   path_nodes=int(len(path)), rrt_ms=result.time_ms)
+                    self.monitor.plan_succeeded()
+                    self.monitor.progress_made()
                     return Plan(path, views, goal.copy(), record)
+                self.monitor.goal_failed(goal)
             record["outcome"] = f"no goal reachable ({result.reason})"
+            self.monitor.plan_failed()
             return None
         finally:
             self.timings["rrt"] += time.perf_counter() - clock
 
+
+    def _goal_mask(self, start: np.ndarray) -> np.ndarray | None:
+        """Candidate goals: free space connected to ``start``, measured free (when
+        ``goals_in_observed_space``), away from goals that failed recently."""
+        sdf = self.sdf
+        labels = self._components.labels_near(start)
+        mask = np.isin(self._components.labels, sorted(labels)) if labels else None
+        if self.config.goals_in_observed_space:
+            observed = self.mapper.observed_space
+            free = observed.sample(observed.grid.free, sdf.grid_points()).reshape(sdf.shape)
+            mask = free if mask is None else mask & free
+        failed = self.monitor.recent_failed_goals()
+        if len(failed):
+            radius = self.config.recovery.failed_goal_radius_m
+            points = sdf.grid_points()
+            near = np.zeros(len(points), dtype=bool)
+            for goal in failed:
+                near |= np.linalg.norm(points - goal, axis=1) <= radius
+            near = near.reshape(sdf.shape)
+            mask = ~near if mask is None else mask & ~near
+        return mask
+
+    # -- recovery ----------------------------------------------------------------------------
+    def _recover(self, position: np.ndarray, record: dict[str, Any]) -> Plan | None:
+        """The next recovery step (look around, wander, retreat) as a plan."""
+        kind = self.monitor.next_recovery()
+        self.recoveries.append((self._frame_index, kind.value))
+        record.update(recovery=kind.value)
+        plan = None
+        if kind == RecoveryKind.WANDER:
+            plan = self._wander(position)
+            if plan is None:
+                kind = RecoveryKind.RETREAT
+        if kind == RecoveryKind.RETREAT:
+            path = self.monitor.retreat_path(position)
+            if len(path) > 1:
+                plan = Plan(path, self._look_around(path[-1]), path[-1].copy(),
+                            {"recovery": "retreat", "trusted": True})
+            else:
+                kind = RecoveryKind.LOOK_AROUND
+        if kind == RecoveryKind.LOOK_AROUND:
+            plan = Plan(position[None].copy(), self._look_around(position), position.copy(),
+                        {"recovery": "look_around"})
+        record.update(outcome=f"recovery: {plan.info['recovery']}",
+                      path_nodes=int(len(plan.path)))
+        return plan
+
+    def _look_around(self, position: np.ndarray) -> np.ndarray:
+        recovery = self.config.recovery
+        return look_around_targets(position, recovery.look_around_views,
+                                   recovery.look_around_pitch_deg)
+
+    def _wander(self, position: np.ndarray) -> Plan | None:
+        """A path to reachable space within ``wander_max_m``, as far as possible from where
+        the agent has been."""
+        sdf = self.sdf
+        if sdf.sample(position)[0] <= self._clearance:
+            return None
+        planner = replace(self.config.planner, seed=int(self._rng.integers(2**31 - 1)),
+                          device=str(self.device))
+        clock = time.perf_counter()
+        try:
+            reachable = reachable_voxels(sdf, position, planner,
+                                         iterations=self.config.reachable_iterations)
+            points = sdf.grid_points()[reachable.reshape(-1)]
+            points = points[np.linalg.norm(points - position, axis=1)
+                            <= self.config.recovery.wander_max_m]
+            if len(points) == 0:
+                return None
+            history = np.asarray(self.monitor.trajectory[-300:])
+            novelty = np.full(len(points), np.inf)
+            for chunk in np.array_split(history, max(1, len(history) // 64)):
+                novelty = np.minimum(novelty, np.min(
+                    np.linalg.norm(points[:, None, :] - chunk[None, :, :], axis=2), axis=1))
+            order = np.argsort(-novelty, kind="stable")[:5]
+            if self._components is None:
+                self._components = FreeSpaceComponents.from_sdf(sdf, self._clearance)
+            for goal in points[order]:
+                result = plan_path(sdf, position, goal, planner, self._components)
+                if result.success:
+                    path = densify(result.path, planner.step_m)
+                    return Plan(path, self._look_around(goal), goal.copy(),
+                                {"recovery": "wander"})
+            return None
+        finally:
+            self.timings["rrt"] += time.perf_counter() - clock

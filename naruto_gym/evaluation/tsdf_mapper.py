@@ -92,6 +92,7 @@ class TsdfFusionMapper:
         self.num_frames = 0
         self._grid: o3d.t.geometry.VoxelBlockGrid | None = None
         self._sdf_index: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._touched_blocks: list[np.ndarray] = []
         self.reset()
 
     @property
@@ -117,6 +118,7 @@ class TsdfFusionMapper:
         )
         self.num_frames = 0
         self._sdf_index = None
+        self._touched_blocks = []
 
     def integrate(
         self,
@@ -173,6 +175,40 @@ class TsdfFusionMapper:
         )
         self.num_frames += 1
         self._sdf_index = None
+        self._touched_blocks.append(blocks.cpu().numpy().astype(np.int64).reshape(-1, 3))
+
+    def pop_touched_blocks(self) -> np.ndarray:
+        """(K, 3) block coordinates that frames fused since the last call wrote to.
+
+        With :meth:`points_near_blocks`, a user that keeps a coarse view of the SDF (the
+        agent's planner) re-evaluates only what changed.
+        """
+        touched = self._touched_blocks
+        self._touched_blocks = []
+        if not touched:
+            return np.zeros((0, 3), np.int64)
+        return np.unique(np.concatenate(touched), axis=0)
+
+    def points_near_blocks(self, points: np.ndarray, blocks: np.ndarray) -> np.ndarray:
+        """(N,) bool: which points have an interpolation corner in one of ``blocks``
+        (so their :meth:`sdf` may have changed when those blocks did)."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        blocks = np.asarray(blocks, dtype=np.int64).reshape(-1, 3)
+        near = np.zeros(len(points), dtype=bool)
+        if len(blocks) == 0 or len(points) == 0:
+            return near
+        low = blocks.min(axis=0)
+        table = np.zeros(blocks.max(axis=0) - low + 2, dtype=bool)
+        table[tuple((blocks - low).T)] = True
+        # A point's corners lie in its base cell's block or the next one along each axis.
+        base = np.floor_divide(np.floor(points / self.voxel_size_m).astype(np.int64),
+                               self.block_resolution) - low
+        for offset in np.ndindex(2, 2, 2):
+            index = base + np.array(offset)
+            inside = np.all((index >= 0) & (index < np.asarray(table.shape)), axis=1)
+            index[~inside] = 0
+            near |= inside & table[index[:, 0], index[:, 1], index[:, 2]]
+        return near
 
     # -- outputs -----------------------------------------------------------------------
     @property
@@ -208,25 +244,25 @@ class TsdfFusionMapper:
         colours = np.clip(cloud.point.colors.numpy() * 255.0 + 0.5, 0, 255).astype(np.uint8)
         return points, colours
 
-    def _build_sdf_index(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        coordinates, flat_index = self._grid.voxel_coordinates_and_flattened_indices()
-        flat_index = flat_index.cpu().numpy()
-        tsdf = self._grid.attribute("tsdf").cpu().numpy().reshape(-1)[flat_index]
-        weight = self._grid.attribute("weight").cpu().numpy().reshape(-1)[flat_index]
-        observed = weight >= self.min_weight
-        # Voxel samples sit at integer multiples of the voxel size.
-        cells = np.round(coordinates.cpu().numpy()[observed] / self.voxel_size_m).astype(np.int64)
-        origin = cells.min(axis=0) - 1
-        span = cells.max(axis=0) - origin + 2
-        keys = self._keys(cells, origin, span)
-        order = np.argsort(keys)
-        values = tsdf[observed][order].astype(np.float64) * self.truncation_m
-        return keys[order], values, origin, span
+    def _block_table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """A dense table of the allocated blocks' buffer slots over their bounding box.
 
-    @staticmethod
-    def _keys(cells: np.ndarray, origin: np.ndarray, span: np.ndarray) -> np.ndarray:
-        shifted = cells - origin
-        return (shifted[:, 0] * span[1] + shifted[:, 1]) * span[2] + shifted[:, 2]
+        Returns (table (bx, by, bz) int64 with -1 where no block is allocated, the table's
+        lowest block coordinate, tsdf (capacity, r, r, r) and weight arrays). On a CPU the
+        attribute arrays are views of Open3D's buffers: nothing is copied, so a query costs
+        the points asked for, not the size of the map.
+        """
+        hashmap = self._grid.hashmap()
+        active = hashmap.active_buf_indices().cpu().numpy().astype(np.int64)
+        keys = hashmap.key_tensor().cpu().numpy()[active].astype(np.int64)
+        low = keys.min(axis=0)
+        table = np.full(keys.max(axis=0) - low + 1, -1, dtype=np.int64)
+        table[tuple((keys - low).T)] = active
+        resolution = self.block_resolution
+        shape = (-1, resolution, resolution, resolution)
+        tsdf = self._grid.attribute("tsdf").cpu().numpy().reshape(shape)
+        weight = self._grid.attribute("weight").cpu().numpy().reshape(shape)
+        return table, low, tsdf, weight
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """Signed distance of the fused map at world points, metres (positive in free space).
@@ -247,10 +283,9 @@ class TsdfFusionMapper:
         if self.is_empty or len(points) == 0:
             return result
         if self._sdf_index is None:
-            self._sdf_index = self._build_sdf_index()
-        keys, values, origin, span = self._sdf_index
-        if len(keys) == 0:
-            return result
+            self._sdf_index = self._block_table()
+        table, low, tsdf, weights = self._sdf_index
+        resolution = self.block_resolution
         grid = points / self.voxel_size_m
         base = np.floor(grid).astype(np.int64)
         fraction = grid - base
@@ -259,12 +294,19 @@ class TsdfFusionMapper:
         for corner in np.ndindex(2, 2, 2):
             offset = np.array(corner)
             cells = base + offset
-            inside = np.all((cells > origin) & (cells < origin + span), axis=1)
-            query = self._keys(np.where(inside[:, None], cells, origin + 1), origin, span)
-            slot = np.minimum(np.searchsorted(keys, query), len(keys) - 1)
-            found = inside & (keys[slot] == query)
+            block = np.floor_divide(cells, resolution)
+            local = cells - block * resolution
+            block -= low
+            inside = np.all((block >= 0) & (block < np.asarray(table.shape)), axis=1)
+            block[~inside] = 0
+            slot = np.where(inside, table[block[:, 0], block[:, 1], block[:, 2]], -1)
+            found = slot >= 0
+            slot[~found] = 0
+            # Open3D stores a block's voxels as [z, y, x].
+            index = (slot, local[:, 2], local[:, 1], local[:, 0])
+            found &= weights[index] >= self.min_weight
             weight = np.prod(np.where(offset == 1, fraction, 1.0 - fraction), axis=1) * found
-            total += weight * values[slot]
+            total += weight * (tsdf[index].astype(np.float64) * self.truncation_m)
             weight_sum += weight
         known = weight_sum > 1e-12
         result[known] = total[known] / weight_sum[known]

@@ -116,3 +116,23 @@ def test_marching_cubes_normals_face_free_space() -> None:
     assert np.all(np.abs(radius - 1.0) < 0.02)
     inward = np.sum(mesh.face_normals * -mesh.triangles_center, axis=1) > 0
     assert inward.mean() > 0.95  # the rest are degenerate slivers with no normal
+
+
+def test_planner_view_updates_only_what_changed_and_matches_a_full_read(
+    room_renderer, small_camera, room_bounds
+) -> None:
+    mapper = TsdfUncertaintyMapper(room_bounds, small_camera,
+                                   TsdfMapperConfig(voxel_size_m=0.04, truncation_m=0.12,
+                                                    device="cpu"))
+    poses = orbit_poses(36)
+    for index, pose in enumerate(poses[:6]):
+        mapper.integrate(*room_renderer.render(pose), pose, index)
+    first, _ = mapper.planner_view(0.1)
+    for index, pose in enumerate(poses[6:18], start=6):
+        mapper.integrate(*room_renderer.render(pose), pose, index)
+    incremental, _ = mapper.planner_view(0.1)
+    full = SdfVolume.from_function(mapper.sdf, mapper.bounds, 0.1)
+    np.testing.assert_array_equal(incremental.values, full.values)
+    assert not np.array_equal(first.values, full.values)  # the new frames changed the map
+    again, _ = mapper.planner_view(0.1)  # nothing fused since: the same view
+    np.testing.assert_array_equal(again.values, incremental.values)

@@ -1,0 +1,220 @@
+"""Never stuck: how the NARUTO agent notices it makes no progress, and what it does then.
+
+The published agent stays where it is whenever planning fails, and independent re-runs of it
+report failed episodes. This agent watches three signals:
+
+* *no progress*: over the last ``window`` frames it has neither moved (``min_motion_m``) nor
+  measured new space (its observed-space grid grew by less than ``min_observed_gain``);
+* *failed plans*: ``max_failed_plans`` planning requests in a row found no reachable goal
+  (every goal the search offered was unreachable, or the agent's own map put it inside an
+  obstacle's clearance);
+* *refused moves*: the env's ``collided`` / ``collision_reason`` info, which the agent turns
+  into blocked voxels of its own map (see :class:`BlockedSpace`) so it never repeats them.
+
+and recovers in escalating steps (:class:`RecoveryKind`): a turn in place that looks all
+around (refreshing the map, which is often all a stale or grazing map needs), then a move to
+reachable space away from where it has been, then a retreat along its own trajectory (space
+it has physically been in, so free whatever the map says).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from naruto_agent.planning.sdf_volume import SdfVolume
+
+
+@dataclass(frozen=True)
+class RecoveryConfig:
+    """Settings of stall detection and recovery.
+
+    Attributes:
+        window: frames over which progress is judged (60).
+        min_motion_m: moving less than this over the window is standing still (0.1 m).
+        min_observed_gain: the observed-space share must grow by at least this over the
+            window (0.0005, i.e. 0.05 % of the grid's voxels).
+        max_failed_plans: planning requests in a row without a plan that trigger a recovery.
+        failed_goal_radius_m: candidate goals this close to a goal that failed are skipped.
+        failed_goal_memory_frames: ... for this many frames.
+        blocked_radius_m: a refused move blocks the agent's map this far around its target.
+        look_around_views: headings of the turn in place.
+        look_around_pitch_deg: the look-around alternates looking this much up and down.
+        wander_max_m: the farthest a move to reachable space goes (straight-line distance).
+        retreat_m: how far back along its own trajectory the agent retreats.
+    """
+
+    window: int = 60
+    min_motion_m: float = 0.1
+    min_observed_gain: float = 0.0005
+    max_failed_plans: int = 3
+    failed_goal_radius_m: float = 0.3
+    failed_goal_memory_frames: int = 300
+    blocked_radius_m: float = 0.05
+    look_around_views: int = 8
+    look_around_pitch_deg: float = 25.0
+    wander_max_m: float = 3.0
+    retreat_m: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.window < 2 or self.max_failed_plans < 1 or self.look_around_views < 1:
+            raise ValueError("window must be >= 2, max_failed_plans and look_around_views >= 1")
+        for name in ("min_motion_m", "failed_goal_radius_m", "wander_max_m", "retreat_m"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"RecoveryConfig.{name} must be positive")
+        if self.min_observed_gain < 0 or self.blocked_radius_m < 0:
+            raise ValueError("min_observed_gain and blocked_radius_m must be >= 0")
+
+
+class RecoveryKind(str, Enum):
+    """The recovery steps, in the order they are tried."""
+
+    LOOK_AROUND = "look_around"
+    WANDER = "wander"
+    RETREAT = "retreat"
+
+
+class ProgressMonitor:
+    """Positions and map growth over a sliding window; failed plans in a row; failed goals."""
+
+    def __init__(self, config: RecoveryConfig) -> None:
+        self.config = config
+        self.reset()
+
+    def reset(self) -> None:
+        self._positions: deque[np.ndarray] = deque(maxlen=self.config.window)
+        self._observed: deque[float] = deque(maxlen=self.config.window)
+        self.trajectory: list[np.ndarray] = []
+        self.failed_plans = 0
+        self.failed_goals: list[tuple[np.ndarray, int]] = []
+        self.frame = 0
+        self.escalation = 0
+        self.last_recovery_frame = -(10**9)
+
+    def record(self, position: np.ndarray, observed_fraction: float) -> None:
+        """One frame: where the agent is and how much of space its map has measured."""
+        position = np.asarray(position, np.float64).copy()
+        self.frame += 1
+        self._positions.append(position)
+        self._observed.append(float(observed_fraction))
+        if not self.trajectory or np.linalg.norm(position - self.trajectory[-1]) > 1e-6:
+            self.trajectory.append(position)
+
+    def stalled(self) -> bool:
+        """No motion and no new measured space over a full window."""
+        if len(self._positions) < self.config.window:
+            return False
+        if self.frame - self.last_recovery_frame < self.config.window:
+            return False  # give the last recovery a window to work
+        positions = np.asarray(self._positions)
+        moved = float(np.max(np.linalg.norm(positions - positions[0], axis=1)))
+        gained = self._observed[-1] - self._observed[0]
+        return moved < self.config.min_motion_m and gained < self.config.min_observed_gain
+
+    def plan_succeeded(self) -> None:
+        self.failed_plans = 0
+
+    def plan_failed(self) -> None:
+        self.failed_plans += 1
+
+    def needs_recovery(self) -> bool:
+        return self.failed_plans >= self.config.max_failed_plans or self.stalled()
+
+    def next_recovery(self) -> RecoveryKind:
+        """The next step of the escalation (look around, wander, retreat, then again)."""
+        kinds = list(RecoveryKind)
+        kind = kinds[self.escalation % len(kinds)]
+        self.escalation += 1
+        self.last_recovery_frame = self.frame
+        self.failed_plans = 0
+        return kind
+
+    def progress_made(self) -> None:
+        """A normal plan went through: the escalation starts over."""
+        self.escalation = 0
+
+    def goal_failed(self, goal: np.ndarray) -> None:
+        self.failed_goals.append((np.asarray(goal, np.float64).copy(), self.frame))
+
+    def recent_failed_goals(self) -> np.ndarray:
+        """(F, 3) goals that failed within the memory."""
+        horizon = self.frame - self.config.failed_goal_memory_frames
+        self.failed_goals = [(g, f) for g, f in self.failed_goals if f >= horizon]
+        if not self.failed_goals:
+            return np.zeros((0, 3))
+        return np.stack([g for g, _ in self.failed_goals])
+
+    def retreat_path(self, position: np.ndarray, step_m: float = 0.1) -> np.ndarray:
+        """(K, 3) nodes from ``position`` back along the trajectory for ``retreat_m``,
+        consecutive nodes at most ``step_m`` apart (just ``position`` with no history)."""
+        position = np.asarray(position, np.float64)
+        points = [position]
+        travelled = 0.0
+        for previous in reversed(self.trajectory[:-1]):
+            travelled += float(np.linalg.norm(previous - points[-1]))
+            points.append(previous)
+            if travelled >= self.config.retreat_m:
+                break
+        return densify(np.asarray(points), step_m)
+
+
+def densify(points: np.ndarray, step_m: float) -> np.ndarray:
+    """Insert nodes so that consecutive ones are at most ``step_m`` apart."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    out = [points[0]]
+    for a, b in zip(points[:-1], points[1:], strict=True):
+        count = max(1, math.ceil(float(np.linalg.norm(b - a)) / step_m - 1e-9))
+        out.extend(a + (b - a) * (k / count) for k in range(1, count + 1))
+    return np.asarray(out)
+
+
+def look_around_targets(
+    position: np.ndarray, views: int = 8, pitch_deg: float = 25.0, distance_m: float = 1.0
+) -> np.ndarray:
+    """(views, 3) points all around ``position`` to look at in turn (a turn in place),
+    alternately ``pitch_deg`` above and below the horizon."""
+    azimuth = 2.0 * np.pi * np.arange(views) / views
+    pitch = np.deg2rad(pitch_deg) * np.where(np.arange(views) % 2 == 0, 1.0, -1.0)
+    offsets = np.stack([np.cos(pitch) * np.cos(azimuth), np.cos(pitch) * np.sin(azimuth),
+                        np.sin(pitch)], axis=1)
+    return np.asarray(position, np.float64) + distance_m * offsets
+
+
+class BlockedSpace:
+    """Points where the env refused a move; they read as obstacles in the agent's SDF.
+
+    A real robot learns from a refused move (a bump, or a no-go boundary such as the edge of
+    a scanned space) that the place it tried to reach is not for it, whatever its map says.
+    """
+
+    def __init__(self, radius_m: float = 0.05) -> None:
+        self.radius_m = float(radius_m)
+        self.points: list[np.ndarray] = []
+
+    def add(self, point: np.ndarray) -> None:
+        self.points.append(np.asarray(point, np.float64).copy())
+
+    def apply(self, sdf: SdfVolume) -> SdfVolume:
+        """The SDF with every voxel within ``radius_m`` + half a voxel of a blocked point set
+        to at most minus one voxel (an obstacle the planner keeps its clearance from)."""
+        if not self.points:
+            return sdf
+        values = sdf.values.copy()
+        reach = self.radius_m + 0.5 * sdf.voxel_size
+        span = math.ceil(reach / sdf.voxel_size)
+        axis = np.arange(-span, span + 1)
+        block = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+        for point in self.points:
+            centre = np.rint(sdf.world_to_voxel(point)).astype(np.int64)
+            voxels = centre + block
+            inside = np.all((voxels >= 0) & (voxels < np.asarray(sdf.shape)), axis=1)
+            voxels = voxels[inside]
+            near = np.linalg.norm(sdf.voxel_to_world(voxels) - point, axis=1) <= reach
+            voxels = voxels[near]
+            index = (voxels[:, 0], voxels[:, 1], voxels[:, 2])
+            values[index] = np.minimum(values[index], -sdf.voxel_size)
+        return SdfVolume(values, sdf.origin, sdf.voxel_size)

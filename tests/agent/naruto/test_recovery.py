@@ -1,0 +1,159 @@
+"""Never stuck: stall detection, recovery steps, refused moves, and randomised episodes."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import naruto_gym  # noqa: F401  (registers the env)
+from naruto_agent.naruto import NarutoPolicy
+from naruto_agent.naruto.recovery import (
+    BlockedSpace,
+    ProgressMonitor,
+    RecoveryConfig,
+    RecoveryKind,
+    densify,
+    look_around_targets,
+)
+from naruto_agent.planning.sdf_volume import SdfVolume
+from naruto_agent.policies import EnvContext
+from naruto_gym.scenes import make_random_scene
+
+
+def test_standing_still_without_new_space_is_a_stall() -> None:
+    monitor = ProgressMonitor(RecoveryConfig(window=10))
+    for _ in range(9):
+        monitor.record(np.zeros(3), 0.1)
+    assert not monitor.stalled()  # not a full window yet
+    monitor.record(np.zeros(3), 0.1)
+    assert monitor.stalled() and monitor.needs_recovery()
+
+
+def test_moving_or_measuring_is_progress() -> None:
+    moving = ProgressMonitor(RecoveryConfig(window=10))
+    measuring = ProgressMonitor(RecoveryConfig(window=10))
+    for step in range(20):
+        moving.record(np.array([0.05 * step, 0.0, 0.0]), 0.1)
+        measuring.record(np.zeros(3), 0.1 + 0.001 * step)
+    assert not moving.stalled() and not measuring.stalled()
+
+
+def test_failed_plans_escalate_through_every_recovery() -> None:
+    monitor = ProgressMonitor(RecoveryConfig(max_failed_plans=2))
+    kinds = []
+    for _ in range(4):
+        monitor.plan_failed()
+        assert not monitor.needs_recovery()
+        monitor.plan_failed()
+        assert monitor.needs_recovery()
+        kinds.append(monitor.next_recovery())
+        assert not monitor.needs_recovery()  # the count starts over
+    assert kinds == [RecoveryKind.LOOK_AROUND, RecoveryKind.WANDER, RecoveryKind.RETREAT,
+                     RecoveryKind.LOOK_AROUND]
+    monitor.progress_made()
+    monitor.plan_failed()
+    monitor.plan_failed()
+    assert monitor.next_recovery() == RecoveryKind.LOOK_AROUND
+
+
+def test_failed_goals_are_forgotten_after_the_memory() -> None:
+    monitor = ProgressMonitor(RecoveryConfig(failed_goal_memory_frames=5))
+    monitor.goal_failed(np.ones(3))
+    assert len(monitor.recent_failed_goals()) == 1
+    for _ in range(6):
+        monitor.record(np.zeros(3), 0.0)
+    assert len(monitor.recent_failed_goals()) == 0
+
+
+def test_retreat_goes_back_along_the_trajectory_in_small_steps() -> None:
+    monitor = ProgressMonitor(RecoveryConfig(retreat_m=0.5))
+    for x in np.linspace(0.0, 2.0, 21):
+        monitor.record(np.array([x, 0.0, 1.0]), 0.0)
+    path = monitor.retreat_path(np.array([2.0, 0.0, 1.0]))
+    assert np.allclose(path[0], [2.0, 0.0, 1.0])
+    assert path[-1][0] == pytest.approx(1.5, abs=1e-9)
+    assert np.all(np.linalg.norm(np.diff(path, axis=0), axis=1) <= 0.1 + 1e-9)
+    assert len(ProgressMonitor(RecoveryConfig()).retreat_path(np.zeros(3))) == 1
+
+
+def test_densify_and_look_around() -> None:
+    path = densify(np.array([[0.0, 0, 0], [1.0, 0, 0]]), 0.3)
+    assert len(path) == 5 and np.allclose(path[-1], [1, 0, 0])
+    targets = look_around_targets(np.zeros(3), views=8, pitch_deg=25.0)
+    azimuth = np.degrees(np.arctan2(targets[:, 1], targets[:, 0])) % 360
+    assert np.allclose(np.sort(azimuth), np.arange(0, 360, 45))
+    assert np.allclose(np.linalg.norm(targets, axis=1), 1.0)
+
+
+def test_blocked_points_read_as_obstacles() -> None:
+    sdf = SdfVolume(np.full((20, 20, 20), 0.5), np.zeros(3), 0.1)
+    blocked = BlockedSpace(radius_m=0.05)
+    assert blocked.apply(sdf) is sdf
+    blocked.add(np.array([1.0, 1.0, 1.0]))
+    result = blocked.apply(sdf)
+    assert result.sample(np.array([[1.0, 1.0, 1.0]]))[0] < 0
+    assert result.sample(np.array([[1.5, 1.0, 1.0]]))[0] == pytest.approx(0.5)
+    assert np.all(sdf.values == 0.5)  # the input is left alone
+
+
+def test_a_refused_move_blocks_its_target_and_is_not_repeated() -> None:
+    env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1,
+                   max_episode_steps=1000)
+    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy.bind(EnvContext.from_env(env.unwrapped))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    for _ in range(200):
+        action = policy.act(observation, info)
+        position = np.asarray(observation["pose"])[:3, 3]
+        if np.linalg.norm(action[:3] - position) > 1e-3:
+            break
+    target = action[:3].astype(np.float64)
+    # Tell the agent the env refused that move (as an "escape" refusal would).
+    refused = {**info, "collided": True, "collision_reason": "escape"}
+    policy.act(observation, refused)
+    assert len(policy.blocked.points) == 1
+    assert np.allclose(policy.blocked.points[0], target, atol=1e-5)
+    assert policy.sdf.sample(target[None])[0] < 0
+    # No later action moves to the refused target again.
+    for _ in range(40):
+        action = policy.act(observation, info)
+        assert np.linalg.norm(action[:3] - target) > 0.02
+    env.close()
+
+
+def _scenes() -> list:
+    shipped = ["replica_like_room", "two_rooms", "apartment"]
+    procedural = [("room", seed) for seed in (3, 11, 27, 40, 58)] + [
+        ("apartment", seed) for seed in (5, 19, 33, 64, 71)
+    ]
+    return shipped + procedural
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene", _scenes(), ids=lambda s: s if isinstance(s, str)
+                         else f"{s[0]}_{s[1]}")
+def test_randomised_episodes_never_stall(scene) -> None:
+    steps = 160
+    mesh = make_random_scene(scene[1], kind=scene[0]) if isinstance(scene, tuple) else scene
+    seed = 7 if isinstance(scene, str) else scene[1]
+    env = gym.make("NarutoRecon-v0", scene=mesh, image_scale=0.1, panorama_shape=(32, 64),
+                   max_episode_steps=steps + 1)
+    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy.bind(EnvContext.from_env(env.unwrapped, step_budget=steps))
+    observation, info = env.reset(seed=seed)
+    policy.reset(observation, info, seed=seed)
+    coverage = [info["coverage"]]
+    space = env.action_space
+    for _ in range(steps):
+        action = policy.act(observation, info)
+        assert np.all(np.isfinite(action)) and space.contains(action)
+        observation, _, terminated, truncated, info = env.step(action)
+        coverage.append(info["coverage"])
+        assert not terminated and not truncated
+    last_quarter = coverage[-steps // 4 - 1]
+    assert coverage[-1] > last_quarter or coverage[-1] > 0.9, (
+        f"coverage stalled at {coverage[-1]:.3f} ({policy.recoveries})"
+    )
+    env.close()
