@@ -15,12 +15,18 @@ walls. The project ships no real scans, so it makes such scans from its procedur
   - ``floor_hole``: a 1.4 x 1.4 m hole through the floor (tiles, rug and slab) in the first room;
   - ``wall_holes``: two 1.0 x 0.9 m window-like holes through two exterior walls;
   - ``missing_wall``: one exterior wall removed over its whole length and height;
-  - ``holes``: short for ``floor_hole+wall_holes``.
+  - ``holes``: short for ``floor_hole+wall_holes``;
+  - ``fragments``: nothing cut: the closed scene as a scan, the reference for the others.
 
-  Every open variant also gets six small stray fragments 1.2 m outside the building (above,
-  below and on each side), as real scans get from surfaces seen through windows and doors:
-  they widen the mesh's bounds, so that leaving the scanned space is possible within the
-  bounds and the env's escape rule is what must stop it.
+  Every variant is a scan, not a solid model: the building's outer shell (the outer faces of
+  the exterior walls and the slabs' outer faces, which no camera inside could capture) is
+  dropped, so walls and floor are single surfaces, as in a reconstruction. Every variant also
+  gets six small stray fragments 1.2 m outside the building (above, below and on each side),
+  as real scans get from surfaces seen through windows and doors: they widen the mesh's
+  bounds, so that leaving the scanned space is possible within the bounds and the env's
+  escape rule is what must stop it. ``NAME:fragments`` has the same bounds as the open
+  variants of ``NAME`` (so the env draws the same start poses) and differs from them only by
+  the openings.
 
 Placement is seeded and deterministic (``numpy.random.default_rng``). The shipped catalogue
 meshes are never changed: variants are built in memory, and ``resolve_scene`` accepts them as
@@ -37,7 +43,7 @@ from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.scenes.procedural import FLOOR_THICKNESS_M, SceneLayout
 
 OPENINGS = ("no_ceiling", "floor_hole", "wall_holes", "missing_wall")
-ALIASES = {"holes": ("floor_hole", "wall_holes")}
+ALIASES: dict[str, tuple[str, ...]] = {"holes": ("floor_hole", "wall_holes"), "fragments": ()}
 
 CEILING_CUT_BELOW_M = 0.03
 FLOOR_HOLE_SIZE_M = 1.4
@@ -178,6 +184,30 @@ def subtract_boxes(
     )
 
 
+def keep_faces(scene: Scene, keep: np.ndarray, name: str | None = None) -> Scene:
+    """``scene`` with only the triangles where ``keep`` (F,) is True."""
+    keep = np.asarray(keep, bool)
+    return Scene(
+        vertices=scene.vertices,
+        faces=scene.faces[keep],
+        corner_colours=scene.corner_colours[keep],
+        name=name or scene.name,
+        corner_uvs=None if scene.corner_uvs is None else scene.corner_uvs[keep],
+        face_texture_ids=None if scene.face_texture_ids is None else scene.face_texture_ids[keep],
+        textures=list(scene.textures),
+    )
+
+
+def faces_on_box_planes(scene: Scene, box: np.ndarray, tolerance_m: float = 1e-4) -> np.ndarray:
+    """(F,) mask of the triangles lying in one of the six face planes of ``box`` ((2, 3))."""
+    triangles = scene.vertices[scene.faces]
+    on_plane = np.zeros(len(triangles), bool)
+    for side in range(2):
+        for axis in range(3):
+            on_plane |= np.all(np.abs(triangles[:, :, axis] - box[side, axis]) <= tolerance_m, 1)
+    return on_plane
+
+
 def add_boxes(
     scene: Scene, boxes: np.ndarray, rgb: Sequence[int], name: str | None = None
 ) -> Scene:
@@ -211,7 +241,8 @@ def add_boxes(
 # Openings of a procedural layout
 # ---------------------------------------------------------------------------------------
 def parse_openings(text: str | Sequence[str]) -> tuple[str, ...]:
-    """``"no_ceiling+holes"`` (or a sequence of names) to the opening names, in canonical order.
+    """``"no_ceiling+holes"`` (or a sequence of names) to the opening names, in canonical order
+    (``"fragments"`` gives none).
 
     Raises:
         ValueError: an unknown or empty name (the message lists the known ones).
@@ -345,6 +376,7 @@ def open_scan_variant(
     seed: int = 0,
     scene: Scene | None = None,
     fragments: bool = True,
+    shell: bool = False,
     name: str | None = None,
 ) -> Scene:
     """An open scan made from a procedural layout.
@@ -357,11 +389,14 @@ def open_scan_variant(
         seed: placement seed of the holes and fragments.
         scene: the layout's mesh when already loaded (default: ``layout.to_scene()``).
         fragments: add the stray fragments outside the building (see the module docstring).
+        shell: keep the building's outer shell (default: dropped, as a scan has none).
         name: name of the result (default ``"<scene name>:<openings>"``).
     """
     names = parse_openings(openings)
     base = scene if scene is not None else layout.to_scene()
-    label = name or f"{base.name}:{'+'.join(names)}"
+    label = name or f"{base.name}:{'+'.join(names) or 'fragments'}"
+    if not shell:
+        base = keep_faces(base, ~faces_on_box_planes(base, building_envelope(layout)))
     cut = subtract_boxes(base, opening_boxes(layout, names, seed), name=label)
     if fragments:
         cut = add_boxes(cut, fragment_boxes(layout, seed), _FRAGMENT_RGB, name=label)
@@ -386,5 +421,5 @@ def catalogue_open_scan(name: str, seed: int = 0) -> Scene:
     names = parse_openings(openings)
     return open_scan_variant(
         entry.layout(), names, seed=seed, scene=load_catalogue_scene(base),
-        name=f"{base}:{'+'.join(names)}",
+        name=f"{base}:{'+'.join(names) or 'fragments'}",
     )
