@@ -7,9 +7,12 @@
   published MP3D budget).
 * ``NarutoReconDiscrete-v0``: the default room with habitat-style discrete actions and a
   quarter-resolution camera, a cheap start for RL.
+
+Each id also has a vector entry point: ``gymnasium.make_vec(id, num_envs=64,
+vectorization_mode="vector_entry_point")`` gives the batched ``NarutoReconVectorEnv``.
 """
 
-from gymnasium.envs.registration import WrapperSpec, register
+from gymnasium.envs.registration import register
 
 from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
 
@@ -17,6 +20,7 @@ __all__ = ["NarutoReconEnv"]
 __version__ = "0.1.0"
 
 ENTRY_POINT = "naruto_gym.envs.naruto_recon_env:NarutoReconEnv"
+VECTOR_ENTRY_POINT = "naruto_gym.vector.vector_env:NarutoReconVectorEnv"
 
 # Variants are keyword presets of one class (budget: the published Replica / MP3D frames).
 PRESETS: dict[str, tuple[int, dict]] = {
@@ -30,11 +34,8 @@ for _env_id, (_budget, _kwargs) in PRESETS.items():
         entry_point=ENTRY_POINT,
         max_episode_steps=_budget,
         kwargs=_kwargs,
-        additional_wrappers=(
-            WrapperSpec(
-                "FinalReconstructionMetrics",
-                "naruto_gym.wrappers:FinalReconstructionMetrics",
-                {},
-            ),
-        ),
+        # The batched NarutoReconVectorEnv: gymnasium.make_vec(id, num_envs,
+        # vectorization_mode="vector_entry_point"). No additional_wrappers (Gymnasium refuses
+        # them with a vector entry point): the env adds the final reconstruction metrics itself.
+        vector_entry_point=VECTOR_ENTRY_POINT,
     )

@@ -27,6 +27,7 @@ from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.panorama import EquirectangularCamera, no_hit_share, render_panorama
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
 from naruto_gym.sensors.raycaster import RayCaster
+from naruto_gym.wrappers import time_limit_ends_this_step
 
 START_CANDIDATES = 2048
 
@@ -139,10 +140,11 @@ class NarutoReconEnv(gym.Env):
       more triangles than the frame has pixels). The panorama, collisions and coverage always
       ray-cast.
     * ``reconstruct``: fuse every frame into a reference TSDF map (2 cm voxels) so that any
-      policy gets accuracy / completion / completion ratio: ``gymnasium.make`` adds the
-      ``FinalReconstructionMetrics`` wrapper, so the info of the episode's last step
-      (terminated or truncated) carries them under ``"reconstruction"``;
-      ``env.unwrapped.reconstruction_metrics()`` gives them at any time.
+      policy gets accuracy / completion / completion ratio: the info of the step on which
+      the episode's ``TimeLimit`` truncates carries them under ``"reconstruction"`` (the env
+      adds them itself, so the registered ids need no extra wrapper and also work with
+      ``gymnasium.make_vec``'s vector entry point); ``env.unwrapped.reconstruction_metrics()``
+      gives them at any time.
     * ``render_mode``: None or ``"rgb_array"``.
 
     ## Scoring
@@ -377,6 +379,8 @@ class NarutoReconEnv(gym.Env):
         gain = self.coverage.update(self._pose, self._depth)
         reward = 100.0 * gain - (self.collision_penalty if move.collided else 0.0)
         info = self._info(gain, move.collided, move.reason)
+        if self.reconstruction is not None and time_limit_ends_this_step(self):
+            info["reconstruction"] = self.reconstruction_metrics()
         return self._observation(), float(reward), False, False, info
 
     def render(self) -> np.ndarray | None:

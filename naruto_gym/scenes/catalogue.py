@@ -313,6 +313,17 @@ def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z"
         from naruto_gym.scenes.open_scans import catalogue_open_scan
 
         return catalogue_open_scan(name_or_path)  # "NAME:OPENINGS", an open-scan variant
+    if isinstance(name_or_path, str) and name_or_path.startswith("procedural:"):
+        from naruto_gym.scenes.stream import parse_procedural_name
+
+        spec = parse_procedural_name(name_or_path)
+        if spec.is_stream:
+            raise ValueError(
+                f"scene {name_or_path!r} is a stream (a new scene every reset), not one scene; "
+                "give a seed ('procedural:room:123') or use the vector env, which draws from "
+                "streams"
+            )
+        return spec.scene(int(spec.seed))
     if not isinstance(name_or_path, (str, os.PathLike)):
         raise ValueError(
             f"scene must be a catalogue name, a mesh path or a Scene, got "

@@ -205,20 +205,55 @@ class RayCaster:
         """
         start = np.asarray(start, dtype=np.float64)
         end = np.asarray(end, dtype=np.float64)
-        delta = end - start
-        length = float(np.linalg.norm(delta))
-        step = max(clearance / 4.0, 1e-3)
-        count = max(int(np.ceil(length / step)), 1)
-        fractions = np.linspace(0.0, 1.0, count + 1)
-        samples = start[None, :] + fractions[:, None] * delta[None, :]
-        clear = self.unsigned_distance(samples) >= clearance
+        fractions, samples, length = segment_samples(start, end, clearance)
+        surface_distance = self.unsigned_distance(samples)
+        wall = np.inf
         if length > 0:
             # A ray along the segment catches a wall thinner than the sampling step.
-            wall = float(self.cast_distance(start[None], (delta / length)[None])[0])
-            clear &= fractions * length < wall - clearance
-        if clear.all():
-            return 1.0
-        first_blocked = int(np.argmin(clear))
-        if first_blocked == 0:
-            return 0.0
-        return float(fractions[first_blocked - 1])
+            wall = float(self.cast_distance(start[None], ((end - start) / length)[None])[0])
+        return free_fraction_from_distances(fractions, length, surface_distance, wall, clearance)
+
+
+def segment_samples(
+    start: np.ndarray, end: np.ndarray, clearance: float
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Where a sphere's sweep from ``start`` to ``end`` is checked (pure).
+
+    Returns the fractions along the segment (every ``clearance / 4``, at least 1 mm apart,
+    both ends included), the (K, 3) points at those fractions and the segment's length.
+    """
+    delta = end - start
+    length = float(np.linalg.norm(delta))
+    step = max(clearance / 4.0, 1e-3)
+    count = max(int(np.ceil(length / step)), 1)
+    fractions = np.linspace(0.0, 1.0, count + 1)
+    samples = start[None, :] + fractions[:, None] * delta[None, :]
+    return fractions, samples, length
+
+
+def free_fraction_from_distances(
+    fractions: np.ndarray,
+    length: float,
+    surface_distance: np.ndarray,
+    wall_distance: float,
+    clearance: float,
+) -> float:
+    """The free fraction of a sweep from the queries at :func:`segment_samples` (pure).
+
+    Args:
+        fractions: the sample fractions along the segment.
+        length: the segment's length.
+        surface_distance: distance from each sample to the nearest surface.
+        wall_distance: first hit of the ray along the segment (``inf`` for none; ignored for a
+            zero-length segment).
+        clearance: the sphere's radius.
+    """
+    clear = surface_distance >= clearance
+    if length > 0:
+        clear &= fractions * length < wall_distance - clearance
+    if clear.all():
+        return 1.0
+    first_blocked = int(np.argmin(clear))
+    if first_blocked == 0:
+        return 0.0
+    return float(fractions[first_blocked - 1])

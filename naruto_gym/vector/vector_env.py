@@ -1,0 +1,746 @@
+"""``NarutoReconVectorEnv``: N agents stepped together in one process, rays cast in one call.
+
+Each agent has its own scene, pose, coverage and random stream, exactly as N
+``NarutoReconEnv`` in a ``gymnasium.vector.SyncVectorEnv`` would (same observations, rewards,
+infos and autoreset semantics, step by step on the same seeds), but a step is batched:
+
+1. one compiled loop turns every action into a bounded pose (the single env's kernels);
+2. collision checking asks one closest-distance query and one segment ray cast per scene for
+   all agents that move;
+3. one ray cast per scene holds every agent's pinhole rays, the escape-check panorama rays of
+   every agent that moved (only as many rays as can decide the check; the rest only when
+   those leave it open) and the observation panorama rays;
+4. one compiled loop updates every agent's coverage.
+
+Agents that share a scene share its ray-casting structure, surface samples and free-space
+sampling, so 64 agents in one scene cast their rays in a single Embree call. Agents in
+different scenes (a list of scenes, or ``"procedural:..."`` streams) are grouped by scene.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+from naruto_gym.coverage import COVERAGE_TOLERANCE_M
+from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
+from naruto_gym.evaluation.scoring import EpisodeReconstruction
+from naruto_gym.geometry.transforms import validate_pose
+from naruto_gym.motion.actions import MAX_DISCRETE_PITCH_RAD
+from naruto_gym.motion.collision import segment_fraction_inside_box
+from naruto_gym.motion.pose_kernels import (
+    MODE_DELTA,
+    MODE_DISCRETE,
+    MODE_POSE,
+    step_poses_kernel,
+)
+from naruto_gym.scenes.stream import (
+    LruCache,
+    ProceduralSceneSpec,
+    is_procedural_name,
+    parse_procedural_name,
+)
+from naruto_gym.sensors.raycaster import free_fraction_from_distances, segment_samples
+from naruto_gym.vector.batch_kernels import (
+    fill_panorama_rays,
+    fill_pinhole_rays,
+    mark_visible_batch,
+    no_hit_counts,
+)
+
+_MODES = {"pose": MODE_POSE, "delta": MODE_DELTA, "discrete": MODE_DISCRETE}
+
+
+class _Moves:
+    """What :meth:`NarutoReconVectorEnv._move` decided for the stepping agents."""
+
+    def __init__(self, agents: np.ndarray) -> None:
+        self.agents = agents
+        self.starts = np.zeros((len(agents), 3))
+        self.collided = np.zeros(len(agents), bool)
+        self.reasons = np.full(len(agents), "", dtype=object)
+        self.check_escape = np.zeros(len(agents), bool)
+
+
+def _escape_rule(checker: Any) -> str:
+    """The collision checker's escape rule (checkers without rules use the published one)."""
+    default = "off" if checker.escape_no_hit_threshold is None else "published"
+    return getattr(checker, "escape_rule", default)
+
+
+def _allclose_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise ``np.allclose(a[i], b[i])`` (same tolerances)."""
+    return np.all(np.abs(a - b) <= 1e-8 + 1e-5 * np.abs(b), axis=1)
+
+
+class NarutoReconVectorEnv(gym.vector.VectorEnv):
+    """Batched ``NarutoReconEnv``: ``num_envs`` agents in one process.
+
+    ## Arguments
+    * ``num_envs``: number of agents.
+    * ``scene``: what each agent explores: a scene as ``NarutoReconEnv`` takes it (shared by
+      all agents), a list of ``num_envs`` such scenes, or a stream name
+      ``"procedural:room"`` / ``"procedural:apartment"`` (``":train"`` or ``":test"`` split
+      appended, default train): a new generated scene for every episode, drawn from the
+      episode's seeded generator (see :mod:`naruto_gym.scenes.stream`).
+    * ``max_episode_steps``: episodes are truncated after this many steps (None: never).
+    * ``autoreset_mode``: ``AutoresetMode.NEXT_STEP`` (Gymnasium's default) or
+      ``AutoresetMode.SAME_STEP`` (the final observation and info go in ``info["final_obs"]``
+      / ``info["final_info"]``, as Stable-Baselines3 expects).
+    * ``scene_cache_size``: generated scenes kept in memory for reuse (stream scenes only).
+    * every other keyword is passed to ``NarutoReconEnv`` (``action_mode``, ``camera``,
+      ``panorama_shape``, ``reconstruct``, ...). With ``reconstruct=True`` the info of each
+      agent's last step (truncated) carries ``"reconstruction"``, as for the single env.
+
+    ## Spaces
+    ``single_observation_space`` / ``single_action_space`` are those of ``NarutoReconEnv``;
+    ``observation_space`` / ``action_space`` batch them. Streams and scene lists need
+    ``action_mode="discrete"`` or ``"delta"`` (pose actions are bounded by one scene's box).
+
+    ## Infos
+    The keys of ``NarutoReconEnv``'s info as arrays with ``_key`` masks, as
+    ``SyncVectorEnv`` gathers them.
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scene: Any = None,
+        max_episode_steps: int | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        scene_cache_size: int = 8,
+        render_mode: str | None = None,
+        **env_kwargs: Any,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or (
+            num_envs < 1
+        ):
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if max_episode_steps is not None and max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be >= 1 or None, got {max_episode_steps}")
+        if render_mode is not None:
+            raise ValueError(
+                "the batched vector env does not render; use "
+                "gymnasium.make_vec(..., vectorization_mode='sync', render_mode='rgb_array')"
+            )
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError as error:
+            raise ValueError(
+                f"autoreset_mode must be 'NextStep' or 'SameStep', got {autoreset_mode!r}"
+            ) from error
+        if self.autoreset_mode == AutoresetMode.DISABLED:
+            raise ValueError("autoreset_mode DISABLED is not supported; use NextStep or SameStep")
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
+        self.num_envs = int(num_envs)
+        self.max_episode_steps = max_episode_steps
+        self.render_mode = None
+        self._env_kwargs = dict(env_kwargs)
+        self._reconstruct = bool(self._env_kwargs.pop("reconstruct", False))
+        self._env_kwargs.pop("render_mode", None)
+        self._streams: list[ProceduralSceneSpec | None] = []
+        self._scene_cache: LruCache[NarutoReconEnv] = LruCache(scene_cache_size)
+        # Per agent: the env instance whose building blocks (ray caster, samples, checker)
+        # serve its current scene; agents in one scene share it.
+        self._scenes: list[NarutoReconEnv | None] = [None] * self.num_envs
+
+        scenes = scene if isinstance(scene, (list, tuple)) else [scene] * self.num_envs
+        if len(scenes) != self.num_envs:
+            raise ValueError(f"scene list has {len(scenes)} entries for num_envs={num_envs}")
+        fixed: dict[int, NarutoReconEnv] = {}
+        for index, item in enumerate(scenes):
+            if is_procedural_name(item):
+                spec = parse_procedural_name(item)
+                self._streams.append(spec if spec.is_stream else None)
+                if not spec.is_stream:
+                    self._scenes[index] = self._scene_env(("fixed", item), item)
+                continue
+            self._streams.append(None)
+            key = id(item)
+            if key not in fixed:
+                fixed[key] = self._make_scene_env(item)
+            self._scenes[index] = fixed[key]
+        template = next((env for env in self._scenes if env is not None), None)
+        if template is None:
+            # Only streams: spaces come from one generated scene (they do not depend on it).
+            spec = next(s for s in self._streams if s is not None)
+            template = self._scene_env((spec.kind, spec.draw_seed(np.random.default_rng(0))),
+                                       spec)
+        self.action_mode: str = template.action_mode
+        distinct = {id(env) for env in self._scenes if env is not None}
+        if self.action_mode == "pose" and (any(self._streams) or len(distinct) > 1):
+            raise ValueError(
+                "action_mode='pose' bounds actions by one scene's box; use 'discrete' or "
+                "'delta' with several scenes or a procedural stream"
+            )
+        self.camera = template.camera
+        self.panorama_camera = template.panorama_camera
+        self.max_depth_m = template.max_depth_m
+        self.single_observation_space = template.observation_space
+        self.single_action_space = template.action_space
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+
+        height, width = self.camera.height, self.camera.width
+        n = self.num_envs
+        self._poses = np.tile(np.eye(4), (n, 1, 1))
+        self._rgb = np.zeros((n, height, width, 3), np.uint8)
+        self._depth = np.zeros((n, height, width), np.float32)
+        self._panorama = (
+            np.zeros((n, self.panorama_camera.height, self.panorama_camera.width), np.float32)
+            if self.panorama_camera is not None else None
+        )
+        self._seen: list[np.ndarray] = [np.zeros(0, bool)] * n
+        self._seen_counts = np.zeros(n, np.int64)
+        self._path_length = np.zeros(n)
+        self._steps = np.zeros(n, np.int64)
+        self._rngs: list[np.random.Generator | None] = [None] * n
+        self._reconstructions: list[EpisodeReconstruction | None] = [None] * n
+        self._autoreset = np.zeros(n, bool)
+        self._started = False
+        self._intrinsics = self.camera.as_dict()
+        self._discrete_zeros = np.zeros(n, np.int64)
+        self._continuous_zeros = np.zeros((n, 7))
+
+    # -- scenes ----------------------------------------------------------------------------
+    def _make_scene_env(self, scene: Any) -> NarutoReconEnv:
+        env = NarutoReconEnv(scene=scene, **self._env_kwargs)
+        env.coverage  # noqa: B018 - builds the samples (and observable surface) now
+        return env
+
+    def _scene_env(self, key: tuple, spec: ProceduralSceneSpec | str) -> NarutoReconEnv:
+        if isinstance(spec, str):
+            return self._scene_cache.get(key, lambda: self._make_scene_env(spec))
+        return self._scene_cache.get(key, lambda: self._make_scene_env(spec.scene(key[1])))
+
+    @property
+    def scene_envs(self) -> list[NarutoReconEnv | None]:
+        """Per agent, the ``NarutoReconEnv`` holding its current scene's building blocks."""
+        return list(self._scenes)
+
+    # -- gymnasium API ---------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        if seed is None:
+            seeds: list[int | None] = [None] * self.num_envs
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seeds = [int(seed) + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(
+                    f"seed list has length {len(seeds)}; it must match num_envs={self.num_envs}"
+                )
+        options = dict(options or {})
+        mask = options.pop("reset_mask", None)
+        if mask is None:
+            mask = np.ones(self.num_envs, bool)
+        elif not (
+            isinstance(mask, np.ndarray) and mask.dtype == np.bool_
+            and mask.shape == (self.num_envs,) and mask.any()
+        ):
+            raise ValueError(
+                f"options['reset_mask'] must be a bool numpy array of shape ({self.num_envs},) "
+                "with at least one True"
+            )
+        indices = np.flatnonzero(mask)
+        self._validate_reset_options(options, indices)
+        for i in indices:
+            self._reset_state(int(i), seeds[i], options)
+        gains = np.zeros(self.num_envs)
+        gains[indices] = self._observe(indices, None)
+        self._autoreset[indices] = False
+        self._started = True
+        infos = self._infos(
+            indices, gains, np.zeros(self.num_envs, bool), np.full(self.num_envs, "", object)
+        )
+        return self._observations(), infos
+
+    def step(
+        self, actions: Any
+    ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        discrete, continuous = self._validated_actions(actions)
+        n = self.num_envs
+        everyone = np.arange(n)
+        resetting = everyone[self._autoreset] if (
+            self.autoreset_mode == AutoresetMode.NEXT_STEP
+        ) else everyone[:0]
+        stepping = everyone[~np.isin(everyone, resetting)]
+        for i in resetting:
+            self._reset_state(int(i), None, {})
+        moves = self._move(stepping, discrete, continuous)
+        gains = np.zeros(n)
+        gains[everyone] = self._observe(everyone, moves)
+        collided = np.zeros(n, bool)
+        reasons = np.full(n, "", dtype=object)
+        rewards = np.zeros(n)
+        terminated = np.zeros(n, bool)
+        truncated = np.zeros(n, bool)
+        if len(stepping):
+            collided[stepping] = moves.collided
+            reasons[stepping] = moves.reasons
+            rewards[stepping] = 100.0 * gains[stepping] - np.where(
+                moves.collided, self._collision_penalty, 0.0
+            )
+            if self.max_episode_steps is not None:
+                truncated[stepping] = self._steps[stepping] >= self.max_episode_steps
+        infos = self._infos(everyone, gains, collided, reasons)
+        done = everyone[terminated | truncated]
+        if self._reconstruct:
+            for i in done:
+                infos = self._add_info(
+                    infos, {"reconstruction": self._reconstruction_metrics(int(i))}, int(i)
+                )
+        observations = self._observations()
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and len(done):
+            final_obs = np.full(n, None, dtype=object)
+            final_infos: dict[str, Any] = {}
+            for i in done:
+                final_obs[i] = {key: value[i] for key, value in observations.items()}
+                final_infos = self._add_info(final_infos, _agent_info(infos, int(i)), int(i))
+            for i in done:
+                self._reset_state(int(i), None, {})
+            reset_gains = np.zeros(n)
+            reset_gains[done] = self._observe(done, None)
+            reset_infos = self._infos(done, reset_gains, np.zeros(n, bool),
+                                      np.full(n, "", dtype=object))
+            infos = _overwrite_agents(infos, reset_infos, done)
+            if "_reconstruction" in infos:
+                infos["_reconstruction"][done] = False
+                if not infos["_reconstruction"].any():
+                    del infos["reconstruction"], infos["_reconstruction"]
+            infos["final_obs"], infos["_final_obs"] = final_obs, _mask(n, done)
+            infos["final_info"], infos["_final_info"] = final_infos, _mask(n, done)
+            observations = self._observations()
+        self._autoreset = terminated | truncated
+        return observations, rewards, terminated, truncated, infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self._scenes = [None] * self.num_envs
+
+    # -- per-agent reset -------------------------------------------------------------------
+    @property
+    def _collision_penalty(self) -> float:
+        return next(env for env in self._scenes if env is not None).collision_penalty
+
+    def _validate_reset_options(self, options: dict[str, Any], indices: np.ndarray) -> None:
+        unknown = set(options) - {"pose"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; supported: ['pose']")
+        if "pose" in options:
+            pose = validate_pose(options["pose"], "options['pose']")
+            for i in indices:
+                env = self._scenes[i]
+                bounds = env.bounds if env is not None else None
+                if bounds is not None and not np.all(
+                    (pose[:3, 3] >= bounds[0]) & (pose[:3, 3] <= bounds[1])
+                ):
+                    raise ValueError(
+                        f"options['pose'] position {pose[:3, 3].tolist()} lies outside the "
+                        f"scene bounds {bounds.tolist()}"
+                    )
+
+    def _reset_state(self, i: int, seed: int | None, options: dict[str, Any]) -> None:
+        if seed is not None or self._rngs[i] is None:
+            self._rngs[i], _ = seeding.np_random(seed)
+        rng = self._rngs[i]
+        stream = self._streams[i]
+        if stream is not None:
+            scene_seed = stream.draw_seed(rng)
+            self._scenes[i] = self._scene_env((stream.kind, scene_seed), stream)
+        env = self._scenes[i]
+        if "pose" in options:
+            pose = np.array(options["pose"], dtype=np.float64)
+        else:
+            # The scene env's own start sampler, driven by this agent's generator.
+            env.np_random = rng
+            pose = env._sample_start_pose()
+        self._poses[i] = pose
+        if len(self._seen[i]) != len(env.coverage.samples_world):
+            self._seen[i] = np.zeros(len(env.coverage.samples_world), bool)
+        else:
+            self._seen[i][:] = False
+        self._seen_counts[i] = 0
+        self._path_length[i] = 0.0
+        self._steps[i] = 0
+        if self._reconstruct:
+            self._reconstructions[i] = EpisodeReconstruction(self.camera)
+
+    def _reconstruction_metrics(self, i: int) -> dict[str, Any]:
+        env = self._scenes[i]
+        env.reconstruction = self._reconstructions[i]
+        try:
+            return env.reconstruction_metrics()
+        finally:
+            env.reconstruction = None
+
+    # -- actions ---------------------------------------------------------------------------
+    def _validated_actions(self, actions: Any) -> tuple[np.ndarray, np.ndarray]:
+        n = self.num_envs
+        if self.action_mode == "discrete":
+            array = np.asarray(actions)
+            if array.shape not in ((n,), (n, 1)) or not np.issubdtype(array.dtype, np.integer):
+                raise ValueError(
+                    f"discrete actions must be {n} integers in [0, "
+                    f"{self.single_action_space.n}), got {actions!r}"
+                )
+            array = array.reshape(n).astype(np.int64)
+            if np.any(array < 0) or np.any(array >= self.single_action_space.n):
+                raise ValueError(
+                    f"discrete actions must lie in [0, {self.single_action_space.n}), got "
+                    f"{array.tolist()}"
+                )
+            return array, self._continuous_zeros
+        try:
+            array = np.asarray(actions, dtype=np.float64)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"actions must be a numeric array, got {actions!r}") from error
+        expected = (n, *self.single_action_space.shape)
+        if array.shape != expected:
+            raise ValueError(f"{self.action_mode} actions must have shape {expected}, got "
+                             f"{array.shape}")
+        if not np.all(np.isfinite(array)):
+            raise ValueError("actions contain NaN or inf")
+        low, high = self.single_action_space.low, self.single_action_space.high
+        if np.any(array < low - 1e-5) or np.any(array > high + 1e-5):
+            raise ValueError(f"{self.action_mode} actions lie outside the action space "
+                             f"[{low.tolist()}, {high.tolist()}]")
+        if self.action_mode == "pose" and np.any(np.linalg.norm(array[:, 3:7], axis=1) < 1e-6):
+            raise ValueError(
+                "pose action quaternion (x, y, z, w) has zero norm; pass a unit quaternion"
+            )
+        padded = np.zeros((n, 7))
+        padded[:, : array.shape[1]] = array
+        return self._discrete_zeros, padded
+
+    # -- motion ----------------------------------------------------------------------------
+    def _move(self, agents: np.ndarray, discrete: np.ndarray, continuous: np.ndarray) -> _Moves:
+        """Bounded pose step and collision sweep of ``agents``; their poses become the
+        candidate poses. The escape check of those that moved is left to :meth:`_observe`,
+        whose cast carries its rays."""
+        moves = _Moves(agents)
+        if len(agents) == 0:
+            return moves
+        env0 = self._scenes[agents[0]]
+        limited = np.empty((len(agents), 4, 4))
+        step_poses_kernel(
+            np.ascontiguousarray(self._poses[agents]), _MODES[self.action_mode],
+            np.ascontiguousarray(discrete[agents]), np.ascontiguousarray(continuous[agents]),
+            env0.max_translation_m, env0.max_rotation_rad, float(MAX_DISCRETE_PITCH_RAD), limited,
+        )
+        moves.starts = self._poses[agents, :3, 3].copy()
+        targets = limited[:, :3, 3].copy()
+        positions = moves.starts.copy()
+        moving = ~_allclose_rows(moves.starts, targets)
+        for group in _groups(self._scenes, agents, moving):
+            self._sweep(agents[group], group, moves, targets, positions)
+        for k in np.flatnonzero(~_allclose_rows(positions, moves.starts)):
+            checker = self._scenes[agents[k]].collision
+            rule = _escape_rule(checker)
+            if rule == "published":
+                # Its panorama rays ride along with the frame's cast (see _render).
+                moves.check_escape[k] = True
+            elif rule != "off" and checker.refuses_escape(moves.starts[k], positions[k]):
+                positions[k] = moves.starts[k]
+                moves.collided[k] = True
+                moves.reasons[k] = "escape"
+        limited[:, :3, 3] = positions
+        self._poses[agents] = limited
+        self._steps[agents] += 1
+        return moves
+
+    def _sweep(
+        self, members: np.ndarray, group: np.ndarray, moves: _Moves, targets: np.ndarray,
+        positions: np.ndarray,
+    ) -> None:
+        """``CollisionChecker.move``'s box clip and sphere sweep for moving agents of one
+        scene (``group`` indexes ``moves``), with one distance query for all their samples
+        and one cast for all their segment rays."""
+        env = self._scenes[members[0]]
+        checker = env.collision
+        raycaster = env.raycaster
+        start = moves.starts[group]
+        target = targets[group]
+        box = np.array([
+            segment_fraction_inside_box(s, t, checker.box_min, checker.box_max)
+            for s, t in zip(start, target, strict=True)
+        ])
+        end = start + box[:, None] * (target - start)
+        # From a start closer than the radius (an exact start pose) the sphere may move on as
+        # long as it gets no closer than it already is.
+        start_clearance = raycaster.unsigned_distance(start)
+        clearances = [
+            max(min(checker.radius_m, float(c) - 1e-4), 0) for c in start_clearance
+        ]
+        sweeps = [segment_samples(s, e, c) for s, e, c in zip(start, end, clearances,
+                                                               strict=True)]
+        distances = np.split(
+            raycaster.unsigned_distance(np.concatenate([sweep[1] for sweep in sweeps])),
+            np.cumsum([len(sweep[0]) for sweep in sweeps])[:-1],
+        )
+        lengths = np.array([sweep[2] for sweep in sweeps])
+        walls = np.full(len(group), np.inf)
+        along = lengths > 0
+        if along.any():
+            directions = (end[along] - start[along]) / lengths[along, None]
+            walls[along] = raycaster.cast_distance(start[along], directions)
+        for k, index in enumerate(group):
+            fraction = free_fraction_from_distances(
+                sweeps[k][0], float(lengths[k]), distances[k], float(walls[k]), clearances[k]
+            )
+            positions[index] = start[k] + fraction * (end[k] - start[k])
+            if fraction < 1.0:
+                moves.reasons[index] = "surface"
+            elif box[k] < 1.0:
+                moves.reasons[index] = "bounds"
+            moves.collided[index] = moves.reasons[index] != ""
+
+    # -- observation -----------------------------------------------------------------------
+    def _observe(self, agents: np.ndarray, moves: _Moves | None) -> np.ndarray:
+        """Render ``agents`` at their poses (one cast per scene, with the escape rays of the
+        agents ``moves`` flags), undo refused moves, update path length and coverage.
+        Returns each agent's coverage gain."""
+        agents = np.asarray(agents, np.int64)
+        gains = np.zeros(len(agents))
+        if len(agents) == 0:
+            return gains
+        escape = np.zeros(self.num_envs, bool)
+        if moves is not None and len(moves.agents):
+            escape[moves.agents[moves.check_escape]] = True
+        refused: list[int] = []
+        for group in _groups(self._scenes, agents, np.ones(len(agents), bool)):
+            members = agents[group]
+            refused += self._render(members, escape[members])
+        if refused:
+            # A refused move stays at its start (with the new rotation): render it there.
+            lookup = {int(a): k for k, a in enumerate(moves.agents)}
+            for agent in refused:
+                k = lookup[agent]
+                self._poses[agent, :3, 3] = moves.starts[k]
+                moves.collided[k] = True
+                moves.reasons[k] = "escape"
+            for group in _groups(self._scenes, np.array(refused), np.ones(len(refused), bool)):
+                self._render(np.array(refused)[group], np.zeros(len(group), bool))
+        if moves is not None and len(moves.agents):
+            self._path_length[moves.agents] += np.linalg.norm(
+                self._poses[moves.agents, :3, 3] - moves.starts, axis=1
+            )
+        for group in _groups(self._scenes, agents, np.ones(len(agents), bool)):
+            members = agents[group]
+            env = self._scenes[members[0]]
+            coverage = env.coverage
+            seen = np.stack([self._seen[i] for i in members])
+            added = np.zeros(len(members), np.int64)
+            mark_visible_batch(
+                coverage.samples_world, seen, np.ascontiguousarray(self._poses[members]),
+                coverage.intrinsics, self._depth[members], coverage.max_range_m,
+                COVERAGE_TOLERANCE_M, added,
+            )
+            total = len(coverage.samples_world)
+            for k, i in enumerate(members):
+                self._seen[i] = seen[k]
+                before = self._seen_counts[i] / total
+                self._seen_counts[i] += added[k]
+                gains[group[k]] = self._seen_counts[i] / total - before
+        if self._reconstruct:
+            for i in agents:
+                self._reconstructions[i].add_frame(self._rgb[i], self._depth[i], self._poses[i])
+        return gains
+
+    def _render(self, members: np.ndarray, escape: np.ndarray) -> list[int]:
+        """Render agents of one scene with one cast that carries their pinhole rays, their
+        observation panorama rays and the first escape-check rays of the agents flagged in
+        ``escape``; returns the agents whose move the escape check refuses.
+
+        With the rasterizing pinhole backend the frames are rasterized (the single env's
+        renderer) and the cast carries only the panorama rays.
+        """
+        env = self._scenes[members[0]]
+        camera = self.camera
+        count = len(members)
+        pixels = camera.width * camera.height
+        raster = getattr(env.renderer, "frame_backend", "raycast") == "raster"
+        cast_pixels = 0 if raster else pixels
+        poses32 = self._poses[members].astype(np.float32)
+        positions32 = np.ascontiguousarray(poses32[:, :3, 3])
+        checker = env.collision
+        escapers = members[escape]
+        first, order = _escape_ray_plan(checker) if len(escapers) else (0, None)
+        panorama = self.panorama_camera
+        panorama_rays = panorama.height * panorama.width if panorama is not None else 0
+        escape_offset = count * (cast_pixels + panorama_rays)
+        rays = np.empty((escape_offset + len(escapers) * first, 6), np.float32)
+        if not raster:
+            fill_pinhole_rays(camera.ray_directions, poses32, rays, 0)
+        if panorama is not None:
+            fill_panorama_rays(panorama.ray_directions, positions32, rays, count * cast_pixels)
+        if len(escapers):
+            fill_panorama_rays(order[:first], np.ascontiguousarray(positions32[escape]), rays,
+                               escape_offset)
+        hits = env.raycaster.cast_packed(rays) if len(rays) else None
+
+        if raster:
+            frames = [env.renderer.render_hits(self._poses[i]) for i in members]
+            depth = np.stack([frame.depth for frame in frames]).reshape(-1)
+            triangle_ids = np.concatenate([frame.triangle_ids for frame in frames])
+            barycentric_uv = np.concatenate([frame.barycentric_uv for frame in frames])
+        else:
+            frame = slice(0, count * pixels)
+            depth = hits.distance[frame].copy()
+            # As RgbdRenderer: hits beyond the range are misses (depth 0, black).
+            depth[~(depth <= self.max_depth_m)] = 0.0
+            triangle_ids = np.where(depth > 0, hits.triangle_ids[frame], -1).astype(np.int32)
+            barycentric_uv = hits.barycentric_uv[frame]
+        rgb = env.scene.colour_at(triangle_ids, barycentric_uv)
+        self._depth[members] = depth.reshape(count, camera.height, camera.width)
+        self._rgb[members] = rgb.reshape(count, camera.height, camera.width, 3)
+        if panorama is not None:
+            distance = hits.distance[count * cast_pixels: escape_offset]
+            self._panorama[members] = np.where(np.isfinite(distance), distance, 0.0).astype(
+                np.float32).reshape(count, panorama.height, panorama.width)
+        if not len(escapers):
+            return []
+        total = len(order)
+        threshold = checker.escape_no_hit_threshold
+        misses = no_hit_counts(hits.distance, escape_offset, first, len(escapers))
+        # Undecided: the rays not cast yet could still push the no-hit share over the limit.
+        undecided = (total - first + misses) / total > threshold
+        if not undecided.any():
+            return []
+        rest = order[first:]
+        extra = np.empty((int(undecided.sum()) * len(rest), 6), np.float32)
+        fill_panorama_rays(rest, np.ascontiguousarray(positions32[escape][undecided]), extra, 0)
+        more = no_hit_counts(env.raycaster.cast_packed(extra).distance, 0, len(rest),
+                             int(undecided.sum()))
+        shares = (misses[undecided] + more) / total
+        return [int(a) for a in escapers[undecided][shares > threshold]]
+
+    def _observations(self) -> dict[str, np.ndarray]:
+        observations = {
+            "rgb": self._rgb.copy(),
+            "depth": self._depth.copy(),
+            "pose": self._poses.astype(np.float32),
+        }
+        if self._panorama is not None:
+            observations["panorama"] = self._panorama.copy()
+        return observations
+
+    # -- infos -----------------------------------------------------------------------------
+    def _infos(
+        self, agents: np.ndarray, gains: np.ndarray, collided: np.ndarray, reasons: np.ndarray
+    ) -> dict[str, Any]:
+        """Infos of ``agents`` as ``SyncVectorEnv`` gathers single-env infos (arrays plus
+        ``_key`` masks); the other arguments are per-env arrays of length ``num_envs``."""
+        n = self.num_envs
+        mask = _mask(n, agents)
+        totals = np.array([
+            len(env.coverage.samples_world) if env is not None else 1 for env in self._scenes
+        ])
+
+        def column(values: np.ndarray, dtype: Any) -> np.ndarray:
+            array = np.full(n, None, object) if dtype is object else np.zeros(n, dtype)
+            array[mask] = np.asarray(values)[mask]
+            return array
+
+        infos: dict[str, Any] = {
+            "coverage": column(self._seen_counts / totals, float),
+            "coverage_gain": column(gains, float),
+            "collided": column(collided, bool),
+            "collision_reason": column(reasons, object),
+            "path_length_m": column(self._path_length, float),
+            "intrinsics": {},
+            "step": column(self._steps, int),
+        }
+        for key, value in self._intrinsics.items():
+            infos["intrinsics"][key] = column(np.full(n, value), type(value))
+            infos["intrinsics"][f"_{key}"] = mask.copy()
+        if self._panorama is not None:
+            infos["panorama_no_hit_share"] = column(
+                np.mean(self._panorama <= 0.0, axis=(1, 2)), float
+            )
+        for key in list(infos):
+            if not key.startswith("_"):
+                infos[f"_{key}"] = mask.copy()
+        return infos
+
+
+# -- helpers -------------------------------------------------------------------------------
+def _mask(n: int, agents: np.ndarray) -> np.ndarray:
+    mask = np.zeros(n, bool)
+    mask[np.asarray(agents, np.int64)] = True
+    return mask
+
+
+def _groups(scenes: list, agents: np.ndarray, selected: np.ndarray) -> list[np.ndarray]:
+    """Indices into ``agents`` (where ``selected``), grouped by the agents' scene."""
+    groups: dict[int, list[int]] = {}
+    for k, agent in enumerate(agents):
+        if selected[k]:
+            groups.setdefault(id(scenes[agent]), []).append(k)
+    return [np.array(group, np.int64) for group in groups.values()]
+
+
+_ESCAPE_PLANS: dict[tuple[int, int, float], tuple[int, np.ndarray]] = {}
+
+
+def _escape_ray_plan(checker: Any) -> tuple[int, np.ndarray]:
+    """How the published escape check's panorama is cast: ``(k, directions)`` with the
+    directions reordered so that any prefix spreads over the whole sphere (bit-reversed
+    pixel order), and ``k`` the fewest of them whose all hitting proves the no-hit share
+    cannot exceed the threshold, even if every remaining ray missed. Only undecided agents
+    cast the rest. The shares are computed as the check computes them."""
+    camera = checker.escape_panorama
+    threshold = float(checker.escape_no_hit_threshold)
+    key = (camera.height, camera.width, threshold)
+    if key not in _ESCAPE_PLANS:
+        total = camera.height * camera.width
+        first = next(k for k in range(total + 1) if (total - k) / total <= threshold)
+        bits = max(int(np.ceil(np.log2(max(total, 2)))), 1)
+        keys = [int(f"{i:0{bits}b}"[::-1], 2) for i in range(total)]
+        order = np.argsort(np.array(keys), kind="stable")
+        _ESCAPE_PLANS[key] = (first, np.ascontiguousarray(camera.ray_directions[order]))
+    return _ESCAPE_PLANS[key]
+
+
+def _agent_info(infos: dict[str, Any], i: int) -> dict[str, Any]:
+    """One agent's info dict back out of vector infos."""
+    single: dict[str, Any] = {}
+    for key, value in infos.items():
+        if key.startswith("_") or not infos.get(f"_{key}", np.zeros(i + 1, bool))[i]:
+            continue
+        if isinstance(value, dict):
+            single[key] = _agent_info(value, i)
+        else:
+            item = value[i]
+            single[key] = item.item() if isinstance(item, np.generic) else item
+    return single
+
+
+def _overwrite_agents(
+    infos: dict[str, Any], update: dict[str, Any], agents: np.ndarray
+) -> dict[str, Any]:
+    for key, value in update.items():
+        if key.startswith("_"):
+            continue
+        if isinstance(value, dict):
+            infos[key] = _overwrite_agents(infos.get(key, {}), value, agents)
+        else:
+            infos[key][agents] = value[agents]
+    return infos
+
+
+def make_vector_env(num_envs: int = 1, **kwargs: Any) -> NarutoReconVectorEnv:
+    """Vector entry point of the registered ids (``gymnasium.make_vec``)."""
+    return NarutoReconVectorEnv(num_envs=num_envs, **kwargs)
+
+

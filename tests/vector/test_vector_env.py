@@ -1,0 +1,172 @@
+"""NarutoReconVectorEnv against N single envs in Gymnasium's SyncVectorEnv, step by step."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import naruto_gym  # noqa: F401  (registers the ids)
+from naruto_gym.scenes.catalogue import resolve_scene
+from naruto_gym.scenes.mesh_scene import Scene
+from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.vector import NarutoReconVectorEnv
+from naruto_gym.wrappers import time_limit_ends_this_step
+
+SMALL: dict[str, Any] = {
+    "action_mode": "discrete",
+    "camera": PinholeCamera(24, 24, 12, 12, 11.5, 11.5),
+    "coverage_samples": 3000,
+    "panorama_shape": (8, 16),
+}
+
+
+def open_room() -> Scene:
+    """The default room without its ceiling and one wall: escape checks refuse moves there."""
+    scene = resolve_scene("replica_like_room")
+    centroids = scene.vertices[scene.faces].mean(axis=1)
+    high = scene.bounds[1]
+    keep = (centroids[:, 2] < high[2] - 0.2) & (centroids[:, 0] < high[0] - 0.3)
+    return Scene(scene.vertices, scene.faces[keep], scene.corner_colours[keep], "open_room")
+
+
+def assert_same(vector: Any, sync: Any, where: str) -> None:
+    if isinstance(vector, dict):
+        assert set(vector) == set(sync), (where, set(vector) ^ set(sync))
+        for key in vector:
+            assert_same(vector[key], sync[key], f"{where}/{key}")
+        return
+    vector, sync = np.asarray(vector), np.asarray(sync)
+    if vector.dtype == object:
+        assert len(vector) == len(sync), where
+        for k, (a, b) in enumerate(zip(vector, sync, strict=True)):
+            assert_same(a, b, f"{where}[{k}]") if isinstance(a, dict) else None
+            if not isinstance(a, dict):
+                assert a == b, (where, k, a, b)
+        return
+    assert vector.dtype == sync.dtype, (where, vector.dtype, sync.dtype)
+    assert vector.shape == sync.shape, (where, vector.shape, sync.shape)
+    np.testing.assert_allclose(vector, sync, atol=1e-6, err_msg=where)
+
+
+def run_both(
+    num_envs: int, steps: int, actions: Any, autoreset: AutoresetMode = AutoresetMode.NEXT_STEP,
+    budget: int = 12, seed: int = 3, **kwargs: Any,
+) -> tuple[list[str], NarutoReconVectorEnv]:
+    settings = {**SMALL, **kwargs}
+    vector = NarutoReconVectorEnv(
+        num_envs, max_episode_steps=budget, autoreset_mode=autoreset, **settings
+    )
+    sync = gym.vector.SyncVectorEnv(
+        [lambda: gym.make("NarutoRecon-v0", max_episode_steps=budget, **settings)] * num_envs,
+        autoreset_mode=autoreset,
+    )
+    assert_same(vector.reset(seed=seed), sync.reset(seed=seed), "reset")
+    reasons: list[str] = []
+    for step in range(steps):
+        action = actions(step)
+        got, expected = vector.step(action), sync.step(action)
+        for name, a, b in zip(("obs", "reward", "term", "trunc", "info"), got, expected,
+                              strict=True):
+            assert_same(a, b, f"step {step} {name}")
+        reasons += [r for r in got[4]["collision_reason"] if r]
+    sync.close()
+    return reasons, vector
+
+
+def test_matches_sync_vector_env_with_autoreset_next_step():
+    rng = np.random.default_rng(0)
+    # Mostly forward and down, so that agents reach walls and the floor within the test.
+    weights = np.array([4, 1, 1, 1, 0, 12, 1, 0, 0, 0]) / 20
+    reasons, vector = run_both(3, 34, lambda _: rng.choice(10, 3, p=weights), budget=25)
+    assert vector.single_observation_space["rgb"].shape == (24, 24, 3)
+    assert reasons, "no collision happened: the collision path went untested"
+
+
+def test_matches_sync_vector_env_same_step_autoreset():
+    rng = np.random.default_rng(1)
+    run_both(2, 16, lambda _: rng.integers(0, 10, 2), AutoresetMode.SAME_STEP, budget=7)
+
+
+@pytest.mark.parametrize("rule", ["published", "scanned_space"])
+def test_matches_sync_in_open_scene_where_escapes_are_refused(rule):
+    rng = np.random.default_rng(0)
+    # Mostly forward, sometimes sideways, up or turning: some agents reach the open side.
+    reasons, _ = run_both(
+        3, 60, lambda step: np.zeros(3, int) if step % 3 else rng.choice([0, 2, 3, 4, 6], 3),
+        budget=80, seed=0, scene=open_room(), escape_rule=rule,
+    )
+    assert "surface" in reasons
+    if rule == "published":
+        assert "escape" in reasons
+
+
+def test_matches_sync_with_delta_actions():
+    rng = np.random.default_rng(2)
+    run_both(2, 10, lambda _: rng.uniform(-1, 1, (2, 6)).astype(np.float32),
+             action_mode="delta", panorama_shape=None)
+
+
+def test_partial_reset_mask_and_seeds_list():
+    vector = NarutoReconVectorEnv(3, max_episode_steps=5, **SMALL)
+    first, _ = vector.reset(seed=[5, 6, 7])
+    vector.step(np.array([0, 6, 7]))
+    mask = np.array([False, True, False])
+    after, infos = vector.reset(seed=[None, 6, None], options={"reset_mask": mask})
+    np.testing.assert_array_equal(after["pose"][1], first["pose"][1])
+    assert infos["_step"].tolist() == [False, True, False]
+    assert not np.allclose(after["pose"][2], first["pose"][2])
+
+
+def test_make_vec_vector_entry_point_returns_batched_env():
+    env = gym.make_vec("NarutoRecon-v0", num_envs=2,
+                       vectorization_mode="vector_entry_point", **SMALL)
+    assert isinstance(env, NarutoReconVectorEnv)
+    assert env.max_episode_steps == 2000
+    observations, infos = env.reset(seed=0)
+    assert observations["rgb"].shape == (2, 24, 24, 3)
+    assert infos["coverage"].shape == (2,)
+
+
+def test_bad_actions_raise_and_leave_env_usable():
+    vector = NarutoReconVectorEnv(2, **SMALL)
+    vector.reset(seed=0)
+    for bad in ([0], [0, 10], [0.5, 1.0], [[0, 1]]):
+        with pytest.raises(ValueError, match="discrete actions"):
+            vector.step(np.array(bad))
+    observations, *_ = vector.step(np.array([0, 1]))
+    assert observations["depth"].shape == (2, 24, 24)
+    with pytest.raises(ValueError, match="num_envs"):
+        NarutoReconVectorEnv(0, **SMALL)
+    with pytest.raises(ValueError, match="pose"):
+        NarutoReconVectorEnv(2, scene="procedural:room", action_mode="pose")
+
+
+class _CountingEnv(gym.Env):
+    """A minimal env that asks, at every step, whether its TimeLimit ends the episode."""
+
+    observation_space = gym.spaces.Discrete(1)
+    action_space = gym.spaces.Discrete(1)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return 0, {}
+
+    def step(self, action):
+        return 0, 0.0, False, False, {"last": time_limit_ends_this_step(self)}
+
+
+@pytest.mark.parametrize("budget", [1, 3])
+def test_env_sees_the_step_its_time_limit_truncates(budget):
+    # NarutoReconEnv puts the final reconstruction metrics into the info of that step (the
+    # registered ids no longer add a wrapper for it, which make_vec's entry point forbids).
+    env = gym.wrappers.TimeLimit(gym.wrappers.OrderEnforcing(_CountingEnv()), budget)
+    env.reset()
+    flags = [env.step(0)[4]["last"] for _ in range(budget)]
+    assert flags == [False] * (budget - 1) + [True]
+    env.reset()
+    assert not _CountingEnv().step(0)[4]["last"]  # no TimeLimit around it
+    assert gym.spec("NarutoRecon-v0").additional_wrappers == ()
