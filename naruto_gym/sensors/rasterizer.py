@@ -11,17 +11,21 @@ parameter of the exact pixel ray, as the ray caster reports it. Nothing is inter
 space, so triangles that cross the camera plane need no geometric clipping (points behind the
 camera fail the sign test), and the depth is that of the ray-plane intersection in float64.
 
-A frame is made in three passes over the triangles and pixels:
+A frame is made in four passes:
 
-1. setup (triangles split between the threads): the edge planes, the plane normal, ``det``
-   and the image rows the triangle can cover (its corners clipped to ``z >= NEAR_PLANE_M``
-   and projected); triangles behind the camera, outside the image or entirely beyond the
-   depth range are dropped, the others packed into a list;
-2. raster (image rows interleaved between the threads, so both get a like share of the
-   image): per row of a triangle, the span of columns where all three edge planes are
-   non-negative, every pixel of it tested exactly and kept when nearer than the z-buffer;
-3. resolve (same rows): barycentric coordinates of the winning triangle, depth as float32,
-   the range cut, -1 for pixels without a hit.
+1. vertices (split between the threads): camera-frame coordinates and an outcode per vertex,
+   one bit per side of the view volume it lies outside of;
+2. setup (triangles split between the threads): triangles whose corners share an outcode bit
+   (behind the camera, outside the image, entirely beyond the depth range) are dropped; the
+   others get their edge planes, inverse-depth plane and barycentric planes, all in pixel
+   units, and the image rows they can cover (corners clipped to ``z >= NEAR_PLANE_M`` and
+   projected), packed into a list;
+3. binning: which packed triangles touch each band of ``BAND_ROWS`` image rows;
+4. drawing (bands dealt out to the threads in turn): per row of a triangle, the span of
+   columns where all three edge planes are non-negative (a bound per edge, from its plane),
+   each pixel of it kept when its inverse depth beats the band's z-buffer; then, per pixel of
+   the band, the winner's z-depth (as float32, with the range cut), triangle id and
+   barycentric (u, v), or depth 0 and id -1.
 
 The kernels release the GIL and run in a small pool of Python threads, not numba's threading
 layer, which would have to coexist with torch's and with spawned env workers. Triangles share
@@ -44,7 +48,7 @@ NEAR_PLANE_M = 1e-6
 
 # Layout of the float64 triangle records made by the setup pass, every plane in pixel units
 # (a * u + b * v + c): the three edge planes (times the sign of det), the inverse-depth plane
-# 1 / z, and the reciprocal of each edge plane's u slope (0 where the slope is 0).
+# 1 / z, and the reciprocal of each edge plane's u slope (0 where that would overflow).
 _INVERSE_DEPTH = 9
 _INVERSE_SLOPES = 12
 _RECORD_FLOATS = 15
@@ -205,7 +209,8 @@ def setup_triangles(
             px, py, pz = _cross(xs[a], ys[a], zs[a], xs[b], ys[b], zs[b])
             _store_plane(records, slot, 3 * edge, sign * px, sign * py, sign * pz, intrinsics)
             slope = records[slot, 3 * edge]
-            records[slot, _INVERSE_SLOPES + edge] = 1.0 / slope if slope != 0.0 else 0.0
+            # 0 marks an edge plane that is constant along a row (its 1 / slope would overflow).
+            records[slot, _INVERSE_SLOPES + edge] = 1.0 / slope if abs(slope) > 1e-290 else 0.0
         _store_plane(records, slot, _INVERSE_DEPTH, nx / det, ny / det, nz / det, intrinsics)
         # u = e1 / (e0 + e1 + e2) with e0 + e1 + e2 = sign * det / z, so u = e1 * z / |det|.
         scale = 1.0 / abs(det)
@@ -221,12 +226,13 @@ def setup_triangles(
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _edge_bounds(
-    slope: float, inverse_slope: float, offset: float, low: float, high: float
+    inverse_slope: float, offset: float, low: float, high: float
 ) -> tuple[float, float]:
-    """Narrow [low, high] to where slope * u + offset >= 0 (empty: low > high)."""
-    if slope > 0.0:
+    """Narrow [low, high] to where u / inverse_slope + offset >= 0 (empty: low > high); an
+    ``inverse_slope`` of 0 means the plane is constant along the row."""
+    if inverse_slope > 0.0:
         return max(low, -offset * inverse_slope), high
-    if slope < 0.0:
+    if inverse_slope < 0.0:
         return low, min(high, -offset * inverse_slope)
     if offset < 0.0:
         return np.inf, -np.inf
@@ -288,9 +294,9 @@ def rasterize_band(
     row_last_band = row_first_band + band_height - 1
     for entry in range(entries.shape[0]):
         record = entries[entry]
-        a0, b0, c0 = records[record, 0], records[record, 1], records[record, 2]
-        a1, b1, c1 = records[record, 3], records[record, 4], records[record, 5]
-        a2, b2, c2 = records[record, 6], records[record, 7], records[record, 8]
+        b0, c0 = records[record, 1], records[record, 2]
+        b1, c1 = records[record, 4], records[record, 5]
+        b2, c2 = records[record, 7], records[record, 8]
         qa, qb, qc = records[record, 9], records[record, 10], records[record, 11]
         i0, i1, i2 = records[record, 12], records[record, 13], records[record, 14]
         for row in range(max(record_rows[record, 1], row_first_band),
@@ -299,9 +305,9 @@ def rasterize_band(
             k0 = b0 * v + c0
             k1 = b1 * v + c1
             k2 = b2 * v + c2
-            low, high = _edge_bounds(a0, i0, k0, -np.inf, np.inf)
-            low, high = _edge_bounds(a1, i1, k1, low, high)
-            low, high = _edge_bounds(a2, i2, k2, low, high)
+            low, high = _edge_bounds(i0, k0, -np.inf, np.inf)
+            low, high = _edge_bounds(i1, k1, low, high)
+            low, high = _edge_bounds(i2, k2, low, high)
             # The columns with all three edge planes >= 0. Two triangles sharing an edge compute
             # its bound from exactly negated planes, so they get the same number: a pixel on
             # it goes to both (an exact tie), never to neither.
@@ -399,6 +405,9 @@ def draw_bands(
 
 
 # -- thread pool ---------------------------------------------------------------------------
+# Pixels plus triangles below which a frame is drawn in the calling thread alone.
+PARALLEL_MIN_WORK = 150_000
+
 _POOL_LOCK = threading.Lock()
 _POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
 
@@ -426,10 +435,9 @@ def run_parallel(function, count: int) -> list:
 
 
 def default_thread_count() -> int:
-    """Threads a rasterizer uses by default: the CPUs this process may run on, at most 2.
-
-    More row groups only pay on more cores, and each one re-reads every packed triangle.
-    """
+    """Threads a rasterizer uses by default: the CPUs this process may run on, at most 2
+    (the development machine's count; env workers of a vector env each run their own
+    renderer, so more would oversubscribe them). Pass ``threads`` to use more."""
     try:
         available = len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - not on Linux
@@ -517,8 +525,11 @@ class PinholeRasterizer:
             or None when not asked for.
         """
         pose = np.asarray(camera_to_world, dtype=np.float32).astype(np.float64)
-        if pose.shape != (4, 4):
-            raise ValueError(f"camera_to_world must be a 4x4 matrix, got shape {pose.shape}")
+        if pose.shape != (4, 4) or not np.isfinite(pose).all():
+            raise ValueError(
+                f"camera_to_world must be a finite 4x4 matrix, got shape {pose.shape}"
+                + ("" if pose.shape != (4, 4) else " with non-finite entries")
+            )
         rotation = np.ascontiguousarray(pose[:3, :3])
         origin = np.ascontiguousarray(pose[:3, 3])
         (
@@ -528,7 +539,9 @@ class PinholeRasterizer:
         # A triangle whose every corner lies beyond the range can only give depth-0 pixels.
         far_cut = max_depth * (1.0 + 1e-6) + 1e-6 if np.isfinite(max_depth) else np.inf
         nearest = 1.0 / far_cut
-        groups = self.threads
+        # Handing work to another thread costs more than it saves on small frames.
+        small = self.width * self.height + len(self.faces) < PARALLEL_MIN_WORK
+        groups = 1 if small else self.threads
         bounds = np.linspace(0, len(self.faces), groups + 1).astype(np.int64)
 
         vertex_bounds = np.linspace(0, len(self.vertices), groups + 1).astype(np.int64)
