@@ -154,14 +154,16 @@ def time_active_scoring(
     camera = renderer.camera
     results: dict[str, float] = {}
     picked: dict[str, set[int]] = {}
-    frames = [(index, *renderer.render(poses[index])) for index in range(0, 50, 5)]
+    # The first 50 frames, a keyframe every 5 (fewer when the run is shorter).
+    frames = [(index, *renderer.render(poses[index]))
+              for index in range(0, min(50, len(poses)), 5)]
     for score in ("rendered", "surface"):
         config = NeuralMapperConfig(device=args.device, seed=args.seed, active_score=score,
                                     first_frame_iterations=20)
         mapper = NeuralMapper(bounds, camera, config)
         for index, rgb, depth in frames:
             mapper.integrate(rgb, depth, poses[index], index)
-        pose = torch.tensor(poses[45], dtype=torch.float32, device=mapper.device)
+        pose = torch.tensor(poses[frames[-1][0]], dtype=torch.float32, device=mapper.device)
         rgb, depth = frames[-1][1], frames[-1][2]
         pixels = torch.randperm(depth.size, generator=torch.Generator().manual_seed(args.seed))
         pixels = pixels[: config.current_frame_rays * config.active_oversample]
@@ -245,6 +247,8 @@ def main() -> None:
         sys.exit(f"no mesh.ply in {scene_dir}; pass --scene-dir with the Replica sample")
     torch.set_num_threads(max(torch.get_num_threads(), 1))
     scene = load_scene(scene_dir / "mesh.ply", up_axis="z", name="replica_office0")
+    if args.num_frames < 1:
+        sys.exit(f"--num-frames must be at least 1, got {args.num_frames}")
     poses = load_trajectory(scene_dir / "traj.txt")[: args.num_frames]
     camera = PinholeCamera()
     renderer = RgbdRenderer(scene, camera, max_depth_m=5.0)

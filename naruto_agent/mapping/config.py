@@ -62,7 +62,7 @@ class NeuralMapperConfig:
             mapper (:mod:`naruto_agent.mapping.observed_space`). Fed by :meth:`integrate`'s
             full frames (and panoramas), not by ``integrate_pixels``.
         frontier_min_cluster_voxels: frontier clusters smaller than this are ignored (8).
-        observed_rays_per_frame: pixels per frame integrated into the observed space (8192).
+        observed_rays_per_frame: pixels per frame integrated into the observed space (2048).
 
     Device and seed:
         device: "auto" (CUDA when present), "cpu", "cuda[:N]".
@@ -121,7 +121,7 @@ class NeuralMapperConfig:
 
     unknown_space: bool = True
     frontier_min_cluster_voxels: int = 8
-    observed_rays_per_frame: int = 8192
+    observed_rays_per_frame: int = 2048
 
     device: str = "auto"
     seed: int = 0

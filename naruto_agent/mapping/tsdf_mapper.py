@@ -84,7 +84,7 @@ class TsdfMapperConfig:
     device: str = "auto"
     unknown_space: bool = True
     frontier_min_cluster_voxels: int = 8
-    observed_rays_per_frame: int = 8192
+    observed_rays_per_frame: int = 2048
     grazing_weighting: bool = True
     min_observation_weight: float = 0.1
 
@@ -128,6 +128,7 @@ class TsdfUncertaintyMapper:
         )
         self._grid_origin = template.origin
         self._grid_points = template.grid_points()
+        self._flat_index = np.arange(self._grid_points.shape[0]).reshape(template.shape)
         self.counts = np.zeros(template.shape, dtype=np.float32)
         self.frames_integrated = 0
         self._sdf_view: SdfVolume | None = None
@@ -154,9 +155,28 @@ class TsdfUncertaintyMapper:
             self.frames_integrated += 1
         return frame_index % self.config.map_every == 0
 
+    def _frustum_block(self, pose: np.ndarray) -> tuple[slice, slice, slice]:
+        """Index ranges of the count grid within the box around the view frustum (to the
+        mapping range): grid points outside it cannot be seen, so they are not projected."""
+        camera, far = self.camera, self.config.max_depth_m
+        corners = np.array([[0.0, 0.0, 0.0]] + [
+            [(u - camera.cx) / camera.fx * far, (v - camera.cy) / camera.fy * far, far]
+            for u in (0.0, camera.width) for v in (0.0, camera.height)
+        ])
+        world = corners @ pose[:3, :3].T + pose[:3, 3]
+        low = np.floor((world.min(axis=0) - self._grid_origin) / self.config.uncertainty_voxel_m)
+        high = np.ceil((world.max(axis=0) - self._grid_origin) / self.config.uncertainty_voxel_m)
+        shape = np.asarray(self.counts.shape)
+        low = np.clip(low.astype(np.int64), 0, shape)
+        high = np.clip(high.astype(np.int64) + 1, 0, shape)
+        return tuple(slice(int(a), int(b)) for a, b in zip(low, high, strict=True))
+
     def _count_observations(self, depth: np.ndarray, pose: np.ndarray) -> None:
+        block = self._frustum_block(pose)
+        flat_index = self._flat_index[block].reshape(-1)
         world_to_camera = np.linalg.inv(pose)
-        camera_points = self._grid_points @ world_to_camera[:3, :3].T + world_to_camera[:3, 3]
+        camera_points = (self._grid_points[flat_index] @ world_to_camera[:3, :3].T
+                         + world_to_camera[:3, 3])
         pixels, z = self.camera.project(camera_points)
         u = np.round(pixels[:, 0]).astype(np.int64)
         v = np.round(pixels[:, 1]).astype(np.int64)
@@ -170,7 +190,7 @@ class TsdfUncertaintyMapper:
                 incidence_cosine(depth, self.camera, u[index[seen]], v[index[seen]]),
                 self.config.min_observation_weight,
             )
-        self.counts.reshape(-1)[index[seen]] += weight  # grid points are distinct
+        self.counts.reshape(-1)[flat_index[index[seen]]] += weight  # points are distinct
 
     def integrate_panorama(self, panorama: np.ndarray, position: np.ndarray) -> None:
         """Add a depth panorama's rays to the observed space (free space all around)."""

@@ -73,6 +73,10 @@ class GoalSearchConfig:
         top_k: number of best goals returned, best first (the agent tries the next when the
             planner cannot reach one).
         batch_goals: goals checked per vectorised batch of the branch and bound.
+        distance_discount_m: None (published) scores a goal by the uncertainty it sees
+            wherever it is; a length L multiplies the score by exp(-d / L), d the straight
+            distance from the agent, so that of two goals seeing about as much the nearer
+            wins (the agent stops crossing the map back and forth).
     """
 
     goal_spacing_xy_m: float = 0.2
@@ -88,6 +92,7 @@ class GoalSearchConfig:
     num_views: int = 10
     top_k: int = 3
     batch_goals: int = 64
+    distance_discount_m: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("goal_spacing_xy_m", "goal_spacing_z_m", "max_range_m"):
@@ -103,6 +108,9 @@ class GoalSearchConfig:
             raise ValueError(
                 f"need 0 <= min_range_m < max_range_m, got {self.min_range_m}, {self.max_range_m}"
             )
+        if self.distance_discount_m is not None and not self.distance_discount_m > 0:
+            raise ValueError(f"GoalSearchConfig.distance_discount_m must be positive or None, "
+                             f"got {self.distance_discount_m}")
         if not 0.0 <= self.visibility_stop_m < self.max_range_m:
             raise ValueError(f"visibility_stop_m must be in [0, max_range_m), got "
                              f"{self.visibility_stop_m}")
@@ -205,8 +213,9 @@ def select_targets(
     Args:
         uncertainty: uncertainty volume (0 where there is no surface).
         rng: random generator of the subset.
-        top_uncertain: how many of the most uncertain voxels are candidates (ties broken by
-            voxel index, so the choice is deterministic).
+        top_uncertain: how many of the most uncertain voxels are candidates (ties broken at
+            random by ``rng``: many voxels share the largest value, e.g. the whole frontier of
+            unexplored space, and an index order would favour one corner of the map).
         subset: how many of those are drawn (without replacement).
         mask: optional (nx, ny, nz) bool of voxels allowed as targets.
 
@@ -223,7 +232,7 @@ def select_targets(
         allowed &= mask.reshape(-1)
     index = np.flatnonzero(allowed)
     if len(index) > top_uncertain:
-        # Stable sort on -value: equal uncertainties keep voxel order, deterministically.
+        index = rng.permutation(index)  # ties in random order (see above)
         order = np.argsort(-values[index], kind="stable")[:top_uncertain]
         index = index[order]
     if len(index) > subset:
@@ -282,6 +291,7 @@ def search_goals(
     config: GoalSearchConfig | None = None,
     goal_mask: np.ndarray | None = None,
     target_mask: np.ndarray | None = None,
+    origin: np.ndarray | None = None,
 ) -> GoalSearchResult:
     """One goal search (no fallback): the safe goals that see the most target uncertainty.
 
@@ -293,6 +303,8 @@ def search_goals(
         goal_mask: optional (nx, ny, nz) bool: a candidate goal is kept only when the voxel
             nearest to it is True (e.g. free space connected to the agent, or reachable).
         target_mask: optional (nx, ny, nz) bool of voxels allowed as targets.
+        origin: (3,) the agent's position, for ``config.distance_discount_m`` (ignored
+            without it).
 
     Returns:
         A :class:`GoalSearchResult`; ``found`` is False when no safe goal sees a target.
@@ -349,6 +361,11 @@ def search_goals(
     distance = np.linalg.norm(targets[None, :, :] - goals[:, None, :], axis=2)
     in_range = (distance > config.min_range_m) & (distance < config.max_range_m)
     bound = in_range.astype(np.float64) @ target_uncertainty
+    discount = np.ones(len(goals))
+    if config.distance_discount_m is not None and origin is not None:
+        travel = np.linalg.norm(goals - np.asarray(origin, np.float64).reshape(1, 3), axis=1)
+        discount = np.exp(-travel / config.distance_discount_m)
+    bound *= discount  # still an upper bound: the discount depends on the goal only
     order = np.lexsort((np.arange(len(goals)), -bound))  # bound descending, index ascending
     best: list[tuple[float, int, np.ndarray]] = []  # (score, goal index, visibility row)
     for begin in range(0, len(order), config.batch_goals):
@@ -362,7 +379,7 @@ def search_goals(
         seen = visibility(sdf, goals[batch], targets, config)
         diagnostics["evaluated_goals"] += len(batch)
         diagnostics["tested_pairs"] += float(in_range[batch].sum())
-        scores = seen.astype(np.float64) @ target_uncertainty
+        scores = (seen.astype(np.float64) @ target_uncertainty) * discount[batch]
         for row, goal_index in enumerate(batch):
             if scores[row] > 0.0:
                 best.append((float(scores[row]), int(goal_index), seen[row]))
@@ -398,7 +415,7 @@ def uncertainty_aware_goal_search(
         reachable_iterations: extensions of the fallback tree.
     """
     config = config or GoalSearchConfig()
-    found = search_goals(sdf, uncertainty, rng, config, goal_mask=goal_mask)
+    found = search_goals(sdf, uncertainty, rng, config, goal_mask=goal_mask, origin=start)
     if found.found:
         return found
     began = time.perf_counter()
@@ -408,7 +425,8 @@ def uncertainty_aware_goal_search(
     reachable = reachable_voxels(sdf, start, tree_config, iterations=reachable_iterations)
     tree_ms = (time.perf_counter() - began) * 1e3
     mask = reachable if goal_mask is None else reachable & goal_mask
-    retry = search_goals(sdf, uncertainty, rng, config, goal_mask=mask, target_mask=reachable)
+    retry = search_goals(sdf, uncertainty, rng, config, goal_mask=mask, target_mask=reachable,
+                         origin=start)
     retry.used_reachable_mask = True
     retry.diagnostics["reachable_voxels"] = float(reachable.sum())
     retry.diagnostics["reachable_ms"] = tree_ms

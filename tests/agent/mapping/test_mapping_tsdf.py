@@ -136,3 +136,21 @@ def test_planner_view_updates_only_what_changed_and_matches_a_full_read(
     assert not np.array_equal(first.values, full.values)  # the new frames changed the map
     again, _ = mapper.planner_view(0.1)  # nothing fused since: the same view
     np.testing.assert_array_equal(again.values, incremental.values)
+
+
+def test_counting_only_inside_the_frustum_box_counts_the_same(
+    room_renderer, small_camera, room_bounds
+) -> None:
+    config = TsdfMapperConfig(voxel_size_m=0.04, truncation_m=0.12, device="cpu",
+                              max_depth_m=3.0)
+    boxed = TsdfUncertaintyMapper(room_bounds, small_camera, config)
+    whole = TsdfUncertaintyMapper(room_bounds, small_camera, config)
+    whole._frustum_block = lambda pose: (slice(None),) * 3
+    for index, pose in enumerate(orbit_poses(12)):
+        rgb, depth = room_renderer.render(pose)
+        boxed.integrate(rgb, depth, pose, index)
+        whole.integrate(rgb, depth, pose, index)
+        assert all(b.stop - b.start <= n for b, n in
+                   zip(boxed._frustum_block(pose), boxed.counts.shape, strict=True))
+    assert whole.counts.sum() > 0
+    np.testing.assert_array_equal(boxed.counts, whole.counts)
