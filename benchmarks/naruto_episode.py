@@ -7,6 +7,9 @@ Runs :class:`~naruto_agent.naruto.NarutoPolicy` for a step budget on a scene and
   (``gym.make(..., reconstruct=True)``, ``env.unwrapped.reconstruction_metrics()``);
 * the metrics of the agent's own map (``env.unwrapped.evaluate(policy.mesh())``);
 * the trajectory length, collisions, the planner's requests and its state counts;
+* where the agent's targets were and where it went: top-down pictures at a few steps with
+  the frontier of unexplored space (cyan), the most uncertain seen surfaces (orange), the
+  goals it chose (white) and its trajectory (red);
 * the time per step by phase: mapping (frame integration + reading the planner view),
   planning (goal search + E-RRT + the state machine) and the env (motion, rendering,
   coverage, and the reference TSDF fusion that ``reconstruct=True`` adds), next to the
@@ -77,6 +80,8 @@ class Args:
     """where the JSON and PNGs go"""
     tag: str = ""
     """suffix of the output names (default: scene, mapper and steps)"""
+    target_snapshots: int = 4
+    """top-down pictures of the targets, evenly over the episode (0: none)"""
 
 
 def parse_args() -> Args:
@@ -101,6 +106,50 @@ def save_curve(coverage: list[float], path: Path, title: str) -> None:
     plt.close(figure)
 
 
+def target_snapshot(env: gym.Env, policy: NarutoPolicy, step: int) -> tuple[np.ndarray, dict]:
+    """The top-down map and, in world x-y, the agent's targets, goals and trajectory."""
+    base = env.unwrapped
+    if base._top_down is None:
+        env.render()
+    policy._read_view()
+    uncertainty = policy.uncertainty
+    values = uncertainty.values.reshape(-1)
+    points = uncertainty.grid_points()
+    initial = policy.mapper.config.initial_variance
+    frontier = points[np.isclose(values, initial)]
+    surface = points[(values > 0) & ~np.isclose(values, initial)]
+    surface_values = values[(values > 0) & ~np.isclose(values, initial)]
+    surface = surface[np.argsort(-surface_values)[:2000]]
+    goals = np.array([p["goal"] for p in policy.plans if "goal" in p]).reshape(-1, 3)
+    layers = {"frontier": frontier, "uncertain surface": surface, "goals": goals,
+              "trajectory": base.trajectory}
+    return base._top_down.image.copy(), {"step": step, **layers}
+
+
+def save_target_pictures(env: gym.Env, snapshots: list, path: Path, title: str) -> None:
+    top_down = env.unwrapped._top_down
+    figure, axes = plt.subplots(1, len(snapshots), figsize=(4.2 * len(snapshots), 3.8),
+                                squeeze=False)
+    styles = {"frontier": dict(s=2, c="cyan", alpha=0.5),
+              "uncertain surface": dict(s=2, c="orange", alpha=0.5),
+              "goals": dict(s=18, c="white", edgecolors="black", marker="*")}
+    for axis, (image, layers) in zip(axes[0], snapshots, strict=True):
+        axis.imshow(image)
+        for name, style in styles.items():
+            if len(layers[name]):
+                xy = top_down.world_to_pixel(layers[name][:, :2])
+                axis.scatter(xy[:, 0], xy[:, 1], label=name, **style)
+        path_xy = top_down.world_to_pixel(layers["trajectory"][:, :2])
+        axis.plot(path_xy[:, 0], path_xy[:, 1], c="red", lw=1, label="trajectory")
+        axis.set_title(f"step {layers['step']}")
+        axis.axis("off")
+    axes[0][0].legend(loc="lower left", fontsize=6, markerscale=3)
+    figure.suptitle(title)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
 def main(args: Args) -> dict:
     load_start = os.getloadavg()
     # One step more than the budget, so the env's final-metrics wrapper (which scores on
@@ -121,13 +170,20 @@ def main(args: Args) -> dict:
     coverage = [float(info["coverage"])]
     env_s = 0.0
     collisions = 0
-    for _ in tqdm(range(args.steps), desc=f"NARUTO {args.scene}"):
+    snapshot_steps = set(np.linspace(0, args.steps, args.target_snapshots + 1)[1:]
+                         .astype(int).tolist()) if args.target_snapshots > 0 else set()
+    snapshots = []
+    for step in tqdm(range(1, args.steps + 1), desc=f"NARUTO {args.scene}"):
         action = policy.act(observation, info)
         clock = time.perf_counter()
         observation, _, terminated, truncated, info = env.step(action)
         env_s += time.perf_counter() - clock
         coverage.append(float(info["coverage"]))
         collisions += int(info["collided"])
+        if step in snapshot_steps:
+            clock = time.perf_counter()
+            snapshots.append(target_snapshot(env, policy, step))
+            started += time.perf_counter() - clock  # pictures are not the agent's time
         if terminated or truncated:
             break
     episode_s = time.perf_counter() - started
@@ -192,6 +248,9 @@ def main(args: Args) -> dict:
     Image.fromarray(env.render()).save(output_dir / f"naruto_episode_{tag}_topdown.png")
     save_curve(coverage, output_dir / f"naruto_episode_{tag}_coverage.png",
                f"NARUTO ({args.mapper}) on {args.scene}")
+    if snapshots:
+        save_target_pictures(env, snapshots, output_dir / f"naruto_episode_{tag}_targets.png",
+                             f"NARUTO ({args.mapper}) on {args.scene}: targets and path")
     env.close()
 
     print(f"\nNARUTO ({args.mapper} mapper) on {args.scene}, {steps_run} steps, "
