@@ -231,6 +231,7 @@ class NarutoReconEnv(gym.Env):
         self._coverage: CoverageTracker | None = None
         self._observable: ObservableSurface | None = None
         self._top_down: TopDownMap | None = None
+        self._intrinsics = self.camera.as_dict()
         self.reconstruction: EpisodeReconstruction | None = (
             EpisodeReconstruction(self.camera) if reconstruct else None
         )
@@ -396,6 +397,12 @@ class NarutoReconEnv(gym.Env):
     # -- internals -----------------------------------------------------------------------
     def _validated_action(self, action: Any) -> Any:
         if self.action_mode == "discrete":
+            if (
+                isinstance(action, (int, np.integer))
+                and not isinstance(action, (bool, np.bool_))
+                and 0 <= action < self.action_space.n
+            ):
+                return int(action)  # the common case, without the array checks below
             if isinstance(action, (bool, np.bool_)) or not np.issubdtype(
                 np.asarray(action).dtype, np.integer
             ):
@@ -467,7 +474,7 @@ class NarutoReconEnv(gym.Env):
             "collided": bool(collided),
             "collision_reason": reason,
             "path_length_m": float(self._path_length_m),
-            "intrinsics": self.camera.as_dict(),
+            "intrinsics": dict(self._intrinsics),
             "step": self._step_count,
         }
         if self._panorama is not None:

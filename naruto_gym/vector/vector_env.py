@@ -45,6 +45,7 @@ from naruto_gym.scenes.stream import (
     is_procedural_name,
     parse_procedural_name,
 )
+from naruto_gym.sensors.rasterizer import default_thread_count, run_parallel
 from naruto_gym.sensors.raycaster import free_fraction_from_distances, segment_samples
 from naruto_gym.vector.batch_kernels import (
     fill_panorama_rays,
@@ -65,6 +66,14 @@ class _Moves:
         self.collided = np.zeros(len(agents), bool)
         self.reasons = np.full(len(agents), "", dtype=object)
         self.check_escape = np.zeros(len(agents), bool)
+
+
+def _in_threads(work: Any, count: int, threads: int) -> None:
+    """``work(part)`` over ``count`` agents split in up to ``threads`` contiguous slices,
+    run in parallel (the compiled kernels release the GIL)."""
+    parts = max(1, min(threads, count // 8))
+    bounds = np.linspace(0, count, parts + 1).astype(int)
+    run_parallel(lambda k: work(slice(int(bounds[k]), int(bounds[k + 1]))), parts)
 
 
 def _escape_rule(checker: Any) -> str:
@@ -205,6 +214,11 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self._reconstructions: list[EpisodeReconstruction | None] = [None] * n
         self._autoreset = np.zeros(n, bool)
         self._started = False
+        # Compiled loops (ray filling, shading, coverage) split agents between this many
+        # threads; Embree's cast has its own.
+        self._threads = default_thread_count()
+        # Rays cast for frames, panoramas and escape checks (benchmarks report rays/s).
+        self.rays_cast = 0
         self._intrinsics = self.camera.as_dict()
         self._discrete_zeros = np.zeros(n, np.int64)
         self._continuous_zeros = np.zeros((n, 7))
@@ -307,7 +321,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             final_infos: dict[str, Any] = {}
             for i in done:
                 final_obs[i] = {key: value[i] for key, value in observations.items()}
-                final_infos = self._add_info(final_infos, _agent_info(infos, int(i)), int(i))
+                final_infos = self._add_info(final_infos, agent_info(infos, int(i)), int(i))
             for i in done:
                 self._reset_state(int(i), None, {})
             reset_gains = np.zeros(n)
@@ -541,10 +555,16 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             coverage = env.coverage
             seen = np.stack([self._seen[i] for i in members])
             added = np.zeros(len(members), np.int64)
-            mark_visible_batch(
-                coverage.samples_world, seen, np.ascontiguousarray(self._poses[members]),
-                coverage.intrinsics, self._depth[members], coverage.max_range_m,
-                COVERAGE_TOLERANCE_M, added,
+            poses = np.ascontiguousarray(self._poses[members])
+            depth = self._depth[members]
+
+            _in_threads(
+                lambda part, coverage=coverage, seen=seen, poses=poses, depth=depth,
+                added=added: mark_visible_batch(
+                    coverage.samples_world, seen[part], poses[part], coverage.intrinsics,
+                    depth[part], coverage.max_range_m, COVERAGE_TOLERANCE_M, added[part],
+                ),
+                len(members), self._threads,
             )
             total = len(coverage.samples_world)
             for k, i in enumerate(members):
@@ -581,13 +601,18 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         escape_offset = count * (cast_pixels + panorama_rays)
         rays = np.empty((escape_offset + len(escapers) * first, 6), np.float32)
         if not raster:
-            fill_pinhole_rays(camera.ray_directions, poses32, rays, 0)
+            def fill(part: slice) -> None:
+                fill_pinhole_rays(camera.ray_directions, poses32[part], rays,
+                                  (part.start or 0) * pixels)
+
+            _in_threads(fill, count, self._threads)
         if panorama is not None:
             fill_panorama_rays(panorama.ray_directions, positions32, rays, count * cast_pixels)
         if len(escapers):
             fill_panorama_rays(order[:first], np.ascontiguousarray(positions32[escape]), rays,
                                escape_offset)
         hits = env.raycaster.cast_packed(rays) if len(rays) else None
+        self.rays_cast += len(rays)
 
         if raster:
             frames = [env.renderer.render_hits(self._poses[i]) for i in members]
@@ -601,7 +626,14 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             depth[~(depth <= self.max_depth_m)] = 0.0
             triangle_ids = np.where(depth > 0, hits.triangle_ids[frame], -1).astype(np.int32)
             barycentric_uv = hits.barycentric_uv[frame]
-        rgb = env.scene.colour_at(triangle_ids, barycentric_uv)
+        rgb = np.empty((len(triangle_ids), 3), np.uint8)
+
+        def shade(part: slice) -> None:
+            pixels_of = slice((part.start or 0) * pixels, part.stop * pixels)
+            rgb[pixels_of] = env.scene.colour_at(triangle_ids[pixels_of],
+                                                 barycentric_uv[pixels_of])
+
+        _in_threads(shade, count, self._threads)
         self._depth[members] = depth.reshape(count, camera.height, camera.width)
         self._rgb[members] = rgb.reshape(count, camera.height, camera.width, 3)
         if panorama is not None:
@@ -622,6 +654,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         fill_panorama_rays(rest, np.ascontiguousarray(positions32[escape][undecided]), extra, 0)
         more = no_hit_counts(env.raycaster.cast_packed(extra).distance, 0, len(rest),
                              int(undecided.sum()))
+        self.rays_cast += len(extra)
         shares = (misses[undecided] + more) / total
         return [int(a) for a in escapers[undecided][shares > threshold]]
 
@@ -712,14 +745,14 @@ def _escape_ray_plan(checker: Any) -> tuple[int, np.ndarray]:
     return _ESCAPE_PLANS[key]
 
 
-def _agent_info(infos: dict[str, Any], i: int) -> dict[str, Any]:
+def agent_info(infos: dict[str, Any], i: int) -> dict[str, Any]:
     """One agent's info dict back out of vector infos."""
     single: dict[str, Any] = {}
     for key, value in infos.items():
         if key.startswith("_") or not infos.get(f"_{key}", np.zeros(i + 1, bool))[i]:
             continue
         if isinstance(value, dict):
-            single[key] = _agent_info(value, i)
+            single[key] = agent_info(value, i)
         else:
             item = value[i]
             single[key] = item.item() if isinstance(item, np.generic) else item

@@ -1,0 +1,206 @@
+"""Throughput of the batched ``NarutoReconVectorEnv`` against Gymnasium's vector envs, for RL.
+
+Settings (issue "RL researchers' path"): a 64 x 64 pinhole camera
+(``PinholeCamera(64, 64, 32, 32, 31.5, 31.5)``), the observation panorama off, discrete random
+actions, the default room. Goals: at least 2,000 steps/s with 64 envs on 2 cores, at least 5x
+the ``AsyncVectorEnv`` of the same settings in the same run, and the single env at least 800
+steps/s.
+
+Reported, all in one run and process (load average printed beside every figure):
+
+* the single env, ``AsyncVectorEnv`` (2 and 4 workers, spawn) and ``SyncVectorEnv`` (4 envs);
+* the batched env at 1, 2, 4, 16, 64 and 256 envs, at 64 and 128 pixels, with and without the
+  observation panorama (``(64, 128)``);
+* at 64 envs, 64 pixels: the published escape rule (whole-sphere panorama per move) and the
+  rasterizing pinhole backend beside the defaults;
+* rays per second the batched env casts, against the bare Open3D cast rate of the same pinhole
+  rays in one call.
+
+    flock /tmp/naruto_timing.lock python benchmarks/vector_throughput.py
+    python benchmarks/vector_throughput.py --seconds 1 --counts 1 64   # quick look
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import naruto_gym  # noqa: F401  (registers the ids)
+from naruto_gym.cli_args import parse_dataclass_args
+from naruto_gym.sensors.kernels import fill_world_rays
+from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.vector import NarutoReconVectorEnv
+
+CAMERAS = {
+    64: PinholeCamera(64, 64, 32, 32, 31.5, 31.5),
+    128: PinholeCamera(128, 128, 64, 64, 63.5, 63.5),
+}
+
+
+@dataclass
+class Args:
+    seconds: float = 3.0
+    """timed seconds per configuration (after a warm-up)"""
+    counts: list[int] = field(default_factory=lambda: [1, 2, 4, 16, 64, 256])
+    """numbers of envs of the batched env"""
+    sizes: list[int] = field(default_factory=lambda: [64, 128])
+    """square image sizes in pixels (64 and 128 are defined)"""
+    async_workers: list[int] = field(default_factory=lambda: [2, 4])
+    """worker counts of the AsyncVectorEnv reference"""
+    episode_steps: int = 500
+    """episode budget (autoresets are part of the timing)"""
+    output: str = "benchmarks/results/vector_throughput.json"
+    """where the JSON goes"""
+
+
+def load() -> list[float]:
+    return [round(value, 2) for value in os.getloadavg()]
+
+
+def env_kwargs(size: int, panorama: bool, **extra: Any) -> dict[str, Any]:
+    return {
+        "action_mode": "discrete",
+        "camera": CAMERAS[size],
+        "panorama_shape": (64, 128) if panorama else None,
+        **extra,
+    }
+
+
+def time_vector(env: Any, seconds: float, seed: int = 0) -> dict[str, float]:
+    """Random discrete steps of a (batched, sync or async) vector env for ``seconds``."""
+    rng = np.random.default_rng(seed)
+    n = env.num_envs
+    env.reset(seed=seed)
+    for _ in range(3):
+        env.step(rng.integers(0, 10, n))
+    rays_before = getattr(env, "rays_cast", 0)
+    steps, started = 0, time.perf_counter()
+    while time.perf_counter() - started < seconds or steps < 2:
+        env.step(rng.integers(0, 10, n))
+        steps += 1
+    elapsed = time.perf_counter() - started
+    result = {"steps_per_s": steps * n / elapsed, "load": load()}
+    if hasattr(env, "rays_cast"):
+        result["rays_per_s"] = (env.rays_cast - rays_before) / elapsed
+    return result
+
+
+def time_single(seconds: float, episode_steps: int) -> dict[str, float]:
+    env = gym.make("NarutoRecon-v0", max_episode_steps=episode_steps, **env_kwargs(64, False))
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    for _ in range(20):
+        env.step(int(rng.integers(10)))
+    steps, started = 0, time.perf_counter()
+    while time.perf_counter() - started < seconds:
+        _, _, terminated, truncated, _ = env.step(int(rng.integers(10)))
+        if terminated or truncated:
+            env.reset()
+        steps += 1
+    return {"steps_per_s": steps / (time.perf_counter() - started), "load": load()}
+
+
+def bare_cast_rate(count: int, size: int, seconds: float) -> dict[str, float]:
+    """Mrays/s of one Open3D call casting ``count`` agents' pinhole rays (start poses)."""
+    vector = NarutoReconVectorEnv(count, **env_kwargs(size, False))
+    vector.reset(seed=0)
+    camera = CAMERAS[size]
+    pixels = camera.width * camera.height
+    rays = np.empty((count * pixels, 6), np.float32)
+    for i, pose in enumerate(vector._poses.astype(np.float32)):
+        fill_world_rays(camera.ray_directions, np.ascontiguousarray(pose[:3, :3]),
+                        np.ascontiguousarray(pose[:3, 3]), rays[i * pixels:(i + 1) * pixels])
+    raycaster = vector.scene_envs[0].raycaster
+    raycaster.cast_packed(rays)
+    calls, started = 0, time.perf_counter()
+    while time.perf_counter() - started < seconds:
+        raycaster.cast_packed(rays)
+        calls += 1
+    elapsed = time.perf_counter() - started
+    return {"mrays_per_s": calls * len(rays) / elapsed / 1e6, "load": load()}
+
+
+def main(args: Args) -> dict[str, Any]:
+    from tqdm.auto import tqdm
+
+    results: dict[str, Any] = {"args": asdict(args), "load_start": load(), "cpus": os.cpu_count()}
+    print(f"load average at start: {results['load_start']}")
+    results["single_env"] = time_single(args.seconds, args.episode_steps)
+    print(f"single env, 64 px, no panorama: {results['single_env']['steps_per_s']:.0f} steps/s "
+          f"(load {results['single_env']['load']})")
+    results["async"] = {}
+    for workers in args.async_workers:
+        env = gym.make_vec("NarutoRecon-v0", num_envs=workers, vectorization_mode="async",
+                           vector_kwargs={"context": "spawn"},
+                           max_episode_steps=args.episode_steps, **env_kwargs(64, False))
+        results["async"][workers] = time_vector(env, args.seconds)
+        env.close()
+        print(f"AsyncVectorEnv {workers} workers: "
+              f"{results['async'][workers]['steps_per_s']:.0f} steps/s "
+              f"(load {results['async'][workers]['load']})")
+    env = gym.make_vec("NarutoRecon-v0", num_envs=4, vectorization_mode="sync",
+                       max_episode_steps=args.episode_steps, **env_kwargs(64, False))
+    results["sync_4"] = time_vector(env, args.seconds)
+    env.close()
+    print(f"SyncVectorEnv 4 envs: {results['sync_4']['steps_per_s']:.0f} steps/s")
+
+    results["batched"] = []
+    configs = [(size, panorama, count) for size in args.sizes for panorama in (False, True)
+               for count in args.counts]
+    for size, panorama, count in tqdm(configs, desc="batched env"):
+        env = NarutoReconVectorEnv(count, max_episode_steps=args.episode_steps,
+                                   **env_kwargs(size, panorama))
+        row = {"size": size, "panorama": panorama, "num_envs": count,
+               **time_vector(env, args.seconds)}
+        results["batched"].append(row)
+        tqdm.write(f"batched {count:4d} envs, {size} px, panorama {'on ' if panorama else 'off'}:"
+                   f" {row['steps_per_s']:7.0f} steps/s, {row['rays_per_s'] / 1e6:5.2f} Mrays/s"
+                   f" (load {row['load']})")
+    results["variants_64_envs_64_px"] = {}
+    for name, extra in (("published_escape_rule", {"escape_rule": "published"}),
+                        ("raster_pinhole", {"pinhole_backend": "raster"})):
+        env = NarutoReconVectorEnv(64, max_episode_steps=args.episode_steps,
+                                   **env_kwargs(64, False, **extra))
+        results["variants_64_envs_64_px"][name] = time_vector(env, args.seconds)
+        row = results["variants_64_envs_64_px"][name]
+        print(f"batched 64 envs, 64 px, {name}: {row['steps_per_s']:.0f} steps/s, "
+              f"{row['rays_per_s'] / 1e6:.2f} Mrays/s (load {row['load']})")
+    results["bare_cast_64_envs"] = {size: bare_cast_rate(64, size, args.seconds)
+                                    for size in args.sizes}
+    for size, row in results["bare_cast_64_envs"].items():
+        print(f"bare Open3D cast, 64 agents' {size} px frames in one call: "
+              f"{row['mrays_per_s']:.2f} Mrays/s (load {row['load']})")
+
+    best_async = max(row["steps_per_s"] for row in results["async"].values())
+    goal_row = next((row for row in results["batched"] if row["size"] == 64
+                     and not row["panorama"] and row["num_envs"] == 64), None)
+    if goal_row is not None:
+        results["goals"] = {
+            "batched_64_envs_steps_per_s": goal_row["steps_per_s"],
+            "goal_2000": goal_row["steps_per_s"] >= 2000,
+            "ratio_vs_best_async": goal_row["steps_per_s"] / best_async,
+            "goal_5x_async": goal_row["steps_per_s"] >= 5 * best_async,
+            "single_env_steps_per_s": results["single_env"]["steps_per_s"],
+            "goal_single_800": results["single_env"]["steps_per_s"] >= 800,
+            "rays_share_of_bare_cast": goal_row["rays_per_s"] / 1e6
+            / results["bare_cast_64_envs"][64]["mrays_per_s"],
+        }
+        print("goals:", json.dumps(results["goals"], indent=1))
+    results["load_end"] = load()
+    print(f"load average at end: {results['load_end']}")
+    path = Path(args.output)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(results, indent=1))
+    print(f"wrote {path}")
+    return results
+
+
+if __name__ == "__main__":
+    main(parse_dataclass_args(Args))

@@ -1,0 +1,57 @@
+"""Stable-Baselines3 on the batched vector env: the VecEnv adapter and the features extractor."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from stable_baselines3 import PPO  # noqa: E402
+
+from naruto_gym.rl.sb3 import NarutoFeaturesExtractor, Sb3VecEnv, make_sb3_vec_env  # noqa: E402
+from naruto_gym.sensors.pinhole import PinholeCamera  # noqa: E402
+from naruto_gym.vector import NarutoReconVectorEnv  # noqa: E402
+
+SETTINGS = {
+    "camera": PinholeCamera(32, 32, 16, 16, 15.5, 15.5),
+    "coverage_samples": 3000,
+    "max_episode_steps": 5,
+}
+
+
+def test_adapter_steps_like_sb3_expects():
+    venv = make_sb3_vec_env(3, size=32, top_down_map=True, **SETTINGS)
+    observations = venv.reset()
+    assert venv.observation_space.contains({k: v[0] for k, v in observations.items()})
+    for _ in range(5):
+        observations, rewards, dones, infos = venv.step(np.array([0, 6, 1]))
+        assert rewards.shape == (3,) and len(infos) == 3
+    assert dones.all()  # the budget of 5 steps ends every episode together
+    for info in infos:
+        assert info["TimeLimit.truncated"]
+        assert info["terminal_observation"]["rgb"].shape == (32, 32, 3)
+        assert info["terminal_observation"]["pose"].shape == (9,)
+        assert 0.0 <= info["final_info"]["coverage"] <= 1.0
+    # The observation returned with done is the new episode's first one (its step is 0).
+    assert all(info["step"] == 0 for info in infos)
+    assert not np.array_equal(observations["pose"][0], infos[0]["terminal_observation"]["pose"])
+
+
+def test_ppo_learns_a_few_updates_with_the_features_extractor(tmp_path):
+    venv = make_sb3_vec_env(2, size=32, top_down_map=True, **SETTINGS)
+    model = PPO(
+        "MultiInputPolicy", venv, n_steps=8, batch_size=16, n_epochs=1, seed=0,
+        policy_kwargs={"features_extractor_class": NarutoFeaturesExtractor,
+                       "features_extractor_kwargs": {"features_dim": 32}},
+    )
+    model.learn(32)
+    model.save(tmp_path / "model.zip")
+    loaded = PPO.load(tmp_path / "model.zip")
+    actions, _ = loaded.predict(venv.reset(), deterministic=True)
+    assert actions.shape == (2,) and np.all((actions >= 0) & (actions < 10))
+
+
+def test_adapter_refuses_next_step_autoreset():
+    with pytest.raises(ValueError, match="SAME_STEP"):
+        Sb3VecEnv(NarutoReconVectorEnv(1, action_mode="discrete", **SETTINGS))

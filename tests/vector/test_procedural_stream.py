@@ -1,0 +1,65 @@
+"""Per-episode procedural scenes: seeded draws, disjoint splits, bounded memory."""
+
+from __future__ import annotations
+
+import resource
+
+import numpy as np
+import pytest
+
+from naruto_gym.scenes.catalogue import resolve_scene
+from naruto_gym.scenes.stream import SPLIT_SEEDS, parse_procedural_name, split_of_seed
+from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.vector import NarutoReconVectorEnv
+
+STREAM = {
+    "action_mode": "discrete",
+    "camera": PinholeCamera(16, 16, 8, 8, 7.5, 7.5),
+    "coverage_samples": 1500,
+    "panorama_shape": None,
+}
+
+
+def test_names_splits_and_fixed_scenes():
+    assert parse_procedural_name("procedural:room").split == "train"
+    assert parse_procedural_name("procedural:apartment:test").split == "test"
+    assert parse_procedural_name("procedural:room:42").seed == 42
+    (train_low, train_high), (test_low, test_high) = SPLIT_SEEDS["train"], SPLIT_SEEDS["test"]
+    assert train_high <= test_low or test_high <= train_low
+    assert split_of_seed(train_low) == "train" and split_of_seed(test_low) == "test"
+    for bad in ("procedural:house", "procedural:room:val", "procedural:room:1:2"):
+        with pytest.raises(ValueError, match="procedural"):
+            parse_procedural_name(bad)
+    assert resolve_scene("procedural:room:42").name == "room_42"
+    with pytest.raises(ValueError, match="stream"):
+        resolve_scene("procedural:room")
+
+
+def test_stream_draws_a_new_seeded_scene_every_episode():
+    env = NarutoReconVectorEnv(2, scene="procedural:room:test", max_episode_steps=2, **STREAM)
+    first, _ = env.reset(seed=7)
+    names = [scene.scene.name for scene in env.scene_envs]
+    assert names[0] != names[1]
+    assert all(split_of_seed(int(name.split("_")[1])) == "test" for name in names)
+    for _ in range(3):  # the episode ends after 2 steps; the next step starts a new one
+        env.step(np.array([6, 6]))
+    assert [scene.scene.name for scene in env.scene_envs] != names
+    again, _ = env.reset(seed=7)
+    assert [scene.scene.name for scene in env.scene_envs] == names
+    np.testing.assert_array_equal(again["pose"], first["pose"])
+
+
+@pytest.mark.slow
+def test_memory_stays_bounded_with_a_new_scene_every_reset():
+    env = NarutoReconVectorEnv(
+        2, scene="procedural:room", max_episode_steps=1, scene_cache_size=2, **STREAM
+    )
+    env.reset(seed=0)
+    rss = []
+    for step in range(60):  # a new scene for each env every other step: 60 scenes
+        env.step(np.array([0, 6]))
+        if step % 10 == 9:
+            rss.append(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
+    assert len(env._scene_cache) <= 2
+    # Peak resident memory (MiB) may grow while allocators warm up, then levels off.
+    assert rss[-1] - rss[1] < 40, rss
