@@ -13,13 +13,13 @@ camera fail the sign test), and the depth is that of the ray-plane intersection 
 
 A frame is made in four passes:
 
-1. vertices (split between the threads): camera-frame coordinates and an outcode per vertex,
-   one bit per side of the view volume it lies outside of;
+1. vertices (split between the threads): an outcode per vertex, one bit per side of the view
+   volume it lies outside of;
 2. setup (triangles split between the threads): triangles whose corners share an outcode bit
    (behind the camera, outside the image, entirely beyond the depth range) are dropped; the
-   others get their edge planes, inverse-depth plane and barycentric planes, all in pixel
-   units, and the image rows they can cover (corners clipped to ``z >= NEAR_PLANE_M`` and
-   projected), packed into a list;
+   others get their corners in the camera frame (float64) and from them their edge planes,
+   inverse-depth plane and barycentric planes, all in pixel units, and the image rows they
+   can cover (corners clipped to ``z >= NEAR_PLANE_M`` and projected), packed into a list;
 3. binning: which packed triangles touch each band of ``BAND_ROWS`` image rows;
 4. drawing (bands dealt out to the threads in turn): per row of a triangle, the span of
    columns where all three edge planes are non-negative (a bound per edge, from its plane),
@@ -73,8 +73,21 @@ def _store_plane(records, slot, offset, x, y, z, intrinsics):
     records[slot, offset + 2] = z - a * cx - b * cy
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _to_camera(vertices, index, rotation, origin):
+    """Camera-frame coordinates R^T (p - origin) of one vertex, in float64."""
+    dx = np.float64(vertices[index, 0]) - origin[0]
+    dy = np.float64(vertices[index, 1]) - origin[1]
+    dz = np.float64(vertices[index, 2]) - origin[2]
+    return (
+        rotation[0, 0] * dx + rotation[1, 0] * dy + rotation[2, 0] * dz,
+        rotation[0, 1] * dx + rotation[1, 1] * dy + rotation[2, 1] * dz,
+        rotation[0, 2] * dx + rotation[1, 2] * dy + rotation[2, 2] * dz,
+    )
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def transform_vertices(
+def vertex_outcodes(
     vertices: np.ndarray,
     first: int,
     stop: int,
@@ -84,59 +97,46 @@ def transform_vertices(
     width: int,
     height: int,
     far_cut: float,
-    camera_points: np.ndarray,
     outcodes: np.ndarray,
 ) -> None:
-    """Camera-frame coordinates and view-volume outcodes of vertices ``first .. stop - 1``.
+    """View-volume outcodes of vertices ``first .. stop - 1``.
 
     Args:
-        vertices: (V, 3) float64 world positions.
+        vertices: (V, 3) float32 world positions.
         first, stop: the range of vertices.
         rotation: (3, 3) float64 camera-to-world rotation; origin: (3,) float64 camera centre.
         intrinsics: float64 (fx, fy, cx, cy).
         width, height: image size in pixels.
         far_cut: the farthest z worth drawing.
-        camera_points: (V, 3) float64 output, R^T (p - origin).
         outcodes: (V,) uint8 output, one bit per side of the view volume the vertex lies
             outside of (left, right, top, bottom of the image with a pixel of margin, near
             plane, far cut). A triangle whose three corners share a bit cannot be seen.
     """
     fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
     for index in range(first, stop):
-        dx = vertices[index, 0] - origin[0]
-        dy = vertices[index, 1] - origin[1]
-        dz = vertices[index, 2] - origin[2]
-        x = rotation[0, 0] * dx + rotation[1, 0] * dy + rotation[2, 0] * dz
-        y = rotation[0, 1] * dx + rotation[1, 1] * dy + rotation[2, 1] * dz
-        z = rotation[0, 2] * dx + rotation[1, 2] * dy + rotation[2, 2] * dz
-        camera_points[index, 0] = x
-        camera_points[index, 1] = y
-        camera_points[index, 2] = z
+        x, y, z = _to_camera(vertices, index, rotation, origin)
         # Planes through the camera centre bounding u in [-1, width], v in [-1, height]; their
         # intersection lies in front of the camera, so sharing a bit means unseen.
-        code = 0
-        if fx * x + (cx + 1.0) * z < 0.0:
-            code |= 1
-        if (width - cx) * z - fx * x < 0.0:
-            code |= 2
-        if fy * y + (cy + 1.0) * z < 0.0:
-            code |= 4
-        if (height - cy) * z - fy * y < 0.0:
-            code |= 8
-        if z < NEAR_PLANE_M:
-            code |= 16
-        if z > far_cut:
-            code |= 32
-        outcodes[index] = code
+        # Sums of comparisons, not branches: which bits are set is unpredictable.
+        outcodes[index] = (
+            (fx * x + (cx + 1.0) * z < 0.0) * 1
+            + ((width - cx) * z - fx * x < 0.0) * 2
+            + (fy * y + (cy + 1.0) * z < 0.0) * 4
+            + ((height - cy) * z - fy * y < 0.0) * 8
+            + (z < NEAR_PLANE_M) * 16
+            + (z > far_cut) * 32
+        )
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def setup_triangles(
-    camera_points: np.ndarray,
+    vertices: np.ndarray,
     outcodes: np.ndarray,
     faces: np.ndarray,
     first: int,
     stop: int,
+    rotation: np.ndarray,
+    origin: np.ndarray,
     intrinsics: np.ndarray,
     width: int,
     height: int,
@@ -147,9 +147,10 @@ def setup_triangles(
     """Set up triangles ``first .. stop - 1``; pack the drawable ones from ``records[first]``.
 
     Args:
-        camera_points, outcodes: :func:`transform_vertices`'s output.
-        faces: (F, 3) int64 corner indices.
+        vertices: (V, 3) float32 world positions; outcodes: :func:`vertex_outcodes`'s output.
+        faces: (F, 3) int32 corner indices.
         first, stop: the range of triangles this call sets up.
+        rotation: (3, 3) float64 camera-to-world rotation; origin: (3,) float64 camera centre.
         intrinsics: float64 (fx, fy, cx, cy).
         width, height: image size in pixels.
         records: (F, 15) float64 output, laid out as described at ``_RECORD_FLOATS``.
@@ -166,14 +167,14 @@ def setup_triangles(
     ys = np.empty(3)
     zs = np.empty(3)
     for triangle in range(first, stop):
-        i0, i1, i2 = faces[triangle, 0], faces[triangle, 1], faces[triangle, 2]
-        if outcodes[i0] & outcodes[i1] & outcodes[i2]:
+        if outcodes[faces[triangle, 0]] & outcodes[faces[triangle, 1]] & (
+            outcodes[faces[triangle, 2]]
+        ):
             continue
         for corner in range(3):
-            index = faces[triangle, corner]
-            xs[corner] = camera_points[index, 0]
-            ys[corner] = camera_points[index, 1]
-            zs[corner] = camera_points[index, 2]
+            xs[corner], ys[corner], zs[corner] = _to_camera(
+                vertices, faces[triangle, corner], rotation, origin
+            )
         # Image bounding box of the part in front of the near plane: the corners there and the
         # points where edges cross it.
         u_min, u_max, v_min, v_max = np.inf, -np.inf, np.inf, -np.inf
@@ -470,12 +471,20 @@ class PinholeRasterizer:
         cy: float,
         threads: int | None = None,
     ) -> None:
-        self.vertices = np.asarray(vertices, dtype=np.float32).astype(np.float64)
-        self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float32)
+        faces = np.asarray(faces)
         if self.vertices.ndim != 2 or self.vertices.shape[1] != 3:
             raise ValueError(f"vertices must have shape (V, 3), got {self.vertices.shape}")
-        if self.faces.ndim != 2 or self.faces.shape[1] != 3 or len(self.faces) == 0:
-            raise ValueError(f"faces must have shape (F, 3) with F > 0, got {self.faces.shape}")
+        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+            raise ValueError(f"faces must have shape (F, 3) with F > 0, got {faces.shape}")
+        if faces.min() < 0 or faces.max() >= len(self.vertices):
+            raise ValueError(
+                f"faces index vertices 0 .. {len(self.vertices) - 1}, got indices from "
+                f"{faces.min()} to {faces.max()}"
+            )
+        if not np.isfinite(self.vertices).all():
+            raise ValueError("vertices must be finite (found NaN or inf coordinates)")
+        self.faces = np.ascontiguousarray(faces, dtype=np.int32)
         if width <= 0 or height <= 0 or fx <= 0 or fy <= 0:
             raise ValueError(
                 f"need a positive image size and focal lengths, got {width} x {height}, "
@@ -497,7 +506,6 @@ class PinholeRasterizer:
         if self._buffers is None:
             count = len(self.faces)
             self._buffers = (
-                np.empty((len(self.vertices), 3), np.float64),
                 np.empty(len(self.vertices), np.uint8),
                 np.empty((count, _RECORD_FLOATS), np.float64),
                 np.empty((count, 6), np.float64),
@@ -533,7 +541,7 @@ class PinholeRasterizer:
         rotation = np.ascontiguousarray(pose[:3, :3])
         origin = np.ascontiguousarray(pose[:3, 3])
         (
-            camera_points, outcodes, records, hit_planes, record_rows, inverse_depth, winners
+            outcodes, records, hit_planes, record_rows, inverse_depth, winners
         ) = self._scratch()
         max_depth = float(max_depth_m)
         # A triangle whose every corner lies beyond the range can only give depth-0 pixels.
@@ -546,19 +554,20 @@ class PinholeRasterizer:
 
         vertex_bounds = np.linspace(0, len(self.vertices), groups + 1).astype(np.int64)
 
-        def transform(group: int) -> None:
-            transform_vertices(
+        def classify(group: int) -> None:
+            vertex_outcodes(
                 self.vertices, vertex_bounds[group], vertex_bounds[group + 1], rotation, origin,
-                self.intrinsics, self.width, self.height, far_cut, camera_points, outcodes,
+                self.intrinsics, self.width, self.height, far_cut, outcodes,
             )
 
         def setup(group: int) -> int:
             return setup_triangles(
-                camera_points, outcodes, self.faces, bounds[group], bounds[group + 1],
-                self.intrinsics, self.width, self.height, records, hit_planes, record_rows,
+                self.vertices, outcodes, self.faces, bounds[group], bounds[group + 1], rotation,
+                origin, self.intrinsics, self.width, self.height, records, hit_planes,
+                record_rows,
             )
 
-        run_parallel(transform, groups)
+        run_parallel(classify, groups)
         counts = run_parallel(setup, groups)
         segments = np.stack([bounds[:-1], bounds[:-1] + np.asarray(counts, np.int64)], axis=1)
         band_count = -(-self.height // BAND_ROWS)
