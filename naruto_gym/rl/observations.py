@@ -324,3 +324,41 @@ class DropKeys(ObservationTransform):
         self, batch: dict[str, np.ndarray], envs: np.ndarray | None = None
     ) -> dict[str, np.ndarray]:
         return {key: value for key, value in batch.items() if key not in self.keys}
+
+
+class LearningObservation:
+    """Callable mapping one raw env observation to the learning observation of
+    :func:`naruto_gym.wrappers.for_learning` without the top-down map (resize, depth,
+    flat pose, panorama dropped): what a model trained on that chain is given at evaluation,
+    e.g. as ``SB3Policy(model, observation_transform=LearningObservation(64))``.
+
+    Args:
+        size: square frame side.
+        depth: ``"uint8"`` or ``"float"``.
+        max_depth_m: sensor range the depth was normalised by.
+    """
+
+    def __init__(self, size: int = 64, depth: DepthFormat = "uint8",
+                 max_depth_m: float = 10.0) -> None:
+        self.size = size
+        self.depth = depth
+        self.max_depth_m = max_depth_m
+        self._transforms: list[ObservationTransform] | None = None
+
+    def __call__(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        if self._transforms is None:
+            space = spaces.Dict({
+                key: spaces.Box(-np.inf, np.inf, np.shape(value), np.asarray(value).dtype)
+                for key, value in observation.items()
+            })
+            space = spaces.Dict({**space.spaces, "depth": spaces.Box(
+                0.0, self.max_depth_m, np.shape(observation["depth"]), np.float32)})
+            self._transforms = [ResizeTransform(self.size),
+                                DepthTransform(self.max_depth_m, self.depth), PoseTransform(),
+                                DropKeys(("panorama",))]
+            for transform in self._transforms:
+                space = transform.space(space)
+        batch = {key: np.asarray(value)[None] for key, value in observation.items()}
+        for transform in self._transforms:
+            batch = transform.apply(batch)
+        return {key: value[0] for key, value in batch.items()}

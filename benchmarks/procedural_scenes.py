@@ -1,0 +1,143 @@
+"""Per-episode procedural scenes: what a new scene costs at reset, and memory over a long run.
+
+1. Cost of one new scene, per kind (room, apartment) and coverage sample count: generating the
+   mesh, and building what the env needs of it (ray-casting structure, coverage samples and the
+   observable surface, which dominates), median over ``seeds`` seeds.
+2. Resident memory over ``steps`` steps of a ``NarutoReconVectorEnv`` on
+   ``"procedural:room"`` whose episodes last ``episode_steps`` steps, so every reset draws a
+   new scene; memory is sampled every ``sample_every`` steps and plotted.
+
+    flock /tmp/naruto_timing.lock python benchmarks/procedural_scenes.py
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from naruto_gym.cli_args import parse_dataclass_args
+from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
+from naruto_gym.scenes.procedural import make_random_scene
+from naruto_gym.scenes.stream import SPLIT_SEEDS
+from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.vector import NarutoReconVectorEnv
+
+CAMERA = PinholeCamera(64, 64, 32, 32, 31.5, 31.5)
+
+
+@dataclass
+class Args:
+    seeds: int = 5
+    """scenes timed per kind and sample count"""
+    steps: int = 10_000
+    """steps of the memory run"""
+    episode_steps: int = 50
+    """episode length of the memory run (a new scene at every reset)"""
+    coverage_samples: int = 5000
+    """coverage samples of the memory run"""
+    sample_every: int = 250
+    """steps between memory samples"""
+    output: str = "benchmarks/results/procedural_scenes.json"
+    """where the JSON (and the PNG beside it) go"""
+
+
+def resident_mib() -> float:
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def scene_costs(kind: str, samples: int, seeds: int) -> dict[str, Any]:
+    generate, build = [], []
+    low = SPLIT_SEEDS["train"][0]
+    for seed in range(low + 100, low + 100 + seeds):
+        started = time.perf_counter()
+        scene = make_random_scene(seed, kind)  # type: ignore[arg-type]
+        generated = time.perf_counter()
+        env = NarutoReconEnv(scene=scene, action_mode="discrete", camera=CAMERA,
+                             panorama_shape=None, coverage_samples=samples)
+        env.coverage  # noqa: B018 - builds the samples and the observable surface
+        env.reset(seed=0)
+        generate.append(generated - started)
+        build.append(time.perf_counter() - generated)
+    return {
+        "kind": kind, "coverage_samples": samples,
+        "generate_s": float(np.median(generate)), "build_s": float(np.median(build)),
+        "total_s": float(np.median(np.add(generate, build))),
+        "max_total_s": float(np.max(np.add(generate, build))),
+        "load": [round(v, 2) for v in os.getloadavg()],
+    }
+
+
+def memory_run(args: Args) -> dict[str, Any]:
+    from tqdm.auto import tqdm
+
+    env = NarutoReconVectorEnv(
+        1, scene="procedural:room", max_episode_steps=args.episode_steps, action_mode="discrete",
+        camera=CAMERA, panorama_shape=None, coverage_samples=args.coverage_samples,
+    )
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    names, steps, memory = set(), [], []
+    started = time.perf_counter()
+    for step in tqdm(range(1, args.steps + 1), desc="steps, new scene every reset"):
+        env.step(rng.integers(0, 10, 1))
+        names.add(env.scene_envs[0].scene.name)
+        if step % args.sample_every == 0:
+            steps.append(step)
+            memory.append(resident_mib())
+    elapsed = time.perf_counter() - started
+    return {
+        "steps": steps, "resident_mib": memory, "scenes": len(names), "seconds": elapsed,
+        "growth_after_first_quarter_mib": memory[-1] - memory[len(memory) // 4],
+        "load": [round(v, 2) for v in os.getloadavg()],
+    }
+
+
+def main(args: Args) -> dict[str, Any]:
+    results: dict[str, Any] = {"args": asdict(args), "load_start": os.getloadavg()}
+    print(f"load average at start: {results['load_start']}")
+    results["scene_costs"] = []
+    for kind in ("room", "apartment"):
+        for samples in (20_000, 5000):
+            row = scene_costs(kind, samples, args.seeds)
+            results["scene_costs"].append(row)
+            print(f"new {kind:9s} scene, {samples:5d} coverage samples: generate "
+                  f"{row['generate_s']:.3f} s + build {row['build_s']:.3f} s = "
+                  f"{row['total_s']:.3f} s median, {row['max_total_s']:.3f} s max "
+                  f"(load {row['load']})")
+    run = memory_run(args)
+    results["memory"] = run
+    print(f"{args.steps} steps, {run['scenes']} scenes in {run['seconds']:.0f} s: resident "
+          f"{run['resident_mib'][0]:.0f} -> {run['resident_mib'][-1]:.0f} MiB, growth after the "
+          f"first quarter {run['growth_after_first_quarter_mib']:.1f} MiB (load {run['load']})")
+    path = Path(args.output)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(results, indent=1))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(6, 3.5))
+    axis.plot(run["steps"], run["resident_mib"])
+    axis.set_xlabel("step (a new generated room every reset)")
+    axis.set_ylabel("resident memory (MiB)")
+    axis.set_ylim(bottom=0)
+    axis.set_title(f"procedural:room, episodes of {args.episode_steps} steps")
+    figure.tight_layout()
+    figure.savefig(path.with_suffix(".png"), dpi=120)
+    print(f"wrote {path} and {path.with_suffix('.png')}")
+    return results
+
+
+if __name__ == "__main__":
+    main(parse_dataclass_args(Args))

@@ -1,0 +1,1 @@
+"""Learned exploration policies for the harness (``naruto-benchmark``)."""
