@@ -107,9 +107,13 @@ class NarutoConfig:
             the map's measure of explored space.
         panorama_every: ... every n-th frame (5, the mapping cadence).
         goals_in_observed_space: candidate goals must lie in space the frames measured free.
+        initial_look_around: the first plan of an episode is a turn in place that looks all
+            around, so the first goal search sees the whole surrounding (the published agent
+            searches from its first view).
         seed: seed of the agent's randomness when ``reset`` gets none.
         recovery: stall detection and recovery (:class:`RecoveryConfig`).
-        goal_search: the goal search's settings.
+        goal_search: the goal search's settings (published, except a distance discount of
+            3 m: of two goals that see about as much, the nearer wins).
         planner: E-RRT settings (the time limit, 2 s, is shorter than the planning module's
             default 5 s: a CPU agent should not stall; the seed is redrawn every request).
         tsdf: settings of the TSDF mapper (``mapper="tsdf"``).
@@ -128,9 +132,12 @@ class NarutoConfig:
     use_panorama: bool = True
     panorama_every: int = 5
     goals_in_observed_space: bool = True
+    initial_look_around: bool = True
     seed: int = 0
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
-    goal_search: GoalSearchConfig = field(default_factory=GoalSearchConfig)
+    goal_search: GoalSearchConfig = field(
+        default_factory=lambda: GoalSearchConfig(distance_discount_m=3.0)
+    )
     planner: PlannerConfig = field(default_factory=lambda: PlannerConfig(time_limit_s=2.0))
     tsdf: TsdfMapperConfig = field(default_factory=TsdfMapperConfig)
     neural: NeuralMapperConfig = field(default_factory=NeuralMapperConfig)
@@ -404,6 +411,10 @@ class NarutoPolicy(Policy):
         sdf, uncertainty = self.sdf, self.uncertainty
         record: dict[str, Any] = {"frame": self._frame_index, "position": position.tolist()}
         self.plans.append(record)
+        if self.config.initial_look_around and len(self.plans) == 1:
+            record.update(outcome="initial look-around", path_nodes=1)
+            return Plan(position[None].copy(), self._look_around(position), position.copy(),
+                        {"recovery": "look_around"})
         if self.monitor.needs_recovery():
             return self._recover(position, record)
         prefix = position[None]
