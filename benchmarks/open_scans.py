@@ -79,6 +79,8 @@ class Args:
     """policies also run under escape_rule=published on the open scenes (subfolder)"""
     workers: int = 1
     """worker processes (0: in this process)"""
+    reconstruct: bool = False
+    """also fuse and score the reference TSDF map (completion ratio; about 5x slower)"""
     eval_points: int = 1
     """completion-ratio checkpoints per episode besides the final score"""
     out_dir: str = "benchmarks/results/open_scans"
@@ -113,7 +115,8 @@ def run_set(
         return 0
     specs = build_specs(
         scenes, policies, args.seeds, args.steps, image_scale=args.image_scale,
-        eval_points=args.eval_points, env_kwargs={"escape_rule": rule},
+        eval_points=args.eval_points, reconstruct=args.reconstruct,
+        env_kwargs={"escape_rule": rule},
     )
     todo = pending_specs(specs, out_dir)
     print(f"{out_dir}: {len(specs)} episodes, {len(todo)} to run, rule {rule}", flush=True)

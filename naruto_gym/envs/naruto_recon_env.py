@@ -112,13 +112,14 @@ class NarutoReconEnv(gym.Env):
       (0.05 m, 0.1 m, 20 degrees).
     * ``escape_rule``: how a move that would leave the scanned space is told apart
       (``collision_reason == "escape"``; see ``naruto_gym.motion.collision``):
-      ``"scanned_space"`` (default) refuses a move whose end has no scanned surface below it
-      (more than half of a 60-degree downward cone of rays hits nothing), lies behind a
-      surface, or is above the scan (above the height under which 99 % of its area lies,
-      plus 0.1 m). It needs no ceiling and no walls around, so real scans (no ceiling, holes,
-      missing walls) stay explorable, while walking off the scanned floor, out of a wall hole
-      or down a floor hole is refused. It is answered from a lattice (0.1 m) filled lazily
-      the first time a cell is visited: no extra ray cast per step afterwards.
+      ``"scanned_space"`` (default) refuses a move whose end does not see scanned surface
+      below it in every direction (each 45-degree sector of a 60-degree downward cone of
+      rays must hit something) or is above the scan (above the height under which 99 % of
+      its area lies, plus 0.1 m). It needs no ceiling and no walls around, so real scans (no
+      ceiling, holes, missing walls) stay explorable, while walking off the edge of the
+      scanned floor, out of a wall hole or down a floor hole is refused. It is answered from
+      a 5 cm lattice filled lazily where the agent goes: no extra ray cast per step once the
+      lattice around a place is known.
       ``"published"``: NARUTO's rule, refuse a move whose end sees more than
       ``escape_no_hit_threshold`` no-hit pixels on a whole-sphere panorama (right for closed
       meshes; it refuses moves anywhere in a room without a ceiling). ``"off"``: no check.

@@ -4,11 +4,11 @@ A move is checked along its whole segment against the ground-truth mesh (never a
 map), clipped to the scene bounds, and refused when it would leave the scanned space (an
 agent slipping out of a scan with holes). Two escape rules are available:
 
-* ``"scanned_space"`` (default): the end of the move must be supported by scanned surface
-  below it, not behind a surface and not above the scan
-  (:mod:`naruto_gym.motion.scanned_space`). It is answered from a lazily filled lattice, so
-  a step casts no extra ray once its cell has been visited, and it does not refuse moves in
-  a scan that merely lacks a ceiling.
+* ``"scanned_space"`` (default): the end of the move must see scanned surface below it in
+  every direction and must not be above the scan (:mod:`naruto_gym.motion.scanned_space`).
+  It is answered from a lazily filled lattice, so a step casts no extra ray once the
+  lattice around a place is known, and it does not refuse moves in a scan that merely lacks
+  a ceiling.
 * ``"published"``: NARUTO's rule, refuse a move whose end sees more than
   ``escape_no_hit_threshold`` (50 %) no-hit pixels on a whole-sphere panorama. It works on
   closed meshes; without a ceiling half of every panorama is empty, so it refuses moves
@@ -141,12 +141,13 @@ class CollisionChecker:
     def inside_bounds(self, position: np.ndarray) -> bool:
         return bool(np.all(position >= self.box_min) and np.all(position <= self.box_max))
 
-    def sees_escape(self, position: np.ndarray) -> bool:
-        """True when ``position`` lies outside the scanned space under the escape rule."""
+    def sees_escape(self, position: np.ndarray, clearance_m: float | None = None) -> bool:
+        """True when ``position`` lies outside the scanned space under the escape rule
+        (``clearance_m``: its distance to the nearest surface, when known)."""
         if self.escape_rule == "off":
             return False
         if self.escape_rule == "scanned_space":
-            return not self.scanned_space.contains(position)
+            return not self.scanned_space.contains(position, clearance_m)
         panorama = render_panorama(self.raycaster, self.escape_panorama, position)
         return no_hit_share(panorama) > self.escape_no_hit_threshold
 
@@ -154,16 +155,18 @@ class CollisionChecker:
         """Whether the escape rule refuses a move from ``start`` to ``end``.
 
         Under the scanned-space rule an agent that is already outside (an exact start pose
-        put it there) may still move, as long as it goes no further out: no less support
-        below and no higher above the scan. It is never trapped where it was placed.
+        put it there) may still move, as long as it goes no further out: no more empty
+        support sectors below (then no more support rays missing, then no farther from the
+        surface below), and no higher above the scan. It is never trapped where it was placed.
         """
-        if not self.sees_escape(end):
+        clearance = self.clearance(end) if self.escape_rule == "scanned_space" else None
+        if not self.sees_escape(end, clearance):
             return False
         if self.escape_rule != "scanned_space" or not self.sees_escape(start):
             return True
         space = self.scanned_space
         return not (
-            space.unsupported_share(end) <= space.unsupported_share(start) + 1e-9
+            space.outside_degree(end) <= space.outside_degree(start)
             and end[2] <= max(start[2], space.top_m)
         )
 

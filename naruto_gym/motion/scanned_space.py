@@ -3,31 +3,36 @@
 Real scans are open: no ceiling, holes in the floor, walls missing. Judging "inside" by the
 share of a whole panorama that hits nothing (the published rule, 50 %) fails on them: without a
 ceiling half of every panorama is empty, wherever the agent stands. This module judges a point
-from below and by what faces it:
+from below:
 
-* **supported**: at most ``max_unsupported_share`` (50 %) of the rays of a downward cone
-  (``support_half_angle_deg`` = 60 degrees around straight down, uniform in solid angle) hit
-  nothing. There is scanned surface under the point: a floor, or furniture, or, within the
-  cone's reach, the walls. Over a missing ceiling nothing changes; over a hole in the floor
-  the cone still sees the floor around the hole unless the point sinks into the hole; past a
-  missing wall or out of a wall hole the floor ends, and so does the support.
-* **not behind a surface**: at least ``min_front_facing_share`` (90 %) of the surfaces that a
-  probe of rays in all directions hits face the point. Points inside solids, behind a
-  single-sided scanned wall or under a scanned floor see the back of the surface.
+* **supported**: every azimuth sector (``support_sectors`` = 8, of 45 degrees) of a downward
+  cone (``support_half_angle_deg`` = 60 degrees around straight down) sees scanned surface:
+  floor, furniture or walls. Over a missing ceiling nothing changes. Over a hole in the floor
+  the cone's outer rays still find the floor all around, unless the point sinks into the
+  hole (lower than about 0.6 x the hole's half width). Past the edge of the scanned floor (a
+  missing wall, a wall hole, a partial scan) the sectors that look away from the floor see
+  nothing, however high the point is: the test flips at the edge itself, to within the
+  steepest ring of rays (2 degrees, 5 cm at 1.5 m). Under a single-sided scanned floor
+  nothing is below either.
 * **not above the scan**: the point is at most ``top_margin_m`` above the height under which
   ``top_quantile`` (99 %) of the scan's surface area lies. Stray fragments far above a room
   without a ceiling widen its bounds, but carry almost no area, so they do not raise this.
 
 Walls all around are deliberately not required: partial scans lack them, and a scan of a floor
-with a few objects (the habitat-sim sample room) has none at all.
+with a few objects (the habitat-sim sample room) has none at all. Neither test reads triangle
+orientation, so meshes with flipped normals (common in CAD-made scenes) are judged like any
+other. Start poses and viewpoints, drawn once, also reject points inside solids by the
+published free-space test's facing criterion (:meth:`ScannedSpace.is_inside`).
 
-Evaluating a point casts about a hundred rays, too many to repeat at every step of a fast env.
-:class:`ScannedSpace` therefore evaluates the corners of a voxel lattice (``voxel_m`` = 0.1 m)
-once, lazily, the first time a move ends in a cell, and answers later queries by trilinear
-interpolation of the unsupported share over the cell's corners that are not behind a surface.
-Nothing is precomputed at load (an RL env may draw a new scene at every reset), and after the
-first visit of a cell a query casts no ray; :meth:`ScannedSpace.fill` evaluates the whole
-lattice at once when a complete map is wanted.
+Evaluating a point casts 112 rays, too many to repeat at every step of a fast env.
+:class:`ScannedSpace` therefore evaluates the corners of a lattice (``voxel_m`` = 5 cm) once,
+lazily, the first time a query needs them, and answers a query from the corners of its cell
+that lie within its clearance (the ball around it that no surface enters, so no wall
+separates them from it): all must be supported. The agent keeps at least its radius (5 cm)
+from every surface, which is more than half a cell's diagonal (4.3 cm), so some corner always
+qualifies. Nothing is precomputed at load (an RL env may draw a new scene at every reset),
+and once the corners around a place are known a query casts no ray;
+:meth:`ScannedSpace.fill` evaluates the whole lattice when a complete map is wanted.
 """
 
 from __future__ import annotations
@@ -49,20 +54,25 @@ class ScannedSpaceConfig:
     Attributes:
         voxel_m: lattice spacing of the cached evaluations.
         support_half_angle_deg: half angle of the downward support cone.
-        support_rays: rays in the support cone.
+        support_sectors: azimuth sectors of the cone that must each see surface.
+        support_rings: rings of rays in the cone, from 2 degrees off straight down to the
+            half angle, denser near the axis (where they place the floor's edge).
+        rays_per_sector: rays of each ring in each sector.
+        max_empty_sectors: sectors that may see nothing (0: all must see surface).
         facing_rays: rays over the whole sphere for the facing test.
-        max_unsupported_share: largest share of support rays that may hit nothing.
         min_front_facing_share: smallest share of hit surfaces that must face the point.
         top_quantile: the scan's top is the height under which this share of its area lies.
         top_margin_m: how far above that top a point may still be.
         top_samples: surface samples used to find the top.
     """
 
-    voxel_m: float = 0.1
+    voxel_m: float = 0.05
     support_half_angle_deg: float = 60.0
-    support_rays: int = 48
+    support_sectors: int = 8
+    support_rings: int = 7
+    rays_per_sector: int = 2
+    max_empty_sectors: int = 0
     facing_rays: int = 64
-    max_unsupported_share: float = 0.5
     min_front_facing_share: float = 0.9
     top_quantile: float = 0.99
     top_margin_m: float = 0.1
@@ -71,15 +81,18 @@ class ScannedSpaceConfig:
     def __post_init__(self) -> None:
         if self.voxel_m <= 0:
             raise ValueError(f"voxel_m must be positive, got {self.voxel_m}")
-        if not 0 < self.support_half_angle_deg <= 90:
+        if not 2 < self.support_half_angle_deg <= 90:
             raise ValueError(
-                f"support_half_angle_deg must be in (0, 90], got {self.support_half_angle_deg}"
+                f"support_half_angle_deg must be in (2, 90], got {self.support_half_angle_deg}"
             )
-        if self.support_rays < 1 or self.facing_rays < 1:
-            raise ValueError("support_rays and facing_rays must be at least 1")
-        if not 0 <= self.max_unsupported_share < 1:
+        if min(self.support_sectors, self.support_rings, self.rays_per_sector,
+               self.facing_rays) < 1:
             raise ValueError(
-                f"max_unsupported_share must be in [0, 1), got {self.max_unsupported_share}"
+                "support_sectors, support_rings, rays_per_sector and facing_rays must be >= 1"
+            )
+        if not 0 <= self.max_empty_sectors < self.support_sectors:
+            raise ValueError(
+                f"max_empty_sectors must be in [0, support_sectors), got {self.max_empty_sectors}"
             )
         if not 0 <= self.min_front_facing_share <= 1:
             raise ValueError(
@@ -87,6 +100,32 @@ class ScannedSpaceConfig:
             )
         if not 0 < self.top_quantile <= 1:
             raise ValueError(f"top_quantile must be in (0, 1], got {self.top_quantile}")
+
+
+_STEEPEST_RING_DEG = 2.0
+
+
+def support_directions(config: ScannedSpaceConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The downward cone's rays: (R, 3) float32 unit directions and (R,) sector indices.
+
+    Rings from 2 degrees off straight down to the half angle, spaced as the 1.5th power
+    (denser near the axis); in every ring ``rays_per_sector`` rays per azimuth sector, spread
+    evenly inside it. Deterministic.
+    """
+    rings = config.support_rings
+    steps = np.linspace(0.0, 1.0, rings) if rings > 1 else np.ones(1)
+    polar = np.deg2rad(
+        _STEEPEST_RING_DEG + (config.support_half_angle_deg - _STEEPEST_RING_DEG) * steps**1.5
+    )
+    per_ring = config.support_sectors * config.rays_per_sector
+    azimuth = 2.0 * np.pi * (np.arange(per_ring) + 0.5) / per_ring
+    polar, azimuth = np.meshgrid(polar, azimuth, indexing="ij")
+    directions = np.stack(
+        [np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), -np.cos(polar)],
+        axis=-1,
+    ).reshape(-1, 3)
+    sectors = np.tile(np.arange(per_ring) // config.rays_per_sector, rings)
+    return directions.astype(np.float32), sectors
 
 
 def cap_directions(count: int, half_angle_deg: float, axis: np.ndarray) -> np.ndarray:
@@ -146,13 +185,12 @@ class ScannedSpace:
         # axis-aligned floor or wall at the bounds (a ray from there is ambiguous).
         self.origin = bounds[0] - 0.5 * voxel
         self.shape = tuple(int(n) for n in np.ceil((bounds[1] - self.origin) / voxel) + 1)
-        self._unsupported = np.full(self.shape, np.nan, np.float32)
-        self._behind = np.zeros(self.shape, bool)
-        self.support_directions = cap_directions(
-            self.config.support_rays, self.config.support_half_angle_deg, np.array([0, 0, -1.0])
+        # Per corner: -1 not evaluated yet, else the number of empty support sectors.
+        self._empty = np.full(self.shape, -1, np.int8)
+        self.support_directions, self._sectors = support_directions(self.config)
+        self.facing_directions = cap_directions(
+            self.config.facing_rays, 180.0, np.array([0, 0, 1.0])
         )
-        facing = cap_directions(self.config.facing_rays, 180.0, np.array([0, 0, 1.0]))
-        self._directions = np.concatenate([self.support_directions, facing])
 
     @cached_property
     def top_m(self) -> float:
@@ -167,35 +205,56 @@ class ScannedSpace:
 
     # -- exact evaluation ----------------------------------------------------------------
     def probe(self, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Exact (unsupported share, behind a surface) of (N, 3) points; casts N x ~112 rays."""
+        """Support below (N, 3) points, casting N x ``support rays`` rays in one call.
+
+        Returns:
+            empty support sectors (N,) int, and how far the scan is below: (N, 2) float,
+            the share of support rays that hit nothing and the distance of their nearest hit
+            (inf for none).
+        """
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
-        count, rays = len(positions), len(self._directions)
+        count, rays = len(positions), len(self.support_directions)
         origins = np.repeat(positions.astype(np.float32), rays, axis=0)
-        directions = np.tile(self._directions, (count, 1))
-        hits = self.raycaster.cast(origins, directions)
+        hits = self.raycaster.cast(origins, np.tile(self.support_directions, (count, 1)))
         hit = hits.hit_mask.reshape(count, rays)
-        support = self.config.support_rays
-        unsupported = 1.0 - hit[:, :support].mean(axis=1)
-        normals = self.face_normals[np.where(hits.triangle_ids >= 0, hits.triangle_ids, 0)]
-        facing = (np.einsum("ij,ij->i", normals, directions) < 0).reshape(count, rays) & hit
-        hit_count = hit.sum(axis=1)
-        front_share = facing.sum(axis=1) / np.maximum(hit_count, 1)
-        behind = (hit_count > 0) & (front_share < self.config.min_front_facing_share)
-        return unsupported, behind
+        seen = np.zeros((count, self.config.support_sectors), bool)
+        for sector in range(self.config.support_sectors):
+            seen[:, sector] = hit[:, self._sectors == sector].any(axis=1)
+        empty = self.config.support_sectors - seen.sum(axis=1)
+        missed = 1.0 - hit.mean(axis=1)
+        nearest = hits.distance.reshape(count, rays).min(axis=1)
+        return empty, np.stack([missed, nearest], axis=1)
+
+    def front_facing_share(self, position: np.ndarray) -> float:
+        """Share of the surfaces seen all around ``position`` that face it (1 when none)."""
+        directions = self.facing_directions
+        hits = self.raycaster.cast(np.asarray(position, np.float32), directions)
+        hit = hits.hit_mask
+        if not hit.any():
+            return 1.0
+        normals = self.face_normals[hits.triangle_ids[hit]]
+        return float(np.mean(np.einsum("ij,ij->i", normals, directions[hit]) < 0))
 
     def evaluate(self, positions: np.ndarray) -> np.ndarray:
-        """Exact inside mask of (N, 3) points (casts rays; use :meth:`contains` per step)."""
+        """Exact support and height test of (N, 3) points (casts rays; per step use
+        :meth:`contains`)."""
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
-        unsupported, behind = self.probe(positions)
-        return (
-            ~behind
-            & (unsupported <= self.config.max_unsupported_share)
-            & (positions[:, 2] <= self.top_m)
-        )
+        empty, _ = self.probe(positions)
+        return (empty <= self.config.max_empty_sectors) & (positions[:, 2] <= self.top_m)
 
     def is_inside(self, position: np.ndarray) -> bool:
-        """Exact test of one point (for start poses and viewpoints, drawn rarely)."""
-        return bool(self.evaluate(position)[0])
+        """Exact test of one point for start poses and viewpoints: supported, not above the
+        scan, and not behind a surface (at least ``min_front_facing_share`` of what it sees
+        faces it, which rejects points inside solids)."""
+        if not self.evaluate(position)[0]:
+            return False
+        return self.front_facing_share(position) >= self.config.min_front_facing_share
+
+    def outside_degree(self, position: np.ndarray) -> tuple[int, float, float]:
+        """How far out ``position`` is, exactly, for comparing two points: (empty support
+        sectors, share of support rays hitting nothing, distance of their nearest hit)."""
+        empty, below = self.probe(position)
+        return (int(empty[0]), float(below[0, 0]), float(below[0, 1]))
 
     # -- cached lattice ------------------------------------------------------------------
     def _corner_points(self, index: np.ndarray) -> np.ndarray:
@@ -203,53 +262,55 @@ class ScannedSpace:
 
     def _ensure(self, index: np.ndarray) -> None:
         """Evaluate the lattice corners (K, 3) not evaluated yet."""
-        unknown = np.isnan(self._unsupported[tuple(index.T)])
+        unknown = self._empty[tuple(index.T)] < 0
         if unknown.any():
             todo = np.unique(index[unknown], axis=0)
-            unsupported, behind = self.probe(self._corner_points(todo))
-            self._unsupported[tuple(todo.T)] = unsupported
-            self._behind[tuple(todo.T)] = behind
+            self._empty[tuple(todo.T)] = self.probe(self._corner_points(todo))[0]
 
     def fill(self, batch: int = 4096) -> None:
         """Evaluate every lattice corner now (for maps and statistics; the env never needs it)."""
-        todo = np.argwhere(np.isnan(self._unsupported))
+        todo = np.argwhere(self._empty < 0)
         for start in range(0, len(todo), batch):
             self._ensure(todo[start : start + batch])
 
     @property
     def evaluated_share(self) -> float:
         """Share of the lattice corners evaluated so far."""
-        return float(np.mean(~np.isnan(self._unsupported)))
+        return float(np.mean(self._empty >= 0))
 
-    def unsupported_share(self, position: np.ndarray) -> float:
-        """Unsupported share at ``position``, interpolated over the usable corners of its cell.
+    def corner_support(self) -> np.ndarray:
+        """(X, Y, Z) bool grid: the lattice corners evaluated and supported so far."""
+        return (self._empty >= 0) & (self._empty <= self.config.max_empty_sectors)
 
-        Corners behind a surface (inside a wall, under a floor) do not count; when all eight
-        are, the point itself is evaluated exactly (inf when it is behind a surface too).
+    def contains(self, position: np.ndarray, clearance_m: float | None = None) -> bool:
+        """Whether ``position`` is in the scanned space, from its lattice cell.
+
+        The corners of its cell closer to it than its clearance (the free ball around it, so
+        nothing separates them from it: never a corner inside a wall or behind it) must all
+        be supported, and the point must not be above the scan. When no corner is that close
+        (a point nearer to a surface than half a voxel diagonal), the point itself is
+        evaluated. Casts rays only for a cell's first query.
+
+        Args:
+            position: (3,) point.
+            clearance_m: its distance to the nearest surface, when the caller knows it
+                (otherwise one distance query).
         """
-        position = np.asarray(position, np.float64)
-        scaled = (position - self.origin) / self.config.voxel_m
-        low = np.clip(np.floor(scaled).astype(np.int64), 0, np.array(self.shape) - 2)
-        t = np.clip(scaled - low, 0.0, 1.0)
-        offsets = _CELL_OFFSETS
-        corners = low + offsets
-        self._ensure(corners)
-        key = tuple(corners.T)
-        weights = np.prod(np.where(offsets == 1, t, 1.0 - t), axis=1)
-        usable = ~self._behind[key]
-        total = float(weights[usable].sum())
-        if total <= 1e-9:
-            unsupported, behind = self.probe(position)
-            return float("inf") if behind[0] else float(unsupported[0])
-        return float(weights[usable] @ self._unsupported[key][usable] / total)
-
-    def contains(self, position: np.ndarray) -> bool:
-        """Whether ``position`` is in the scanned space (lattice lookup; casts rays only in a
-        cell visited for the first time)."""
         position = np.asarray(position, np.float64)
         if position[2] > self.top_m:
             return False
-        return self.unsupported_share(position) <= self.config.max_unsupported_share
+        scaled = (position - self.origin) / self.config.voxel_m
+        low = np.clip(np.floor(scaled).astype(np.int64), 0, np.array(self.shape) - 2)
+        corners = low + _CELL_OFFSETS
+        if clearance_m is None:
+            clearance_m = float(self.raycaster.unsigned_distance(position[None])[0])
+        offsets = self._corner_points(corners) - position
+        usable = np.einsum("ij,ij->i", offsets, offsets) < clearance_m**2
+        if not usable.any():
+            return bool(self.evaluate(position)[0])
+        corners = corners[usable]
+        self._ensure(corners)
+        return bool(np.all(self._empty[tuple(corners.T)] <= self.config.max_empty_sectors))
 
     def contains_many(self, positions: np.ndarray) -> np.ndarray:
         """:meth:`contains` for (N, 3) points."""

@@ -8,6 +8,8 @@ index for textured triangles, so that the colour of a ray hit is one barycentric
 
 from __future__ import annotations
 
+import logging
+import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -16,7 +18,7 @@ from typing import Literal
 import numpy as np
 import trimesh
 
-UpAxis = Literal["z", "y", "-y", "x"]
+UpAxis = Literal["z", "y", "-y", "x", "-x", "-z", "auto"]
 
 # Rotations taking each stored up axis to +z (proper rotations, det = +1).
 _UP_AXIS_TO_Z: dict[str, np.ndarray] = {
@@ -24,7 +26,15 @@ _UP_AXIS_TO_Z: dict[str, np.ndarray] = {
     "y": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
     "-y": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),
     "x": np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),
+    "-x": np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]),
+    "-z": np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]),
 }
+
+# File layouts whose up axis is fixed by the dataset (``up_axis="auto"``).
+_SCANNET_MESH = re.compile(r"^scene\d{4}_\d{2}_vh_clean(_2)?\.ply$")
+_REPLICA_SIBLINGS = ("habitat", "textures")
+
+_LOG = logging.getLogger(__name__)
 
 DEFAULT_SURFACE_RGB = (180, 180, 180)
 
@@ -228,18 +238,45 @@ def scene_from_trimesh(
     )
 
 
+def dataset_up_axis(path: str | Path) -> str:
+    """The up axis fixed by a recognised dataset layout (what ``up_axis="auto"`` uses).
+
+    Recognised: ScanNet (``sceneXXXX_XX_vh_clean_2.ply`` or ``..._vh_clean.ply``, z-up) and
+    Replica (``mesh.ply`` beside its ``habitat/`` or ``textures/`` folder, z-up). Nothing else
+    is guessed: glTF files are y-up by the glTF specification, but MP3D/HM3D exports differ
+    and habitat-sim's own test files are z-up.
+
+    Raises:
+        ValueError: the layout is not recognised (the message says what to pass).
+    """
+    path = Path(path)
+    if _SCANNET_MESH.match(path.name):
+        return "z"
+    if path.name == "mesh.ply" and any((path.parent / d).is_dir() for d in _REPLICA_SIBLINGS):
+        return "z"
+    raise ValueError(
+        f"up_axis='auto' does not recognise the layout of {str(path)!r} (it knows ScanNet "
+        "sceneXXXX_XX_vh_clean_2.ply and Replica mesh.ply with habitat/ or textures/ beside "
+        "it); pass the axis that points up in the file: up_axis='z' for ScanNet, Replica and "
+        "most PLY scans, 'y' for y-up glTF/GLB files such as MP3D/HM3D exports and SceneNet "
+        "(habitat-sim's test .glb files are z-up)"
+    )
+
+
 def load_scene(path: str | Path, up_axis: UpAxis = "z", name: str | None = None) -> Scene:
     """Load a triangle mesh file (PLY, OBJ, GLB/glTF, ...) as a z-up :class:`Scene`.
 
     Args:
         path: mesh file in metres.
         up_axis: the axis that points up in the file (``"y"`` for most glTF and SceneNet
-            files); it is rotated to +z. Never guessed.
+            files); it is rotated to +z. Never guessed: ``"auto"`` only reads it from a
+            recognised dataset layout (see :func:`dataset_up_axis`) and raises otherwise.
         name: display name, defaults to the file stem.
 
     Raises:
         FileNotFoundError: the file does not exist.
-        ValueError: the file cannot be read as a mesh, or holds no triangles.
+        ValueError: the file cannot be read as a mesh, or holds no triangles, or
+            ``up_axis="auto"`` does not recognise its layout.
     """
     path = Path(path).expanduser()
     if not path.is_file():
@@ -247,6 +284,9 @@ def load_scene(path: str | Path, up_axis: UpAxis = "z", name: str | None = None)
             f"scene file {str(path)!r} does not exist; pass a mesh path or a catalogue name "
             "(see naruto_gym.scenes.available_scenes())"
         )
+    if up_axis == "auto":
+        up_axis = dataset_up_axis(path)  # type: ignore[assignment]
+        _LOG.info("%s: up axis %s from its dataset layout", path, up_axis)
     try:
         geometry = trimesh.load(path, force="scene", process=False)
     except Exception as error:  # trimesh raises many types for broken files
