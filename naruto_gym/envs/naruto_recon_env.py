@@ -102,7 +102,9 @@ class NarutoReconEnv(gym.Env):
     ## Arguments
     * ``scene``: a catalogue name (see ``naruto_gym.scenes.available_scenes()``), a mesh path
       (PLY/OBJ/GLB/glTF) or a ``Scene``. Default: the shipped ``"replica_like_room"``.
-    * ``up_axis``: the up axis of a mesh file (``"z"`` or ``"y"``), rotated to +z.
+    * ``up_axis``: the up axis of a mesh file (``"z"``, ``"y"``, ``"-y"``, ``"x"``, ``"-x"``,
+      ``"-z"``), rotated to +z; ``"auto"`` reads it from a recognised dataset layout (ScanNet
+      ``*_vh_clean_2.ply``, Replica ``mesh.ply`` beside ``textures/``) and raises otherwise.
     * ``action_mode``: ``"pose"``, ``"delta"`` or ``"discrete"``.
     * ``camera``: ``PinholeCamera`` intrinsics (default 680 x 1200, fx = fy = 600).
     * ``image_scale``: resolution factor applied to ``camera`` (0.25 gives 170 x 300).
