@@ -12,7 +12,7 @@ Writes under ``run_dir``: checkpoints every ``checkpoint_every`` steps, ``final_
 rollout), and TensorBoard logs when ``tensorboard`` is installed. Evaluate with
 ``naruto-benchmark`` (see ``naruto_agent/rl/ppo_policy.py``).
 
-    nice -n 19 python benchmarks/train_ppo.py --total-timesteps 200000
+    nice -n 19 python benchmarks/train_ppo.py --total-timesteps 1000000 --max-hours 1
     python benchmarks/train_ppo.py --total-timesteps 2048 --num-envs 4   # smoke run
 """
 
@@ -73,6 +73,8 @@ class Args:
     """torch threads (the envs use the other core)"""
     checkpoint_every: int = 50_000
     """env steps between checkpoints"""
+    max_hours: float | None = None
+    """stop after this much wall-clock time (at the end of a rollout), whatever the steps"""
     run_dir: str = "runs/ppo"
     """output folder"""
 
@@ -125,6 +127,17 @@ class CoverageCurve(BaseCallback):
         figure.savefig(self.path.with_suffix(".png"), dpi=120)
 
 
+class WallClockBudget(BaseCallback):
+    """Stops training once ``hours`` of wall-clock time have passed (checked every step)."""
+
+    def __init__(self, hours: float) -> None:
+        super().__init__()
+        self.deadline = time.perf_counter() + hours * 3600
+
+    def _on_step(self) -> bool:
+        return time.perf_counter() < self.deadline
+
+
 class ProgressBar(BaseCallback):
     """A tqdm bar over the env steps."""
 
@@ -163,7 +176,10 @@ def main(args: Args) -> dict[str, Any]:
     checkpoints = CheckpointCallback(max(args.checkpoint_every // args.num_envs, 1),
                                      str(run_dir / "checkpoints"), name_prefix="ppo")
     started = time.perf_counter()
-    model.learn(args.total_timesteps, callback=CallbackList([curve, checkpoints, ProgressBar()]))
+    callbacks = [curve, checkpoints, ProgressBar()]
+    if args.max_hours is not None:
+        callbacks.append(WallClockBudget(args.max_hours))
+    model.learn(args.total_timesteps, callback=CallbackList(callbacks))
     hours = (time.perf_counter() - started) / 3600
     model.save(run_dir / "final_model.zip")
     curve.plot()

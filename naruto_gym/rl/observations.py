@@ -171,7 +171,8 @@ def _accumulate_map(
     the hit stands ``obstacle_m`` above the lowest hit so far (the floor estimate)."""
     height, width = depth.shape
     fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
-    lowest = floor[0]
+    points = np.empty((((height + stride - 1) // stride) * ((width + stride - 1) // stride), 3))
+    count = 0
     for v in range(0, height, stride):
         for u in range(0, width, stride):
             d = depth[v, u]
@@ -179,28 +180,20 @@ def _accumulate_map(
                 continue
             x = (u - cx) / fx * d
             y = (v - cy) / fy * d
-            wz = pose[2, 0] * x + pose[2, 1] * y + pose[2, 2] * d + pose[2, 3]
-            if wz < lowest:
-                lowest = wz
-    floor[0] = lowest
+            for axis in range(3):
+                points[count, axis] = (pose[axis, 0] * x + pose[axis, 1] * y
+                                       + pose[axis, 2] * d + pose[axis, 3])
+            floor[0] = min(floor[0], points[count, 2])
+            count += 1
     rows, columns = grid.shape[1], grid.shape[2]
-    for v in range(0, height, stride):
-        for u in range(0, width, stride):
-            d = depth[v, u]
-            if d <= 0:
-                continue
-            x = (u - cx) / fx * d
-            y = (v - cy) / fy * d
-            wx = pose[0, 0] * x + pose[0, 1] * y + pose[0, 2] * d + pose[0, 3]
-            wy = pose[1, 0] * x + pose[1, 1] * y + pose[1, 2] * d + pose[1, 3]
-            wz = pose[2, 0] * x + pose[2, 1] * y + pose[2, 2] * d + pose[2, 3]
-            i = int(np.floor((wx - origin_x) / cell_m))
-            j = int(np.floor((wy - origin_y) / cell_m))
-            if i < 0 or j < 0 or i >= rows or j >= columns:
-                continue
-            grid[MAP_SEEN, i, j] = 255
-            if wz > lowest + obstacle_m:
-                grid[MAP_OCCUPIED, i, j] = 255
+    for k in range(count):
+        i = int(np.floor((points[k, 0] - origin_x) / cell_m))
+        j = int(np.floor((points[k, 1] - origin_y) / cell_m))
+        if i < 0 or j < 0 or i >= rows or j >= columns:
+            continue
+        grid[MAP_SEEN, i, j] = 255
+        if points[k, 2] > floor[0] + obstacle_m:
+            grid[MAP_OCCUPIED, i, j] = 255
 
 
 @numba.njit(cache=True, nogil=True)
