@@ -26,6 +26,7 @@ import numpy as np
 
 from naruto_gym.motion.scanned_space import ScannedSpace, ScannedSpaceConfig
 from naruto_gym.observability import is_inside_free_space
+from naruto_gym.scenes.mesh_scene import face_normals_of
 from naruto_gym.sensors.panorama import EquirectangularCamera, no_hit_share, render_panorama
 from naruto_gym.sensors.raycaster import RayCaster
 
@@ -60,13 +61,6 @@ def segment_fraction_inside_box(
         elif delta[axis] < 0 and end[axis] < box_min[axis]:
             fraction = min(fraction, (box_min[axis] - start[axis]) / delta[axis])
     return float(np.clip(fraction, 0.0, 1.0))
-
-
-def face_normals_of(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(F, 3) unit triangle normals by the right-hand rule of each face's corners."""
-    triangles = np.asarray(vertices, np.float64)[np.asarray(faces)]
-    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-20)
 
 
 class CollisionChecker:

@@ -39,6 +39,13 @@ _LOG = logging.getLogger(__name__)
 DEFAULT_SURFACE_RGB = (180, 180, 180)
 
 
+def face_normals_of(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 3) unit triangle normals by the right-hand rule of each face's corners."""
+    triangles = np.asarray(vertices, np.float64)[np.asarray(faces)]
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-20)
+
+
 @dataclass
 class Scene:
     """An indoor triangle mesh, z-up, metres.
@@ -86,10 +93,7 @@ class Scene:
     @cached_property
     def face_normals(self) -> np.ndarray:
         """(F, 3) unit triangle normals by the right-hand rule of each face's corners."""
-        triangles = self.vertices[self.faces]
-        normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-        length = np.linalg.norm(normals, axis=1, keepdims=True)
-        return normals / np.maximum(length, 1e-20)
+        return face_normals_of(self.vertices, self.faces)
 
     def to_trimesh(self) -> trimesh.Trimesh:
         """A plain trimesh copy with per-vertex colours (corner colours averaged)."""

@@ -6,13 +6,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from naruto_gym.motion.collision import CollisionChecker, face_normals_of
+from naruto_gym.motion.collision import CollisionChecker
 from naruto_gym.motion.scanned_space import (
     ScannedSpace,
     ScannedSpaceConfig,
     cap_directions,
     surface_top,
 )
+from naruto_gym.scenes.mesh_scene import face_normals_of
 from naruto_gym.sensors.panorama import EquirectangularCamera, no_hit_share, render_panorama
 from naruto_gym.sensors.raycaster import RayCaster
 
