@@ -340,10 +340,7 @@ class LearningObservation:
 
     def __call__(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         if self._transforms is None:
-            space = spaces.Dict({
-                key: spaces.Box(-np.inf, np.inf, np.shape(value), np.asarray(value).dtype)
-                for key, value in observation.items()
-            })
+            space = spaces.Dict({key: _box_like(value) for key, value in observation.items()})
             space = spaces.Dict({**space.spaces, "depth": spaces.Box(
                 0.0, self.max_depth_m, np.shape(observation["depth"]), np.float32)})
             self._transforms = [ResizeTransform(self.size),
@@ -355,3 +352,11 @@ class LearningObservation:
         for transform in self._transforms:
             batch = transform.apply(batch)
         return {key: value[0] for key, value in batch.items()}
+
+
+def _box_like(value: np.ndarray) -> spaces.Box:
+    """An unbounded box (0..255 for uint8) of ``value``'s shape and dtype."""
+    value = np.asarray(value)
+    if value.dtype == np.uint8:
+        return spaces.Box(0, 255, value.shape, np.uint8)
+    return spaces.Box(-np.inf, np.inf, value.shape, value.dtype)

@@ -55,3 +55,25 @@ def test_ppo_learns_a_few_updates_with_the_features_extractor(tmp_path):
 def test_adapter_refuses_next_step_autoreset():
     with pytest.raises(ValueError, match="SAME_STEP"):
         Sb3VecEnv(NarutoReconVectorEnv(1, action_mode="discrete", **SETTINGS))
+
+
+def test_saved_model_acts_as_a_harness_policy(tmp_path):
+    import gymnasium as gym
+
+    from naruto_agent.policies import EnvContext
+    from naruto_agent.rl.ppo_policy import PPOExplorer
+
+    camera = PinholeCamera().scaled(0.05)
+    venv = make_sb3_vec_env(2, size=32, camera=camera, coverage_samples=2000,
+                            max_episode_steps=5)
+    PPO("MultiInputPolicy", venv, n_steps=8, batch_size=16,
+        policy_kwargs={"features_extractor_class": NarutoFeaturesExtractor,
+                       "features_extractor_kwargs": {"features_dim": 32}}).save(tmp_path / "m")
+    env = gym.make("NarutoRecon-v0", action_mode="discrete", camera=camera,
+                   coverage_samples=2000, max_episode_steps=5)
+    policy = PPOExplorer(str(tmp_path / "m.zip"), size=32)
+    policy.bind(EnvContext.from_env(env))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    for _ in range(3):  # raw observations (panorama on, 34 x 60 frames) are transformed
+        observation, *_, info = env.step(int(policy.act(observation, info)))
