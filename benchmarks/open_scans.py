@@ -87,6 +87,10 @@ class Args:
     """output folder"""
     report_only: bool = False
     """do not run episodes, only rebuild the tables from the records"""
+    timing: bool = False
+    """also time the escape check per move under each rule (run it under the timing lock)"""
+    timing_moves: int = 3000
+    """moves of the timed move sequence"""
     progress: bool = True
     """show a progress bar"""
 
@@ -293,6 +297,67 @@ def report(
     return rows
 
 
+# ---------------------------------------------------------------------------------------
+# Cost of the escape check
+# ---------------------------------------------------------------------------------------
+def recorded_moves(scene: str, moves: int, seed: int = 0) -> np.ndarray:
+    """(moves, 2, 3) start and target positions of a seeded random discrete walk."""
+    import gymnasium as gym
+
+    import naruto_gym  # noqa: F401
+    from naruto_gym.motion.actions import discrete_target_from_action
+
+    env = gym.make("NarutoRecon-v0", scene=scene, image_scale=0.05, coverage_samples=500,
+                   panorama_shape=None, action_mode="discrete").unwrapped
+    env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    pairs = []
+    while len(pairs) < moves:
+        action = int(rng.integers(0, 6)) if rng.random() < 0.8 else int(rng.integers(6, 10))
+        if action < 6:  # a move: the position the action asks for, before any check
+            target = discrete_target_from_action(
+                env.pose, action, env.max_translation_m, env.max_rotation_rad
+            )
+            pairs.append((env.pose[:3, 3].copy(), target[:3, 3]))
+        env.step(action)
+    return np.array(pairs)
+
+
+def time_escape_rules(scene: str, moves: int) -> dict[str, Any]:
+    """Seconds per ``CollisionChecker.move`` of one recorded move sequence under each rule.
+
+    The scanned-space lattice is timed cold (first pass, filling it) and warm (second pass);
+    the rule "off" (collision checking alone) is the reference, measured in the same process.
+    """
+    from naruto_gym.motion.collision import CollisionChecker
+    from naruto_gym.scenes.catalogue import resolve_scene
+    from naruto_gym.sensors.raycaster import RayCaster
+
+    pairs = recorded_moves(scene, moves)
+    mesh = resolve_scene(scene)
+    caster = RayCaster(mesh.vertices, mesh.faces)
+    caster.unsigned_distance(pairs[:1, 0])  # build the native scenes before timing
+    results: dict[str, Any] = {"scene": scene, "moves": len(pairs), "loadavg": os.getloadavg()}
+    for rule in ("off", "published", "scanned_space"):
+        checker = CollisionChecker(caster, mesh.bounds, escape_rule=rule)
+        checker.scanned_space.top_m  # noqa: B018 (computed once per scene, not per move)
+        passes = 2 if rule == "scanned_space" else 1
+        for index in range(passes):
+            clock = time.perf_counter()
+            for start, end in pairs:
+                checker.move(start, end)
+            per_move = (time.perf_counter() - clock) / len(pairs)
+            key = rule if passes == 1 else f"{rule}_{'cold' if index == 0 else 'warm'}"
+            results[key + "_us"] = 1e6 * per_move
+    reference = results["off_us"]
+    for key in ("published_us", "scanned_space_cold_us", "scanned_space_warm_us"):
+        results[key.replace("_us", "_escape_us")] = results[key] - reference
+    results["published_over_scanned_warm_escape"] = results["published_escape_us"] / max(
+        results["scanned_space_warm_escape_us"], 1e-9
+    )
+    return results
+
+
 def main(argv: list[str] | None = None) -> int:
     args = Args(**vars(dataclass_parser(Args, description=__doc__.split("\n\n")[0]).parse_args(
         argv
@@ -309,6 +374,20 @@ def main(argv: list[str] | None = None) -> int:
         failed += run_set(args, closed + opened, args.policies, out_dir, args.escape_rule)
         failed += run_set(args, opened, args.published_policies, out_dir / "published",
                           "published")
+    if args.timing:
+        timing = time_escape_rules(f"{args.scenes[0]}:no_ceiling+holes", args.timing_moves)
+        write_json_atomic(out_dir / "escape_timing.json", timing)
+        print(
+            "escape check per move ({moves} moves, load {load}): published {p:.0f} us, "
+            "scanned space {c:.0f} us cold / {w:.0f} us warm, on top of {o:.0f} us of "
+            "collision checking; published / scanned warm = {r:.1f}x".format(
+                moves=timing["moves"], load=np.round(timing["loadavg"], 2).tolist(),
+                p=timing["published_escape_us"], c=timing["scanned_space_cold_escape_us"],
+                w=timing["scanned_space_warm_escape_us"], o=timing["off_us"],
+                r=timing["published_over_scanned_warm_escape"],
+            ),
+            flush=True,
+        )
     checker = InsideChecker()
     rows = report(out_dir, f"Open scans, escape rule {args.escape_rule!r}", checker)
     if (out_dir / "published" / "records").is_dir():

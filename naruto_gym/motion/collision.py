@@ -114,6 +114,7 @@ class CollisionChecker:
         self.scanned_space = ScannedSpace(
             raycaster, self.face_normals, bounds, scanned_space_config
         )
+        self._last_clearance: tuple[np.ndarray, float] | None = None
 
     @property
     def max_no_hit_share(self) -> float:
@@ -131,6 +132,15 @@ class CollisionChecker:
     def clearance(self, position: np.ndarray) -> float:
         """Distance from ``position`` to the nearest surface, metres."""
         return float(self.raycaster.unsigned_distance(np.asarray(position)[None])[0])
+
+    def _cached_clearance(self, position: np.ndarray) -> float:
+        """:meth:`clearance`, remembering the last point: a move's end is the next start, so
+        the escape rule's query at the end costs no extra query per step."""
+        if self._last_clearance is not None and np.array_equal(self._last_clearance[0], position):
+            return self._last_clearance[1]
+        value = self.clearance(position)
+        self._last_clearance = (np.array(position, np.float64), value)
+        return value
 
     def inside_bounds(self, position: np.ndarray) -> bool:
         return bool(np.all(position >= self.box_min) and np.all(position <= self.box_max))
@@ -153,7 +163,7 @@ class CollisionChecker:
         support sectors below (then no more support rays missing, then no farther from the
         surface below), and no higher above the scan. It is never trapped where it was placed.
         """
-        clearance = self.clearance(end) if self.escape_rule == "scanned_space" else None
+        clearance = self._cached_clearance(end) if self.escape_rule == "scanned_space" else None
         if not self.sees_escape(end, clearance):
             return False
         if self.escape_rule != "scanned_space" or not self.sees_escape(start):
@@ -174,7 +184,7 @@ class CollisionChecker:
         end = start + box_fraction * (target - start)
         # From a start already closer than the radius (an exact start pose), the sphere may
         # move on as long as it gets no closer than it already is.
-        clearance = min(self.radius_m, self.clearance(start) - 1e-4)
+        clearance = min(self.radius_m, self._cached_clearance(start) - 1e-4)
         surface_fraction = self.raycaster.free_fraction_of_segment(start, end, max(clearance, 0))
         position = start + surface_fraction * (end - start)
         if surface_fraction < 1.0:

@@ -37,6 +37,7 @@ and once the corners around a place are known a query casts no ray;
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -183,8 +184,10 @@ class ScannedSpace:
         voxel = self.config.voxel_m
         # Corners sit half a voxel off the bounds, so none lies in the plane of an
         # axis-aligned floor or wall at the bounds (a ray from there is ambiguous).
-        self.origin = bounds[0] - 0.5 * voxel
-        self.shape = tuple(int(n) for n in np.ceil((bounds[1] - self.origin) / voxel) + 1)
+        self.origin = tuple(float(value) for value in bounds[0] - 0.5 * voxel)
+        self.shape = tuple(
+            int(n) for n in np.ceil((bounds[1] - np.array(self.origin)) / voxel) + 1
+        )
         # Per corner: -1 not evaluated yet, else the number of empty support sectors.
         self._empty = np.full(self.shape, -1, np.int8)
         self.support_directions, self._sectors = support_directions(self.config)
@@ -258,7 +261,7 @@ class ScannedSpace:
 
     # -- cached lattice ------------------------------------------------------------------
     def _corner_points(self, index: np.ndarray) -> np.ndarray:
-        return self.origin + index * self.config.voxel_m
+        return np.array(self.origin) + index * self.config.voxel_m
 
     def _ensure(self, index: np.ndarray) -> None:
         """Evaluate the lattice corners (K, 3) not evaluated yet."""
@@ -296,27 +299,37 @@ class ScannedSpace:
             clearance_m: its distance to the nearest surface, when the caller knows it
                 (otherwise one distance query).
         """
-        position = np.asarray(position, np.float64)
-        if position[2] > self.top_m:
+        x, y, z = (float(value) for value in position)
+        if z > self.top_m:
             return False
-        scaled = (position - self.origin) / self.config.voxel_m
-        low = np.clip(np.floor(scaled).astype(np.int64), 0, np.array(self.shape) - 2)
-        corners = low + _CELL_OFFSETS
         if clearance_m is None:
-            clearance_m = float(self.raycaster.unsigned_distance(position[None])[0])
-        offsets = self._corner_points(corners) - position
-        usable = np.einsum("ij,ij->i", offsets, offsets) < clearance_m**2
-        if not usable.any():
-            return bool(self.evaluate(position)[0])
-        corners = corners[usable]
-        self._ensure(corners)
-        return bool(np.all(self._empty[tuple(corners.T)] <= self.config.max_empty_sectors))
+            clearance_m = float(self.raycaster.unsigned_distance(np.array([[x, y, z]]))[0])
+        # Plain Python over the eight corners: this runs at every step of the env, where
+        # NumPy's per-call overhead on eight elements would cost more than the lookup.
+        voxel = self.config.voxel_m
+        limit = clearance_m * clearance_m
+        low = []
+        for value, origin, size in zip((x, y, z), self.origin, self.shape, strict=True):
+            low.append(min(max(int(math.floor((value - origin) / voxel)), 0), size - 2))
+        usable = []
+        for di, dj, dk in _CELL_STEPS:
+            i, j, k = low[0] + di, low[1] + dj, low[2] + dk
+            dx = self.origin[0] + i * voxel - x
+            dy = self.origin[1] + j * voxel - y
+            dz = self.origin[2] + k * voxel - z
+            if dx * dx + dy * dy + dz * dz < limit:
+                usable.append((i, j, k))
+        if not usable:
+            return bool(self.evaluate(np.array([x, y, z]))[0])
+        empty = self._empty
+        if any(empty[corner] < 0 for corner in usable):
+            self._ensure(np.array(usable, np.int64))
+        allowed = self.config.max_empty_sectors
+        return all(empty[corner] <= allowed for corner in usable)
 
     def contains_many(self, positions: np.ndarray) -> np.ndarray:
         """:meth:`contains` for (N, 3) points."""
         return np.array([self.contains(p) for p in np.asarray(positions).reshape(-1, 3)], bool)
 
 
-_CELL_OFFSETS = np.array(
-    [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.int64
-)
+_CELL_STEPS = tuple((i, j, k) for i in (0, 1) for j in (0, 1) for k in (0, 1))
