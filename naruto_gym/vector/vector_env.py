@@ -340,7 +340,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         return observations, rewards, terminated, truncated, infos
 
     def close_extras(self, **kwargs: Any) -> None:
-        self._scenes = [None] * self.num_envs
+        # Also reached from __del__ of an env whose constructor raised.
+        self._scenes = [None] * getattr(self, "num_envs", 0)
 
     # -- per-agent reset -------------------------------------------------------------------
     @property
