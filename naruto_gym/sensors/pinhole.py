@@ -161,8 +161,7 @@ class RgbdRenderer:
         self.backend: PinholeBackend = backend
         self.threads = int(threads) if threads is not None else default_thread_count()
         self._rasterizer: PinholeRasterizer | None = None
-
-        self._rays = np.empty((self.camera.width * self.camera.height, 6), dtype=np.float32)
+        self._rays: np.ndarray | None = None  # the ray cast's buffer, made on first use
 
     @property
     def frame_backend(self) -> Literal["raycast", "raster"]:
@@ -202,7 +201,7 @@ class RgbdRenderer:
             return PixelHits(*self.rasterizer.render(camera_to_world, self.max_depth_m))
         depth, hits = self._cast(camera_to_world)
         # Pixels beyond the range are black like misses.
-        triangle_ids = np.where(depth.ravel() > 0, hits.triangle_ids, -1).astype(np.int32)
+        triangle_ids = np.where(depth.ravel() > 0, hits.triangle_ids, np.int32(-1))
         return PixelHits(depth, triangle_ids, hits.barycentric_uv)
 
     def shade(self, triangle_ids: np.ndarray, barycentric_uv: np.ndarray) -> np.ndarray:
@@ -224,6 +223,8 @@ class RgbdRenderer:
 
     def _cast(self, camera_to_world: np.ndarray) -> tuple[np.ndarray, RayHits]:
         pose = np.asarray(camera_to_world, dtype=np.float32)
+        if self._rays is None:
+            self._rays = np.empty((self.camera.width * self.camera.height, 6), np.float32)
         # Directions keep camera z = 1, so the ray parameter of a hit is its z-depth.
         fill_world_rays(
             self.camera.ray_directions,

@@ -552,7 +552,9 @@ class PinholeRasterizer:
         groups = 1 if small else self.threads
         bounds = np.linspace(0, len(self.faces), groups + 1).astype(np.int64)
 
-        vertex_bounds = np.linspace(0, len(self.vertices), groups + 1).astype(np.int64)
+        # Classifying a vertex is cheap: split only long vertex lists between the threads.
+        vertex_groups = groups if len(self.vertices) >= PARALLEL_MIN_WORK else 1
+        vertex_bounds = np.linspace(0, len(self.vertices), vertex_groups + 1).astype(np.int64)
 
         def classify(group: int) -> None:
             vertex_outcodes(
@@ -567,7 +569,7 @@ class PinholeRasterizer:
                 record_rows,
             )
 
-        run_parallel(classify, groups)
+        run_parallel(classify, vertex_groups)
         counts = run_parallel(setup, groups)
         segments = np.stack([bounds[:-1], bounds[:-1] + np.asarray(counts, np.int64)], axis=1)
         band_count = -(-self.height // BAND_ROWS)
