@@ -135,7 +135,7 @@ def _scenes() -> list:
 @pytest.mark.parametrize("scene", _scenes(), ids=lambda s: s if isinstance(s, str)
                          else f"{s[0]}_{s[1]}")
 def test_randomised_episodes_never_stall(scene) -> None:
-    steps = 160
+    steps = 120
     mesh = make_random_scene(scene[1], kind=scene[0]) if isinstance(scene, tuple) else scene
     seed = 7 if isinstance(scene, str) else scene[1]
     env = gym.make("NarutoRecon-v0", scene=mesh, image_scale=0.1, panorama_shape=(32, 64),
