@@ -36,6 +36,7 @@ the two wins such an exact tie can differ from Embree.
 
 from __future__ import annotations
 
+import itertools
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -53,6 +54,9 @@ _INVERSE_DEPTH = 9
 _INVERSE_SLOPES = 12
 _RECORD_FLOATS = 15
 
+# Slack (pixels) on a triangle's projected bounding box before it is found to hold no pixel.
+_BOX_MARGIN_PX = 1e-6
+
 # Image rows drawn together: a band's z-buffer (16 x 1200 x 12 bytes) stays in the L2 cache.
 BAND_ROWS = 16
 
@@ -63,11 +67,13 @@ def _cross(ax, ay, az, bx, by, bz):
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _store_plane(records, slot, offset, x, y, z, intrinsics):
-    """Store the plane x * X + y * Y + z (X = (u - cx) / fx, Y = (v - cy) / fy) in pixel units."""
-    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
-    a = x / fx
-    b = y / fy
+def _store_plane(records, slot, offset, x, y, z, inverse_fx, inverse_fy, cx, cy):
+    """Store the plane x * X + y * Y + z (X = (u - cx) / fx, Y = (v - cy) / fy) in pixel units.
+
+    Negating (x, y, z) negates the stored plane exactly, which keeps shared edges watertight.
+    """
+    a = x * inverse_fx
+    b = y * inverse_fy
     records[slot, offset] = a
     records[slot, offset + 1] = b
     records[slot, offset + 2] = z - a * cx - b * cy
@@ -98,8 +104,9 @@ def vertex_outcodes(
     height: int,
     far_cut: float,
     outcodes: np.ndarray,
+    projections: np.ndarray,
 ) -> None:
-    """View-volume outcodes of vertices ``first .. stop - 1``.
+    """View-volume outcodes and image positions of vertices ``first .. stop - 1``.
 
     Args:
         vertices: (V, 3) float32 world positions.
@@ -111,10 +118,15 @@ def vertex_outcodes(
         outcodes: (V,) uint8 output, one bit per side of the view volume the vertex lies
             outside of (left, right, top, bottom of the image with a pixel of margin, near
             plane, far cut). A triangle whose three corners share a bit cannot be seen.
+        projections: (V, 2) float64 output, the pixel (u, v) of each vertex in front of the
+            near plane (anything for the others).
     """
     fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
     for index in range(first, stop):
         x, y, z = _to_camera(vertices, index, rotation, origin)
+        scale = 1.0 / max(z, NEAR_PLANE_M)
+        projections[index, 0] = fx * x * scale + cx
+        projections[index, 1] = fy * y * scale + cy
         # Planes through the camera centre bounding u in [-1, width], v in [-1, height]; their
         # intersection lies in front of the camera, so sharing a bit means unseen.
         # Sums of comparisons, not branches: which bits are set is unpredictable.
@@ -128,10 +140,44 @@ def vertex_outcodes(
         )
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _holds_no_pixel(u_min, u_max, v_min, v_max, width, height):
+    """Whether an image box holds no pixel (pixels sit at integer (u, v)): so it is with most
+    triangles of a dense mesh in a small frame. The margin covers rounding."""
+    column_first = max(np.ceil(max(u_min - _BOX_MARGIN_PX, -1.0)), 0.0)
+    column_last = min(np.floor(min(u_max + _BOX_MARGIN_PX, float(width))), width - 1.0)
+    row_first = max(np.ceil(max(v_min - _BOX_MARGIN_PX, -1.0)), 0.0)
+    row_last = min(np.floor(min(v_max + _BOX_MARGIN_PX, float(height))), height - 1.0)
+    return column_first > column_last or row_first > row_last
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _clipped_box(xs, ys, zs, fx, fy, cx, cy):
+    """Image bounding box (u_min, u_max, v_min, v_max) of the part of a camera-frame triangle
+    in front of the near plane: its corners there and the points where edges cross it."""
+    u_min, u_max, v_min, v_max = np.inf, -np.inf, np.inf, -np.inf
+    for corner in range(3):
+        following = (corner + 1) % 3
+        if zs[corner] >= NEAR_PLANE_M:
+            scale = 1.0 / zs[corner]
+            u = fx * xs[corner] * scale + cx
+            v = fy * ys[corner] * scale + cy
+            u_min, u_max = min(u_min, u), max(u_max, u)
+            v_min, v_max = min(v_min, v), max(v_max, v)
+        if (zs[corner] >= NEAR_PLANE_M) != (zs[following] >= NEAR_PLANE_M):
+            share = (NEAR_PLANE_M - zs[corner]) / (zs[following] - zs[corner])
+            u = fx * (xs[corner] + share * (xs[following] - xs[corner])) / NEAR_PLANE_M + cx
+            v = fy * (ys[corner] + share * (ys[following] - ys[corner])) / NEAR_PLANE_M + cy
+            u_min, u_max = min(u_min, u), max(u_max, u)
+            v_min, v_max = min(v_min, v), max(v_max, v)
+    return u_min, u_max, v_min, v_max
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def setup_triangles(
     vertices: np.ndarray,
     outcodes: np.ndarray,
+    projections: np.ndarray,
     faces: np.ndarray,
     first: int,
     stop: int,
@@ -147,7 +193,8 @@ def setup_triangles(
     """Set up triangles ``first .. stop - 1``; pack the drawable ones from ``records[first]``.
 
     Args:
-        vertices: (V, 3) float32 world positions; outcodes: :func:`vertex_outcodes`'s output.
+        vertices: (V, 3) float32 world positions.
+        outcodes, projections: :func:`vertex_outcodes`'s output.
         faces: (F, 3) int32 corner indices.
         first, stop: the range of triangles this call sets up.
         rotation: (3, 3) float64 camera-to-world rotation; origin: (3,) float64 camera centre.
@@ -162,41 +209,33 @@ def setup_triangles(
         The number of records written from index ``first``.
     """
     fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    inverse_fx, inverse_fy = 1.0 / fx, 1.0 / fy
     count = 0
     xs = np.empty(3)
     ys = np.empty(3)
     zs = np.empty(3)
     for triangle in range(first, stop):
-        if outcodes[faces[triangle, 0]] & outcodes[faces[triangle, 1]] & (
-            outcodes[faces[triangle, 2]]
-        ):
+        i0, i1, i2 = faces[triangle, 0], faces[triangle, 1], faces[triangle, 2]
+        if outcodes[i0] & outcodes[i1] & outcodes[i2]:
             continue
+        crosses_near_plane = (outcodes[i0] | outcodes[i1] | outcodes[i2]) & 16
+        if not crosses_near_plane:
+            u_min = min(projections[i0, 0], min(projections[i1, 0], projections[i2, 0]))
+            u_max = max(projections[i0, 0], max(projections[i1, 0], projections[i2, 0]))
+            v_min = min(projections[i0, 1], min(projections[i1, 1], projections[i2, 1]))
+            v_max = max(projections[i0, 1], max(projections[i1, 1], projections[i2, 1]))
+            if _holds_no_pixel(u_min, u_max, v_min, v_max, width, height):
+                continue
         for corner in range(3):
             xs[corner], ys[corner], zs[corner] = _to_camera(
                 vertices, faces[triangle, corner], rotation, origin
             )
-        # Image bounding box of the part in front of the near plane: the corners there and the
-        # points where edges cross it.
-        u_min, u_max, v_min, v_max = np.inf, -np.inf, np.inf, -np.inf
-        for corner in range(3):
-            following = (corner + 1) % 3
-            if zs[corner] >= NEAR_PLANE_M:
-                u = fx * xs[corner] / zs[corner] + cx
-                v = fy * ys[corner] / zs[corner] + cy
-                u_min, u_max = min(u_min, u), max(u_max, u)
-                v_min, v_max = min(v_min, v), max(v_max, v)
-            if (zs[corner] >= NEAR_PLANE_M) != (zs[following] >= NEAR_PLANE_M):
-                share = (NEAR_PLANE_M - zs[corner]) / (zs[following] - zs[corner])
-                u = fx * (xs[corner] + share * (xs[following] - xs[corner])) / NEAR_PLANE_M + cx
-                v = fy * (ys[corner] + share * (ys[following] - ys[corner])) / NEAR_PLANE_M + cy
-                u_min, u_max = min(u_min, u), max(u_max, u)
-                v_min, v_max = min(v_min, v), max(v_max, v)
-        if u_max < -1.0 or u_min > width or v_max < -1.0 or v_min > height:
-            continue
-        row_first = max(int(np.floor(max(v_min, -1.0))), 0)
-        row_last = min(int(np.ceil(min(v_max, float(height)))), height - 1)
-        if row_first > row_last:
-            continue
+        if crosses_near_plane:
+            u_min, u_max, v_min, v_max = _clipped_box(xs, ys, zs, fx, fy, cx, cy)
+            if _holds_no_pixel(u_min, u_max, v_min, v_max, width, height):
+                continue
+        row_first = max(np.ceil(max(v_min - _BOX_MARGIN_PX, -1.0)), 0.0)
+        row_last = min(np.floor(min(v_max + _BOX_MARGIN_PX, float(height))), height - 1.0)
         nx, ny, nz = _cross(
             xs[1] - xs[0], ys[1] - ys[0], zs[1] - zs[0], xs[2] - xs[0], ys[2] - ys[0], zs[2] - zs[0]
         )
@@ -208,19 +247,26 @@ def setup_triangles(
         for edge in range(3):
             a, b = (edge + 1) % 3, (edge + 2) % 3
             px, py, pz = _cross(xs[a], ys[a], zs[a], xs[b], ys[b], zs[b])
-            _store_plane(records, slot, 3 * edge, sign * px, sign * py, sign * pz, intrinsics)
+            _store_plane(
+                records, slot, 3 * edge, sign * px, sign * py, sign * pz, inverse_fx, inverse_fy,
+                cx, cy,
+            )
             slope = records[slot, 3 * edge]
             # 0 marks an edge plane that is constant along a row (its 1 / slope would overflow).
             records[slot, _INVERSE_SLOPES + edge] = 1.0 / slope if abs(slope) > 1e-290 else 0.0
-        _store_plane(records, slot, _INVERSE_DEPTH, nx / det, ny / det, nz / det, intrinsics)
+        inverse_det = 1.0 / det
+        _store_plane(
+            records, slot, _INVERSE_DEPTH, nx * inverse_det, ny * inverse_det, nz * inverse_det,
+            inverse_fx, inverse_fy, cx, cy,
+        )
         # u = e1 / (e0 + e1 + e2) with e0 + e1 + e2 = sign * det / z, so u = e1 * z / |det|.
-        scale = 1.0 / abs(det)
+        scale = abs(inverse_det)
         for coefficient in range(3):
             hit_planes[slot, coefficient] = records[slot, 3 + coefficient] * scale
             hit_planes[slot, 3 + coefficient] = records[slot, 6 + coefficient] * scale
         record_rows[slot, 0] = triangle
-        record_rows[slot, 1] = row_first
-        record_rows[slot, 2] = row_last
+        record_rows[slot, 1] = int(row_first)
+        record_rows[slot, 2] = int(row_last)
         count += 1
     return count
 
@@ -425,13 +471,36 @@ def _pool(workers: int) -> ThreadPoolExecutor:
 
 
 def run_parallel(function, count: int) -> list:
-    """``[function(0), ..., function(count - 1)]``, the first in this thread, the rest in the
-    pool."""
+    """``[function(0), ..., function(count - 1)]``, shared between this thread and the pool.
+
+    Indices are claimed one at a time by whichever thread is free, and this thread only waits
+    for indices another thread has started: when the pool's threads are slow to get a core
+    (a busy machine), this thread does the work itself instead of waiting for them.
+    """
     if count == 1:
         return [function(0)]
-    futures = [_pool(count - 1).submit(function, index) for index in range(1, count)]
-    results = [function(0)]
-    results.extend(future.result() for future in futures)
+    claims = itertools.count()
+    results: list = [None] * count
+    errors: list[BaseException] = []
+    done = [threading.Event() for _ in range(count)]
+
+    def work() -> None:
+        while (index := next(claims)) < count:
+            try:
+                results[index] = function(index)
+            except BaseException as error:  # re-raised in the calling thread
+                errors.append(error)
+            finally:
+                done[index].set()
+
+    pool = _pool(count - 1)
+    for _ in range(count - 1):
+        pool.submit(work)
+    work()
+    for event in done:
+        event.wait()
+    if errors:
+        raise errors[0]
     return results
 
 
@@ -507,6 +576,7 @@ class PinholeRasterizer:
             count = len(self.faces)
             self._buffers = (
                 np.empty(len(self.vertices), np.uint8),
+                np.empty((len(self.vertices), 2), np.float64),
                 np.empty((count, _RECORD_FLOATS), np.float64),
                 np.empty((count, 6), np.float64),
                 np.empty((count, 3), np.int64),
@@ -541,7 +611,7 @@ class PinholeRasterizer:
         rotation = np.ascontiguousarray(pose[:3, :3])
         origin = np.ascontiguousarray(pose[:3, 3])
         (
-            outcodes, records, hit_planes, record_rows, inverse_depth, winners
+            outcodes, projections, records, hit_planes, record_rows, inverse_depth, winners
         ) = self._scratch()
         max_depth = float(max_depth_m)
         # A triangle whose every corner lies beyond the range can only give depth-0 pixels.
@@ -559,14 +629,14 @@ class PinholeRasterizer:
         def classify(group: int) -> None:
             vertex_outcodes(
                 self.vertices, vertex_bounds[group], vertex_bounds[group + 1], rotation, origin,
-                self.intrinsics, self.width, self.height, far_cut, outcodes,
+                self.intrinsics, self.width, self.height, far_cut, outcodes, projections,
             )
 
         def setup(group: int) -> int:
             return setup_triangles(
-                self.vertices, outcodes, self.faces, bounds[group], bounds[group + 1], rotation,
-                origin, self.intrinsics, self.width, self.height, records, hit_planes,
-                record_rows,
+                self.vertices, outcodes, projections, self.faces, bounds[group],
+                bounds[group + 1], rotation, origin, self.intrinsics, self.width, self.height,
+                records, hit_planes, record_rows,
             )
 
         run_parallel(classify, vertex_groups)
