@@ -139,8 +139,9 @@ class NarutoReconEnv(gym.Env):
     * ``raycaster_backend``: ``"open3d"`` (default) or ``"embreex"``.
     * ``pinhole_backend``: how the pinhole frame is made: ``"raycast"`` (default, Embree ray
       casting, the reference), ``"raster"`` (the rasterizer: the same depth, triangles and
-      colours, about 6x faster on full frames) or ``"auto"`` (the rasterizer unless the mesh has
-      more triangles than the frame has pixels). The panorama, collisions and coverage always
+      colours up to exact edge ties, 9-10x faster than the bare cast on full frames of the
+      shipped scenes and the Replica sample) or ``"auto"`` (the rasterizer unless the mesh
+      has more than 4 triangles per pixel). The panorama, collisions and coverage always
       ray-cast.
     * ``reconstruct``: fuse every frame into a reference TSDF map (2 cm voxels) so that any
       policy gets accuracy / completion / completion ratio: the info of the step on which

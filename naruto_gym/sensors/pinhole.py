@@ -23,9 +23,10 @@ PinholeBackend = Literal["raycast", "raster", "auto"]
 PINHOLE_BACKENDS: tuple[str, ...] = ("raycast", "raster", "auto")
 
 # "auto" rasterizes when the mesh has at most this many triangles per pixel of the frame:
-# rasterizing pays a per-triangle setup on every frame, the ray cast a per-pixel cost
-# (benchmarks/render_speed.py measures where the two cross).
-AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL = 2.0
+# rasterizing pays a per-triangle setup on every frame, the ray cast a per-pixel cost.
+# benchmarks/render_speed.py measured the rasterizer faster at 3.2 triangles per pixel and the
+# ray cast faster from 12 up (README, "Rendering speed").
+AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL = 4.0
 
 # Pixels per thread below which the colour lookup stays in the calling thread.
 _PARALLEL_SHADING_MIN_PIXELS = 65_536
