@@ -145,7 +145,7 @@ def test_neural_mapper_runs_the_same_loop():
     """The published mapper, cut down to run in seconds on a CPU."""
     env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=0.1, panorama_shape=None)
     policy = NarutoPolicy(
-        mapper="neural", device="cpu",
+        mapper="neural", device="cpu", initial_look_around=False,
         neural={"first_frame_iterations": 10, "iterations_per_step": 2, "rays_per_iteration": 256,
                 "current_frame_rays": 32, "active_top_rays": 64, "hash_log2_table_size": 12,
                 "active_score": "surface"},
