@@ -16,6 +16,12 @@ depth and pose observations (never the ground-truth mesh), then repeats:
    blocked or stuck;
 4. at the goal, look at the cluster and to either side of it, mark the goal visited.
 
+On an open scan the env refuses moves that would leave the scanned space ("escape"), where
+the map shows nothing in the way (past a missing wall, above a room without a ceiling). The
+policy learns from each such refusal, as from a bump: a refused climb at the scan's top
+lowers its flight ceiling (``RefusedMoves``), any other refused move blocks the voxels it
+headed into and the edge drawn through nearby refusals; paths and goals avoid blocked voxels.
+
 When no frontier is left the map is complete and the agent keeps looking around where it is.
 """
 
@@ -28,6 +34,7 @@ from scipy import ndimage
 
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
 from naruto_agent.policies.occupancy import OccupancyGrid
+from naruto_agent.policies.panorama_clearance import RefusedMoves
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, rotation_angle_between
 
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
@@ -111,6 +118,8 @@ class FrontierPolicy(Policy):
         self._stuck = 0
         self._pitch_index = 0
         self._traversable_cache: np.ndarray | None = None
+        self.refused = RefusedMoves()
+        self._last_target: np.ndarray | None = None
 
     # -- episode -------------------------------------------------------------------------
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
@@ -123,6 +132,9 @@ class FrontierPolicy(Policy):
             pixel_stride=self.pixel_stride,
         )
         self._visited = np.zeros(self.grid.shape, bool)
+        # Cells beyond the scan's edge, learned from escape refusals; kept apart from the
+        # occupancy map, whose free-space updates would erase them (nothing is there to see).
+        self._blocked = np.zeros(self.grid.shape, bool)
         self.visited_goals = []
         self.plans = 0
         self._path = np.zeros((0, 3))
@@ -132,6 +144,8 @@ class FrontierPolicy(Policy):
         self._last_position = None
         self._stuck = 0
         self._pitch_index = 0
+        self.refused.reset()
+        self._last_target = None
         pose = np.asarray(observation["pose"], np.float64)
         self.grid.integrate(observation["depth"], pose, context.camera)
         self._start_look_around(pose, focus=None)
@@ -140,7 +154,7 @@ class FrontierPolicy(Policy):
     def _z_band(self) -> tuple[float, float]:
         bounds = self.context.bounds
         low = bounds[0, 2] + self.height_margin_m
-        high = bounds[1, 2] - self.height_margin_m
+        high = min(bounds[1, 2] - self.height_margin_m, self.refused.ceiling_z - self.voxel_size_m)
         if high <= low:  # a very flat scene: use its middle
             middle = (bounds[0, 2] + bounds[1, 2]) / 2.0
             return middle - self.voxel_size_m, middle + self.voxel_size_m
@@ -207,6 +221,7 @@ class FrontierPolicy(Policy):
         high = np.minimum(centre + 2, np.array(self.grid.shape))
         block = (slice(low[0], high[0]), slice(low[1], high[1]), slice(low[2], high[2]))
         traversable[block] |= ~self.grid.occupied[block]
+        traversable &= ~self._blocked  # but never past an edge the env refused
         return traversable
 
     def _plan(self, position: np.ndarray) -> bool:
@@ -263,6 +278,34 @@ class FrontierPolicy(Policy):
             self._views.popleft()
         return None
 
+    def _learn_edge(self, position: np.ndarray, panorama: np.ndarray | None) -> None:
+        """Learn from an escape refusal (see the module docstring)."""
+        assert self.grid is not None
+        if self._last_target is None:
+            return
+        ceiling = self.refused.ceiling_z
+        edge = self.refused.record(position, self._last_target, panorama, across_half_width_m=0)
+        if self.refused.ceiling_z < ceiling:
+            return  # the top of the scan: the height band now ends below it
+        # Block the voxels the refused move headed into and the edge joined through earlier
+        # refusals nearby, from 0.3 m below to 0.3 m above, but only ahead of the agent and
+        # never its own voxel (paths start there, and the edge often runs through it):
+        # blocking behind it could box it in where edges meet (a floor hole's corner).
+        move = self._last_target - position
+        direction = move / max(float(np.linalg.norm(move)), 1e-9)
+        ahead = position + np.outer([1.0, 1.5, 2.0], direction) * self.voxel_size_m
+        points = np.concatenate([ahead, edge])
+        if len(edge):
+            heights = np.arange(-0.3, 0.3 + 1e-9, self.voxel_size_m)
+            layers = np.repeat(edge, len(heights), axis=0)
+            layers[:, 2] += np.tile(heights, len(edge))
+            points = np.concatenate([ahead, layers])
+        points = points[(points - position) @ direction > 0.0]
+        cells = self.grid.world_to_cell(points)
+        own = self.grid.world_to_cell(position[None])[0]
+        cells = cells[self.grid.in_grid(cells) & np.any(cells != own, axis=1)]
+        self._blocked[tuple(cells.T)] = True
+
     def _move_action(self, pose: np.ndarray) -> np.ndarray | None:
         assert self.grid is not None
         position = pose[:3, 3]
@@ -288,6 +331,7 @@ class FrontierPolicy(Policy):
         length = float(np.linalg.norm(step))
         if length > self.context.max_translation_m:
             target = position + step * (self.context.max_translation_m / length)
+        self._last_target = np.asarray(target, np.float64).copy()
         return pose_action(make_pose(rotation, target))
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
@@ -304,7 +348,9 @@ class FrontierPolicy(Policy):
                 self._last_position is None or np.linalg.norm(position - self._last_position) > 1e-3
             )
             self._stuck = 0 if moved else self._stuck + 1
-            if collided and len(self._path) > 1:
+            if collided and info.get("collision_reason") == "escape":
+                self._learn_edge(position, observation.get("panorama"))
+            elif collided and len(self._path) > 1:
                 # A bump: the map missed an obstacle there; remember it and plan again.
                 ahead = self._path[min(1, len(self._path) - 1)] - position
                 norm = np.linalg.norm(ahead)

@@ -10,8 +10,10 @@
   then follows the walls on its right at ``wall_distance_m`` (a right-hand wall follower,
   which also leads through doorways into the next rooms), the camera sweeping between the
   wall beside it and the room ahead and across, and up and down. Walls are read from the
-  depth panorama around the agent's height; only the bounds and the observations are used,
-  never the mesh.
+  depth panorama around the agent's height; on an open scan the edge of the scanned floor
+  (past a missing wall) shows nothing there, so a move the env refuses as an escape leaves a
+  virtual wall that the follower follows from then on. Only the bounds, the observations and
+  the step info are used, never the mesh.
 """
 
 from __future__ import annotations
@@ -22,7 +24,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
-from naruto_agent.policies.panorama_clearance import horizontal_profile, profile_clearance
+from naruto_agent.policies.panorama_clearance import (
+    RefusedMoves,
+    horizontal_profile,
+    profile_clearance,
+)
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, validate_pose
 
 
@@ -130,6 +136,8 @@ class PassivePolicy(Policy):
         self._heading = 0.0
         self._found_wall = False
         self._recent: list[np.ndarray] = []
+        self._refused = RefusedMoves()
+        self._last_target: np.ndarray | None = None
 
     @property
     def replays(self) -> bool:
@@ -164,6 +172,8 @@ class PassivePolicy(Policy):
         self._heading = float(np.arctan2(forward[1], forward[0]))
         self._found_wall = False
         self._recent = []
+        self._refused.reset()
+        self._last_target = None
 
     # -- replay ------------------------------------------------------------------------
     def _reached(self, pose: np.ndarray, target: np.ndarray) -> bool:
@@ -225,8 +235,10 @@ class PassivePolicy(Policy):
         position = pose[:3, 3]
         self._position = position
         self._step += 1
-        profile = horizontal_profile(observation["panorama"])
         collided = bool(info.get("collided", False)) if info else False
+        if collided and info.get("collision_reason") == "escape" and self._last_target is not None:
+            self._refused.record(position, self._last_target)
+        profile = self._refused.overlay(horizontal_profile(observation["panorama"]), position)
         self._steer(profile, collided)
         bounds = self.context.bounds
         height = bounds[0, 2] + self.scan_height_fraction * (bounds[1, 2] - bounds[0, 2])
@@ -244,6 +256,7 @@ class PassivePolicy(Policy):
         pitch = self.sweep_pitch_rad * np.sin(phase / 1.6)
         look = np.array([np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)])
         rotation = look_at_rotation(next_position, next_position + look)
+        self._last_target = next_position
         action = pose_action(make_pose(rotation, next_position))
         return clip_pose_action(action, self.context.action_space)
 

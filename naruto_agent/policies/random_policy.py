@@ -3,7 +3,9 @@
 The agent picks a random direction (uniform heading, a small random climb), walks along it
 with the camera looking where it goes (a random pitch per run), and picks a new random
 direction when a move is blocked (``info["collided"]``: a surface, the bounds, or a move into
-the open) or when the run's random length is used up. It never keeps pushing against a wall,
+the open) or when the run's random length is used up. A climb the env refuses as an escape
+(the top of a scan without a ceiling) sets a flight ceiling it turns back under, as the
+bounds' top does. It never keeps pushing against a wall,
 which is what ``action_space.sample()`` would do. All randomness comes from its own seeded
 generator, so one seed gives one trajectory.
 """
@@ -13,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
+from naruto_agent.policies.panorama_clearance import RefusedMoves
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 
 
@@ -58,6 +61,7 @@ class RandomPolicy(Policy):
         self.steps_left = 0
         #: Number of new directions drawn because a move was blocked (for tests and logs).
         self.turns_after_block = 0
+        self.refused = RefusedMoves()
 
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
         super().reset(observation, info, seed)
@@ -65,6 +69,7 @@ class RandomPolicy(Policy):
             self.seed = seed
             self.rng = np.random.default_rng(seed)
         self.turns_after_block = 0
+        self.refused.reset()
         self._new_run(np.asarray(observation["pose"], np.float64), blocked=None)
 
     def _new_run(self, pose: np.ndarray, blocked: np.ndarray | None) -> None:
@@ -76,7 +81,7 @@ class RandomPolicy(Policy):
             # Turn back vertically near the floor or the ceiling.
             if z < bounds[0, 2] + self.height_margin_m:
                 climb = abs(climb)
-            elif z > bounds[1, 2] - self.height_margin_m:
+            elif z > min(bounds[1, 2], self.refused.ceiling_z) - self.height_margin_m:
                 climb = -abs(climb)
             direction = np.array([np.cos(heading), np.sin(heading), 0.0]) * np.sqrt(1 - climb**2)
             direction[2] = climb
@@ -89,6 +94,8 @@ class RandomPolicy(Policy):
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         pose = np.asarray(observation["pose"], np.float64)
         if info is not None and info.get("collided", False):
+            if info.get("collision_reason") == "escape":
+                self.refused.record(pose[:3, 3], pose[:3, 3] + self.direction)
             self.turns_after_block += 1
             self._new_run(pose, blocked=self.direction)
         elif self.steps_left <= 0:
