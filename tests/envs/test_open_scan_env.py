@@ -42,6 +42,7 @@ def _far_target(env, rng: np.random.Generator) -> np.ndarray:
     return np.concatenate([position, quaternion / np.linalg.norm(quaternion)]).astype(np.float32)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", OPEN_VARIANTS)
 def test_random_rollouts_never_leave_the_scanned_space(scene):
     env = _make(scene, action_mode="pose")
@@ -100,6 +101,7 @@ def _approaches(env, layout, boxes: np.ndarray) -> list[tuple[np.ndarray, np.nda
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("base", ["replica_like_room", "two_rooms"])
 def test_pushing_out_through_every_opening_is_refused(base):
     scene = f"{base}:no_ceiling+holes+missing_wall"
