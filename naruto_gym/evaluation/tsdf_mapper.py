@@ -153,8 +153,11 @@ class TsdfFusionMapper:
         if pose.shape != (4, 4) or not np.isfinite(pose).all():
             raise ValueError(f"camera_to_world must be a finite 4x4 matrix, got {pose.shape}")
         depth = np.where(np.isfinite(depth) & (depth > 0.0), depth, 0.0).astype(np.float32)
-        if not (depth > 0.0).any():
-            return  # nothing to fuse; still a valid call (e.g. facing empty space)
+        if not ((depth > 0.0) & (depth <= self.max_depth_m)).any():
+            # Nothing within range to fuse; still a valid call (facing empty space, or, in an
+            # open scan, the sky with only a far fragment: Open3D refuses a frame that
+            # touches no block).
+            return
         extrinsic = o3c.Tensor(np.linalg.inv(pose), o3c.float64)
         intrinsic = o3c.Tensor(camera.matrix, o3c.float64)
         depth_image = o3d.t.geometry.Image(o3c.Tensor(depth)).to(self.device)

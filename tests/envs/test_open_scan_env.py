@@ -260,3 +260,21 @@ def test_habitat_sample_room_without_walls_or_ceiling():
             assert position[2] > 0.15  # above the floor's top
     assert reach["scanned_space"] > 4.0, reach
     assert reach["published"] < 0.5 * reach["scanned_space"], reach
+
+
+def test_reference_map_takes_frames_with_nothing_in_range():
+    """Looking up out of a scan without a ceiling, only far fragments are in view: the
+    reference TSDF map skips such a frame instead of failing (Open3D refuses a frame that
+    touches no block)."""
+    from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper
+    from naruto_gym.sensors.pinhole import PinholeCamera
+
+    camera = PinholeCamera().scaled(0.05)
+    mapper = TsdfFusionMapper(max_depth_m=5.0)
+    far = np.full((camera.height, camera.width), 0.0, np.float32)
+    far[:3, :3] = 7.5  # a fragment beyond the fusion range
+    mapper.integrate(None, far, np.eye(4), camera)
+    assert mapper.num_frames == 0
+    near = np.full((camera.height, camera.width), 2.0, np.float32)
+    mapper.integrate(None, near, np.eye(4), camera)
+    assert mapper.num_frames == 1
