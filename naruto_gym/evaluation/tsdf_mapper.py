@@ -154,17 +154,22 @@ class TsdfFusionMapper:
             raise ValueError(f"camera_to_world must be a finite 4x4 matrix, got {pose.shape}")
         depth = np.where(np.isfinite(depth) & (depth > 0.0), depth, 0.0).astype(np.float32)
         if not ((depth > 0.0) & (depth <= self.max_depth_m)).any():
-            # Nothing within range to fuse; still a valid call (facing empty space, or, in an
-            # open scan, the sky with only a far fragment: Open3D refuses a frame that
-            # touches no block).
-            return
+            return  # nothing within range to fuse; still a valid call (facing empty space)
         extrinsic = o3c.Tensor(np.linalg.inv(pose), o3c.float64)
         intrinsic = o3c.Tensor(camera.matrix, o3c.float64)
         depth_image = o3d.t.geometry.Image(o3c.Tensor(depth)).to(self.device)
         colour_image = o3d.t.geometry.Image(o3c.Tensor(colour)).to(self.device)
-        blocks = self._grid.compute_unique_block_coordinates(
-            depth_image, intrinsic, extrinsic, 1.0, self.max_depth_m, self._trunc_multiplier
-        )
+        try:
+            blocks = self._grid.compute_unique_block_coordinates(
+                depth_image, intrinsic, extrinsic, 1.0, self.max_depth_m, self._trunc_multiplier
+            )
+        except RuntimeError as error:
+            # A frame with a handful of depth pixels (in an open scan, the sky with a far
+            # fragment in a corner) may touch no block: Open3D samples the image sparsely and
+            # refuses it. There is nothing to fuse then, as for an empty frame.
+            if "No block is touched" not in str(error):
+                raise
+            return
         self._grid.integrate(
             blocks,
             depth_image,

@@ -263,9 +263,9 @@ def test_habitat_sample_room_without_walls_or_ceiling():
 
 
 def test_reference_map_takes_frames_with_nothing_in_range():
-    """Looking up out of a scan without a ceiling, only far fragments are in view: the
-    reference TSDF map skips such a frame instead of failing (Open3D refuses a frame that
-    touches no block)."""
+    """Looking up out of a scan without a ceiling, only far fragments (or a few pixels) are in
+    view: the reference TSDF map skips such a frame instead of failing (Open3D refuses a
+    frame that touches no block)."""
     from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper
     from naruto_gym.sensors.pinhole import PinholeCamera
 
@@ -275,6 +275,9 @@ def test_reference_map_takes_frames_with_nothing_in_range():
     far[:3, :3] = 7.5  # a fragment beyond the fusion range
     mapper.integrate(None, far, np.eye(4), camera)
     assert mapper.num_frames == 0
+    few = np.zeros((camera.height, camera.width), np.float32)
+    few[5, 7] = 1.9  # a handful of pixels in range, too few for Open3D to touch a block
+    mapper.integrate(None, few, np.eye(4), camera)
     near = np.full((camera.height, camera.width), 2.0, np.float32)
     mapper.integrate(None, near, np.eye(4), camera)
     assert mapper.num_frames == 1
