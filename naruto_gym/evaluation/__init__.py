@@ -7,11 +7,11 @@ from naruto_gym.evaluation.metrics import (
     nearest_distances,
     point_to_mesh_distance,
     reconstruction_metrics,
-    sample_mesh_surface,
     trajectory_length,
 )
 from naruto_gym.evaluation.scoring import EpisodeReconstruction, evaluate_reconstruction
 from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper, resolve_open3d_device
+from naruto_gym.scenes.mesh_scene import sample_mesh_surface
 
 __all__ = [
     "EpisodeReconstruction",

@@ -28,7 +28,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from naruto_gym.scenes.mesh_scene import Scene
+from naruto_gym.scenes.mesh_scene import Scene, sample_mesh_surface
 
 DEFAULT_NUM_SAMPLES = 200_000
 DEFAULT_THRESHOLD_M = 0.05
@@ -128,62 +128,6 @@ def surface_points(
     if isinstance(surface, trimesh.PointCloud):
         return _check_points(surface.vertices, what)
     return _check_points(surface, what)
-
-
-def sample_mesh_surface(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    count: int = DEFAULT_NUM_SAMPLES,
-    seed: int = 0,
-    what: str = "mesh",
-) -> np.ndarray:
-    """``count`` points drawn uniformly by area on a triangle mesh (seeded, reproducible).
-
-    Args:
-        vertices: (V, 3) vertex positions.
-        faces: (F, 3) triangle vertex indices.
-        count: number of samples (> 0).
-        seed: seed of the random generator.
-        what: name used in error messages.
-
-    Returns:
-        (count, 3) float64 points.
-
-    Raises:
-        ValueError: no triangles, bad indices, non-finite vertices or zero total area.
-    """
-    if count <= 0:
-        raise ValueError(f"count must be positive, got {count}")
-    vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces)
-    if vertices.ndim != 2 or vertices.shape[1] != 3:
-        raise ValueError(f"{what}: vertices must have shape (V, 3), got {vertices.shape}")
-    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
-        raise ValueError(
-            f"{what} has no triangles (faces shape {faces.shape}); an empty reconstruction "
-            "cannot be scored: integrate frames or pass points instead"
-        )
-    faces = faces.astype(np.int64)
-    if faces.min() < 0 or faces.max() >= len(vertices):
-        raise ValueError(f"{what}: face indices out of range for {len(vertices)} vertices")
-    triangles = vertices[faces]
-    if not np.isfinite(triangles).all():
-        raise ValueError(f"{what} has NaN or infinite vertex coordinates")
-    edge1 = triangles[:, 1] - triangles[:, 0]
-    edge2 = triangles[:, 2] - triangles[:, 0]
-    areas = 0.5 * np.linalg.norm(np.cross(edge1, edge2), axis=1)
-    total = float(areas.sum())
-    if not total > 0.0:
-        raise ValueError(f"{what} is degenerate: its triangles have zero total area")
-    rng = np.random.default_rng(seed)
-    # Inverse-CDF draw of triangles by area: faster than rng.choice(p=...) for large meshes.
-    cumulative = np.cumsum(areas)
-    chosen = np.searchsorted(cumulative, rng.random(count) * cumulative[-1], side="right")
-    chosen = np.minimum(chosen, len(areas) - 1)
-    r1, r2 = rng.random(count), rng.random(count)
-    flip = r1 + r2 > 1.0
-    r1[flip], r2[flip] = 1.0 - r1[flip], 1.0 - r2[flip]
-    return triangles[chosen, 0] + r1[:, None] * edge1[chosen] + r2[:, None] * edge2[chosen]
 
 
 # -- metrics ---------------------------------------------------------------------------

@@ -43,6 +43,7 @@ from functools import cached_property
 
 import numpy as np
 
+from naruto_gym.scenes.mesh_scene import sample_mesh_surface
 from naruto_gym.sensors.raycaster import RayCaster
 
 _GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
@@ -154,8 +155,6 @@ def surface_top(
     vertices: np.ndarray, faces: np.ndarray, quantile: float, samples: int = 100_000
 ) -> float:
     """Height under which ``quantile`` of the mesh's surface area lies (seeded samples)."""
-    from naruto_gym.evaluation.metrics import sample_mesh_surface
-
     points = sample_mesh_surface(vertices, faces, samples, seed=0, what="scene")
     return float(np.quantile(points[:, 2], quantile))
 

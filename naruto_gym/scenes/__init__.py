@@ -8,7 +8,12 @@ from naruto_gym.scenes.catalogue import (
     scene_info,
     scene_path,
 )
-from naruto_gym.scenes.mesh_scene import Scene, load_scene, scene_from_trimesh
+from naruto_gym.scenes.mesh_scene import (
+    Scene,
+    load_scene,
+    sample_mesh_surface,
+    scene_from_trimesh,
+)
 from naruto_gym.scenes.procedural import (
     SceneLayout,
     generate_apartment,
@@ -32,6 +37,7 @@ __all__ = [
     "make_random_scene",
     "random_layout",
     "resolve_scene",
+    "sample_mesh_surface",
     "save_scene_ply",
     "scene_from_trimesh",
     "scene_info",

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 from PIL import Image
 
-from naruto_gym.scenes.mesh_scene import load_scene, scene_from_trimesh
+from naruto_gym.scenes.mesh_scene import load_scene, sample_mesh_surface, scene_from_trimesh
 from tests.conftest import SAMPLE_MESHES
 
 
@@ -96,3 +96,20 @@ def test_sample_meshes_load(shared_scenes, name):
     assert scene.extents[2] < scene.extents[:2].max()  # z-up rooms are wider than tall
     samples = scene.sample_surface(1000, seed=0)
     assert samples.shape == (1000, 3)
+
+
+def test_scene_samples_its_surface_with_the_one_area_uniform_sampler():
+    scene = scene_from_trimesh(trimesh.creation.box(extents=(1.0, 2.0, 3.0)))
+    samples = scene.sample_surface(6000, seed=4)
+    np.testing.assert_array_equal(
+        samples, sample_mesh_surface(scene.vertices, scene.faces, 6000, seed=4)
+    )
+    assert not np.array_equal(samples, scene.sample_surface(6000, seed=5))
+    # Every point lies on the box, and the faces are hit in proportion to their area.
+    on_face = np.isclose(np.abs(samples), [0.5, 1.0, 1.5], atol=1e-9)
+    assert on_face.any(axis=1).all()
+    area_share = np.array([2 * 3, 1 * 3, 1 * 2]) / 11.0
+    np.testing.assert_allclose(on_face.mean(axis=0), area_share, atol=0.02)
+    flat = scene_from_trimesh(trimesh.Trimesh(np.zeros((3, 3)), [[0, 1, 2]], process=False))
+    with pytest.raises(ValueError, match="zero total area"):
+        flat.sample_surface(10)
