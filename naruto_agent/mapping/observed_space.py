@@ -16,12 +16,21 @@ noise: a grazing ray, a pixel between two objects).
 frontier voxel gets the mapper's *initial* variance, the largest any voxel can have, so
 unexplored space outranks every surface already seen, and surfaces win again once the
 frontier is exhausted.
+
+Real scans are open (no ceiling, a missing wall, holes): rays that pass over a wall top or
+through a gap mark free space *outside* the scanned room, whose frontier would pull the agent
+out of the scan, where the env refuses its moves. The frontier therefore counts only where it
+is *supported*: measured surface (a floor, furniture, a wall) lies below it, within
+``support_below_m`` and ``support_reach_m`` sideways, as under every place a robot can stand
+or fly over inside a scan. :meth:`ObservedSpace.scan_top_z` gives the height under which the
+measured surfaces lie (a room without a ceiling ends at its wall tops), which the agent uses
+to keep its goals inside.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -44,18 +53,32 @@ class ObservedSpaceConfig:
             integrated (a regular subsample; 2048 resolve 0.1 m voxels out to several metres
             and cost a few milliseconds).
         min_cluster_voxels: frontier clusters (26-connected) smaller than this are ignored.
+        support_below_m: a frontier voxel counts only with measured surface at most this far
+            below it (None: every frontier voxel counts, the behaviour on closed scenes).
+        support_reach_m: ... in its own column or one at most this far sideways (a floor
+            seen next to a table, a doorway's threshold seen at a slant).
+        top_quantile: :meth:`ObservedSpace.scan_top_z` is the height under which this share
+            of the occupied voxels lies.
     """
 
     voxel_size_m: float = 0.1
     max_range_m: float = 5.0
     rays_per_frame: int = 2048
     min_cluster_voxels: int = 8
+    support_below_m: float | None = 3.0
+    support_reach_m: float = 0.3
+    top_quantile: float = 0.99
 
     def __post_init__(self) -> None:
         if not (self.voxel_size_m > 0 and self.max_range_m > 0):
             raise ValueError("voxel_size_m and max_range_m must be positive")
         if self.rays_per_frame < 1 or self.min_cluster_voxels < 1:
             raise ValueError("rays_per_frame and min_cluster_voxels must be at least 1")
+        if self.support_below_m is not None and not self.support_below_m > 0:
+            raise ValueError(f"support_below_m must be positive or None, got "
+                             f"{self.support_below_m}")
+        if self.support_reach_m < 0 or not 0 < self.top_quantile <= 1:
+            raise ValueError("support_reach_m must be >= 0 and top_quantile in (0, 1]")
 
 
 class ObservedSpace:
@@ -71,6 +94,16 @@ class ObservedSpace:
         self.bounds = np.asarray(bounds, np.float64)
         self.grid = OccupancyGrid(self.bounds, self.config.voxel_size_m, self.config.max_range_m)
         self._frontier: np.ndarray | None = None
+        self._supported: np.ndarray | None = None
+
+    def configure(self, **changes: object) -> None:
+        """Change settings (fields of :class:`ObservedSpaceConfig`) of a live grid."""
+        self.config = replace(self.config, **changes)
+        self._changed()
+
+    def _changed(self) -> None:
+        self._frontier = None
+        self._supported = None
 
     def _stride(self, camera: PinholeCamera) -> int:
         pixels = camera.width * camera.height
@@ -85,7 +118,7 @@ class ObservedSpace:
             self.grid.pixel_stride = stride
             self.grid._ray_cache = None
         self.grid.integrate(depth, camera_to_world, camera)
-        self._frontier = None
+        self._changed()
 
     def integrate_panorama(self, panorama: np.ndarray, position: np.ndarray) -> None:
         """Integrate an equirectangular radial-distance panorama (0 = no hit) taken at
@@ -102,22 +135,54 @@ class ObservedSpace:
         columns = np.arange(step // 2, panorama.shape[1], step)
         flat = (rows[:, None] * panorama.shape[1] + columns[None, :]).reshape(-1)
         self.grid.integrate_rays(position, directions[flat], panorama.reshape(-1)[flat])
-        self._frontier = None
+        self._changed()
 
     def mark_occupied(self, points: np.ndarray) -> None:
         """Mark the voxels of world points as occupied (e.g. where a move was refused)."""
         self.grid.mark_occupied(points)
-        self._frontier = None
+        self._changed()
 
     @property
     def observed_fraction(self) -> float:
         """Share of the grid's voxels that some ray has reached (a measure of progress)."""
         return float(self.grid.observed.mean())
 
+    def supported(self) -> np.ndarray:
+        """(nx, ny, nz) bool: voxels with an occupied voxel below them, at most
+        ``support_below_m`` down and ``support_reach_m`` sideways (all True when
+        ``support_below_m`` is None)."""
+        if self._supported is None:
+            if self.config.support_below_m is None:
+                self._supported = np.ones(self.grid.shape, bool)
+                return self._supported
+            voxel = self.config.voxel_size_m
+            occupied = self.grid.occupied
+            reach = int(round(self.config.support_reach_m / voxel))
+            if reach:
+                occupied = ndimage.maximum_filter(occupied, size=(2 * reach + 1,) * 2 + (1,))
+            depth = max(1, math.ceil(self.config.support_below_m / voxel - 1e-9))
+            # below[z] = occupied voxels in z - depth .. z - 1 of the (widened) column.
+            total = np.cumsum(occupied, axis=2, dtype=np.int32)
+            total = np.concatenate([np.zeros(total.shape[:2] + (1,), np.int32), total], axis=2)
+            upper = total[:, :, :-1]
+            lower = total[:, :, np.maximum(np.arange(total.shape[2] - 1) - depth, 0)]
+            self._supported = upper - lower > 0
+        return self._supported
+
+    def scan_top_z(self) -> float:
+        """Height (world z of voxel tops) under which ``top_quantile`` of the occupied
+        voxels lie; +inf before anything was measured occupied."""
+        levels = np.nonzero(self.grid.occupied)[2]
+        if len(levels) == 0:
+            return float("inf")
+        level = np.quantile(levels, self.config.top_quantile, method="higher")
+        return float(self.grid.origin[2] + (level + 1) * self.config.voxel_size_m)
+
     def frontier(self) -> np.ndarray:
-        """(nx, ny, nz) bool: free voxels next to unknown ones, in clusters big enough."""
+        """(nx, ny, nz) bool: free voxels next to unknown ones, in clusters big enough,
+        supported by measured surface below (see :class:`ObservedSpaceConfig`)."""
         if self._frontier is None:
-            frontier = self.grid.frontier()
+            frontier = self.grid.frontier() & self.supported()
             labels, count = ndimage.label(frontier, _ALL_NEIGHBOURS)
             if count:
                 sizes = np.bincount(labels.reshape(-1), minlength=count + 1)
@@ -147,7 +212,7 @@ class ObservedSpace:
             raise ValueError("saved observed-space grid does not match these bounds/voxel size")
         self.grid.log_odds = np.asarray(state["log_odds"], np.float32).copy()
         self.grid.observed = np.asarray(state["observed"], bool).copy()
-        self._frontier = None
+        self._changed()
 
 
 def add_unknown_space_uncertainty(

@@ -107,6 +107,12 @@ class NarutoConfig:
             the map's measure of explored space.
         panorama_every: ... every n-th frame (5, the mapping cadence).
         goals_in_observed_space: candidate goals must lie in space the frames measured free.
+        stay_in_scanned_space: candidate goals must have measured surface below them and lie
+            no higher than the measured surfaces' top (:meth:`ObservedSpace.supported`,
+            :meth:`ObservedSpace.scan_top_z`), and only supported frontier counts as a target:
+            on an open scan (no ceiling, a missing wall) the space rays reach over a wall top
+            or through a gap is outside the scan, where the env refuses moves. False: goals
+            and frontier anywhere in measured free space.
         initial_look_around: the first plan of an episode is a turn in place that looks all
             around, so the first goal search sees the whole surrounding (the published agent
             searches from its first view).
@@ -132,6 +138,7 @@ class NarutoConfig:
     use_panorama: bool = True
     panorama_every: int = 5
     goals_in_observed_space: bool = True
+    stay_in_scanned_space: bool = True
     initial_look_around: bool = True
     seed: int = 0
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
@@ -289,6 +296,8 @@ class NarutoPolicy(Policy):
         super().reset(observation, info, seed)
         self._rng = np.random.default_rng(self.config.seed if seed is None else seed)
         self.mapper = self._make_mapper()
+        if not self.config.stay_in_scanned_space:
+            self.mapper.observed_space.configure(support_below_m=None)
         self.machine.reset()
         self.plans = []
         self.timings = dict.fromkeys(
@@ -478,10 +487,13 @@ class NarutoPolicy(Policy):
         sdf = self.sdf
         labels = self._components.labels_near(start)
         mask = np.isin(self._components.labels, sorted(labels)) if labels else None
+        observed = self.mapper.observed_space
         if self.config.goals_in_observed_space:
-            observed = self.mapper.observed_space
             free = observed.sample(observed.grid.free, sdf.grid_points()).reshape(sdf.shape)
             mask = free if mask is None else mask & free
+        if self.config.stay_in_scanned_space:
+            inside = self._inside_scan(sdf.grid_points()).reshape(sdf.shape)
+            mask = inside if mask is None else mask & inside
         failed = self.monitor.recent_failed_goals()
         if len(failed):
             radius = self.config.recovery.failed_goal_radius_m
@@ -492,6 +504,12 @@ class NarutoPolicy(Policy):
             near = near.reshape(sdf.shape)
             mask = ~near if mask is None else mask & ~near
         return mask
+
+    def _inside_scan(self, points: np.ndarray) -> np.ndarray:
+        """(N,) bool: points over measured surface and below the measured surfaces' top."""
+        observed = self.mapper.observed_space
+        return observed.sample(observed.supported(), points) & (
+            points[:, 2] <= observed.scan_top_z())
 
     # -- recovery ----------------------------------------------------------------------------
     def _recover(self, position: np.ndarray, record: dict[str, Any]) -> Plan | None:
@@ -538,6 +556,8 @@ class NarutoPolicy(Policy):
             points = sdf.grid_points()[reachable.reshape(-1)]
             points = points[np.linalg.norm(points - position, axis=1)
                             <= self.config.recovery.wander_max_m]
+            if self.config.stay_in_scanned_space:
+                points = points[self._inside_scan(points)]
             if len(points) == 0:
                 return None
             history = np.asarray(self.monitor.trajectory[-300:])

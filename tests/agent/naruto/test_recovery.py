@@ -157,3 +157,27 @@ def test_randomised_episodes_never_stall(scene) -> None:
         f"coverage stalled at {coverage[-1]:.3f} ({policy.recoveries})"
     )
     env.close()
+
+
+@pytest.mark.slow
+def test_on_an_open_scan_goals_stay_inside_the_scanned_space() -> None:
+    """Without a ceiling, rays over the wall tops measure free space outside the room; the
+    agent neither aims there nor keeps asking the env to go there."""
+    steps = 150
+    env = gym.make("NarutoRecon-v0", scene="replica_like_room:no_ceiling", image_scale=0.1,
+                   coverage_samples=2000, max_episode_steps=steps + 1)
+    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy.bind(EnvContext.from_env(env.unwrapped, step_budget=steps))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    escapes = 0
+    for _ in range(steps):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+        escapes += info["collision_reason"] == "escape"
+    goals = np.array([plan["goal"] for plan in policy.plans if "goal" in plan]).reshape(-1, 3)
+    assert len(goals) >= 2
+    scanned = env.unwrapped.collision.scanned_space
+    assert scanned.contains_many(goals).all(), goals[~scanned.contains_many(goals)]
+    assert escapes <= 2
+    assert info["coverage"] > 0.5
+    env.close()

@@ -1,0 +1,86 @@
+"""What the agent has measured of space: frontier, support from below, the scan's top."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from naruto_agent.mapping.observed_space import ObservedSpace, ObservedSpaceConfig
+
+BOUNDS = np.array([[0.0, 0.0, 0.0], [4.0, 4.0, 3.0]])
+
+
+def _space(**config) -> ObservedSpace:
+    space = ObservedSpace(BOUNDS, ObservedSpaceConfig(**config))
+    return space
+
+
+def _mark(space: ObservedSpace, occupied: np.ndarray | None = None,
+          free: np.ndarray | None = None) -> None:
+    """Set voxel states directly (boolean (nx, ny, nz) masks)."""
+    grid = space.grid
+    for mask, value in ((occupied, 3.0), (free, -2.0)):
+        if mask is not None:
+            grid.log_odds[mask] = value
+            grid.observed[mask] = True
+    space.configure()  # drop cached frontier and support
+
+
+def _floor_room() -> tuple[ObservedSpace, np.ndarray]:
+    """A measured floor under x < 2 m only (a scan that ends there); free air above the
+    whole grid up to 2 m, unknown above."""
+    space = _space()
+    shape = space.grid.shape
+    floor = np.zeros(shape, bool)
+    floor[:20, :, 0] = True
+    free = np.zeros(shape, bool)
+    free[:, :, 1:20] = True
+    _mark(space, occupied=floor, free=free)
+    return space, floor
+
+
+def test_support_needs_measured_surface_below_within_reach() -> None:
+    space, _ = _floor_room()
+    supported = space.supported()
+    centre = space.cells_of(np.array([[1.0, 2.0, 1.0]]))[0][0]
+    assert supported[tuple(centre)]
+    # Within support_reach_m (0.3 m) past the floor's edge: still supported.
+    near_edge = space.cells_of(np.array([[2.2, 2.0, 1.0]]))[0][0]
+    assert supported[tuple(near_edge)]
+    # Beyond it (no scanned floor under the point): not supported, at any height.
+    outside = space.cells_of(np.array([[3.0, 2.0, 0.5], [3.0, 2.0, 1.5]]))[0]
+    assert not supported[tuple(outside.T)].any()
+    # Too far above the surface (support_below_m = 3 m) is not supported either.
+    tall = _space(support_below_m=1.0)
+    _mark(tall, occupied=np.pad(np.ones((40, 40, 1), bool), ((0, 0), (0, 0), (0, 29))))
+    cells = tall.cells_of(np.array([[1.0, 1.0, 0.5], [1.0, 1.0, 1.5]]))[0]
+    assert tall.supported()[tuple(cells.T)].tolist() == [True, False]
+
+
+def test_frontier_outside_the_scan_is_dropped_unless_switched_off() -> None:
+    space, _ = _floor_room()
+    frontier = space.frontier()
+    points = space.grid.cell_to_world(np.argwhere(frontier))
+    # The frontier at the top of the free air (z 2 m) exists only over the floor.
+    assert len(points) > 0 and points[:, 0].max() < 2.0 + 0.3 + 0.1
+    space.configure(support_below_m=None)
+    everywhere = space.grid.cell_to_world(np.argwhere(space.frontier()))
+    assert everywhere[:, 0].max() > 3.5
+    assert space.supported().all()
+
+
+def test_scan_top_is_the_height_under_the_occupied_voxels() -> None:
+    space = _space()
+    assert space.scan_top_z() == float("inf")
+    occupied = np.zeros(space.grid.shape, bool)
+    occupied[:, :, 0] = True  # floor
+    occupied[0, :, :25] = True  # a wall up to 2.5 m
+    _mark(space, occupied=occupied)
+    assert space.scan_top_z() == pytest.approx(2.5, abs=0.11)
+
+
+def test_invalid_settings_are_refused() -> None:
+    with pytest.raises(ValueError, match="support_below_m"):
+        ObservedSpaceConfig(support_below_m=0.0)
+    with pytest.raises(ValueError, match="top_quantile"):
+        ObservedSpaceConfig(top_quantile=1.5)
