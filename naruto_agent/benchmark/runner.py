@@ -52,6 +52,24 @@ def make_env(spec: EpisodeSpec, action_mode: str) -> Any:
     )
 
 
+def timed_step(
+    policy: Any,
+    env: Any,
+    observation: dict[str, Any],
+    info: dict[str, Any],
+    times: dict[str, float],
+) -> tuple[dict[str, Any], bool, bool, dict[str, Any]]:
+    """One ``policy.act`` and ``env.step``; their seconds are added to ``times["policy"]`` and
+    ``times["env"]``. Returns the new observation, terminated, truncated and info."""
+    clock = time.perf_counter()
+    action = policy.act(observation, info)
+    times["policy"] += time.perf_counter() - clock
+    clock = time.perf_counter()
+    observation, _, terminated, truncated, info = env.step(action)
+    times["env"] += time.perf_counter() - clock
+    return observation, terminated, truncated, info
+
+
 def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
     """Run one episode and return its record (raises on any error).
 
@@ -93,12 +111,9 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
         evaluation_s = 0.0
         steps_run = 0
         for step in tqdm(range(1, spec.steps + 1), disable=not progress, desc=spec.episode_id):
-            clock = time.perf_counter()
-            action = policy.act(observation, info)
-            times["policy"] += time.perf_counter() - clock
-            clock = time.perf_counter()
-            observation, _, terminated, truncated, info = env.step(action)
-            times["env"] += time.perf_counter() - clock
+            observation, terminated, truncated, info = timed_step(
+                policy, env, observation, info, times
+            )
             steps_run = step
             if reconstruction is not None:
                 clock = time.perf_counter()

@@ -1,0 +1,24 @@
+"""The main command: one episode of a policy (the NARUTO agent by default) and what to look at.
+
+``naruto-demo`` (``python -m naruto_agent.demo``, or ``bash scripts/run_demo.sh`` after set-up)
+runs one episode and writes into ``--out`` (default ``outputs/demo``):
+
+* ``reconstruction.ply``: the policy's own map as a mesh (the NARUTO agent's TSDF or neural
+  map); for a policy that keeps no map, the reference TSDF fusion of the episode's frames;
+* ``metrics.json``: that mesh scored against the ground truth (accuracy, completion,
+  completion ratio over the whole and the observable surface), coverage, path length,
+  collisions and time per step (also printed);
+* ``curves.csv`` / ``curves.png``: coverage at every step, completion ratio at a few
+  checkpoints (scored with cheaper settings than the final metrics);
+* ``trajectory.png``: the trajectory on the top-down map, with the goals the policy chose;
+* ``episode.gif``: the env's ``rgb_array`` frames (map, RGB, depth), subsampled;
+* ``viewer.html``: a 3D view to open in a browser and turn (reconstruction, ground-truth
+  outline, trajectory, camera frustums); needs the ``viewer`` extra (plotly).
+
+Modules: :mod:`.run` (arguments and the episode loop), :mod:`.outputs` (files and pictures),
+:mod:`.viewer` (the 3D page and its reader).
+"""
+
+from naruto_agent.demo.run import DemoArgs, main, parse_args, run_demo
+
+__all__ = ["DemoArgs", "main", "parse_args", "run_demo"]

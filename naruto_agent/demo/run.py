@@ -1,0 +1,400 @@
+"""The demo's arguments and its episode loop (see :mod:`naruto_agent.demo` for the outputs).
+
+The loop is the benchmark harness's (:mod:`naruto_agent.benchmark.runner`): bind the policy to
+the env, reset both with the same seed, ``act`` / ``step`` until the budget, with the env made
+in the policy's preferred action mode. On top of it the demo keeps what a person wants to see:
+the coverage at every step, the completion ratio of the policy's own map at a few
+checkpoints, the goals the policy chose, and subsampled ``rgb_array`` frames.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from collections import Counter
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from naruto_gym.cli_args import parse_dataclass_args
+
+#: The default step budget: about 3 minutes after set-up on a 2-core CPU (README).
+DEFAULT_STEPS = 1000
+#: Cheaper scoring at the checkpoints of the completion curve than at the end.
+CHECKPOINT_CULL_EVERY = 10
+
+
+class DemoInputError(ValueError):
+    """Settings the demo cannot run with: an unknown policy or scene, or a bad value."""
+
+
+@dataclass
+class DemoArgs:
+    """Settings of the demo."""
+
+    policy: str = "naruto"
+    """passive, random, frontier, naruto, or a Policy subclass as 'package.module:ClassName'"""
+    scene: str = "replica_like_room"
+    """catalogue name, mesh path, 'NAME:OPENINGS' or 'procedural:room:SEED'"""
+    up_axis: str = "z"
+    """up axis of a mesh file: z, y or auto"""
+    steps: int = DEFAULT_STEPS
+    """step budget of the episode"""
+    seed: int = 0
+    """seed of the start pose and of the policy"""
+    mapper: str = "tsdf"
+    """the NARUTO agent's mapper: tsdf (fast) or neural (the published one; slow on a CPU)"""
+    device: str = "auto"
+    """device of the NARUTO agent's mapper (auto: CUDA when present)"""
+    policy_kwargs: str = ""
+    """JSON object of further keyword arguments of the policy's constructor"""
+    image_scale: float = 0.25
+    """camera resolution factor of the 680 x 1200 camera (0.25: 170 x 300)"""
+    out: str = "outputs/demo"
+    """folder the outputs are written to"""
+    checkpoints: int = 4
+    """completion-ratio checkpoints during the episode (besides the last step)"""
+    checkpoint_samples: int = 50_000
+    """surface samples per mesh at the checkpoints"""
+    eval_samples: int = 200_000
+    """surface samples per mesh of the final metrics (200,000 as published)"""
+    gif_frames: int = 60
+    """frames of the animated GIF (0: no GIF)"""
+    gif_width: int = 480
+    """width of the GIF's frames in pixels"""
+    viewer: bool = True
+    """write the 3D view (viewer.html; needs the viewer extra)"""
+    progress: bool = True
+    """show a progress bar"""
+
+
+def parse_args(argv: list[str] | None = None) -> DemoArgs:
+    """Parse command-line flags (``--policy naruto --steps 500 ...``) into :class:`DemoArgs`."""
+    return parse_dataclass_args(DemoArgs, argv, "Run one episode and write what to look at.")
+
+
+def check_args(args: DemoArgs) -> None:
+    """Raise ``ValueError`` for settings that cannot run (before anything is built)."""
+    if args.steps < 1:
+        raise ValueError(f"--steps must be at least 1, got {args.steps}")
+    if not 0 < args.image_scale <= 1:
+        raise ValueError(f"--image-scale must be in (0, 1], got {args.image_scale}")
+    if args.checkpoints < 0 or args.gif_frames < 0:
+        raise ValueError("--checkpoints and --gif-frames must be >= 0")
+    if args.checkpoint_samples < 1000 or args.eval_samples < 1000:
+        raise ValueError("--checkpoint-samples and --eval-samples must be at least 1000")
+    if args.gif_width < 32:
+        raise ValueError(f"--gif-width must be at least 32 pixels, got {args.gif_width}")
+
+
+def build_policy(args: DemoArgs) -> Any:
+    """The policy named by ``--policy`` with ``--policy-kwargs`` (and ``--mapper`` for NARUTO).
+
+    Raises:
+        ValueError: an unknown policy name, an import path that is not a ``Policy``, or
+            keyword arguments that are not a JSON object.
+    """
+    from naruto_agent.policies import policy_class
+
+    cls = policy_class(args.policy)
+    try:
+        kwargs = json.loads(args.policy_kwargs) if args.policy_kwargs.strip() else {}
+    except json.JSONDecodeError as error:
+        raise ValueError(f"--policy-kwargs is not valid JSON: {error}") from error
+    if not isinstance(kwargs, dict):
+        raise ValueError(f"--policy-kwargs must be a JSON object, got {args.policy_kwargs!r}")
+    if _is_naruto(cls):
+        kwargs = {"mapper": args.mapper, "device": args.device, **kwargs}
+    try:
+        return cls(**kwargs)
+    except TypeError as error:  # a keyword the constructor does not take
+        raise ValueError(f"cannot build policy {args.policy!r} with {kwargs}: {error}") from error
+
+
+def _is_naruto(cls: type) -> bool:
+    # Compared by name so that other policies never import the agent (and torch).
+    return any(base.__name__ == "NarutoPolicy" for base in cls.__mro__)
+
+
+def chosen_goals(policy: Any) -> np.ndarray:
+    """(G, 3) goals a policy chose this episode, in order; empty when it does not say.
+
+    The NARUTO agent logs every planning request (``plans``, a ``goal`` per successful
+    search); the frontier policy keeps the goals it reached (``visited_goals``).
+    """
+    plans = getattr(policy, "plans", None)
+    goals: list[Any] = []
+    if isinstance(plans, list):
+        goals = [plan["goal"] for plan in plans if isinstance(plan, dict) and "goal" in plan]
+    elif isinstance(getattr(policy, "visited_goals", None), list):
+        goals = list(policy.visited_goals)
+    return np.asarray(goals, dtype=np.float64).reshape(-1, 3)
+
+
+@dataclass
+class Episode:
+    """What one demo episode produced.
+
+    Attributes:
+        steps_run: steps taken.
+        coverage: coverage (fraction of the observable surface seen) after reset and each step.
+        completion_curve: ``{"step", "completion_ratio_pct", ...}`` at the checkpoints.
+        poses: (steps_run + 1, 4, 4) camera-to-world poses, start included.
+        goals: (G, 3) goals the policy chose.
+        frames: (step, picture) of the subsampled ``rgb_array`` frames.
+        collisions: refused or shortened moves, by reason.
+        path_length_m: distance travelled.
+        times_s: seconds per phase (``policy``, ``env``, ``mapping``, ``pictures``,
+            ``checkpoints``).
+        mesh: the reconstruction scored at the end.
+        map_source: where ``mesh`` comes from.
+        camera_size: (width, height) of the frames.
+        policy_detail_s: the policy's own per-phase seconds, when it keeps them.
+    """
+
+    steps_run: int
+    coverage: list[float]
+    completion_curve: list[dict[str, Any]]
+    poses: np.ndarray
+    goals: np.ndarray
+    frames: list[tuple[int, np.ndarray]]
+    collisions: Counter[str]
+    path_length_m: float
+    times_s: dict[str, float]
+    mesh: trimesh.Trimesh
+    map_source: str
+    camera_size: tuple[int, int]
+    policy_detail_s: dict[str, float]
+
+
+class _MapSource:
+    """The episode's reconstruction: the policy's own map, or a reference fusion of frames."""
+
+    def __init__(self, policy: Any, camera: Any, device: str) -> None:
+        self.policy = policy
+        self.own = callable(getattr(policy, "mesh", None))
+        self.reference = None
+        if not self.own:
+            from naruto_gym.evaluation import EpisodeReconstruction
+
+            self.reference = EpisodeReconstruction(camera, device=device)
+        self.label = (
+            f"the policy's own map ({type(policy).__name__}.mesh())"
+            if self.own
+            else "reference TSDF fusion of the episode's frames (the policy keeps no map)"
+        )
+
+    def add_frame(self, observation: dict[str, np.ndarray]) -> None:
+        if self.reference is not None:
+            self.reference.add_frame(observation["rgb"], observation["depth"], observation["pose"])
+
+    def mesh(self) -> trimesh.Trimesh:
+        return self.policy.mesh() if self.own else self.reference.mesh()
+
+
+def _score(env: Any, mesh: trimesh.Trimesh, **kwargs: Any) -> dict[str, Any] | None:
+    """Metrics of ``mesh`` against the ground truth; None when there is nothing to score."""
+    if len(mesh.faces) == 0:
+        return None
+    try:
+        return env.unwrapped.evaluate(mesh, **kwargs)
+    except ValueError:  # culling kept no face: nothing of the map is in view yet
+        return None
+
+
+def _curve_point(step: int, metrics: dict[str, Any] | None) -> dict[str, Any]:
+    keys = (
+        "completion_ratio_pct",
+        "observable_completion_ratio_pct",
+        "completion_cm",
+        "accuracy_cm",
+    )
+    return {"step": step, **{key: (metrics or {}).get(key) for key in keys}}
+
+
+def _frame(env: Any, width: int) -> np.ndarray:
+    from PIL import Image
+
+    picture = Image.fromarray(env.render())
+    height = max(1, round(picture.height * width / picture.width))
+    return np.asarray(picture.resize((width, height), Image.BILINEAR))
+
+
+def make_env(args: DemoArgs, scene: Any, action_mode: str) -> Any:
+    """The episode's env: the default camera scaled, the budget as its time limit."""
+    import gymnasium as gym
+
+    import naruto_gym  # noqa: F401  (registers the env ids)
+
+    return gym.make(
+        "NarutoRecon-v0",
+        scene=scene,
+        action_mode=action_mode,
+        image_scale=args.image_scale,
+        max_episode_steps=args.steps,
+        render_mode="rgb_array",
+    )
+
+
+def run_episode(args: DemoArgs, env: Any, policy: Any) -> Episode:
+    """Run one episode of ``policy`` in ``env`` and keep what the outputs need."""
+    from tqdm.auto import tqdm
+
+    from naruto_agent.benchmark.runner import checkpoint_steps, timed_step
+    from naruto_agent.policies import EnvContext
+
+    base = env.unwrapped
+    policy.bind(EnvContext.from_env(env, step_budget=args.steps))
+    source = _MapSource(policy, base.camera, args.device)
+    times = dict.fromkeys(("policy", "env", "mapping", "pictures", "checkpoints"), 0.0)
+    observation, info = env.reset(seed=args.seed, options=policy.reset_options())
+    policy.reset(observation, info, seed=args.seed)
+    source.add_frame(observation)
+
+    gif_every = max(1, args.steps // args.gif_frames) if args.gif_frames else 0
+    frames = [(0, _frame(env, args.gif_width))] if gif_every else []
+    checkpoints = set(checkpoint_steps(args.steps, args.checkpoints))
+    cheap = {"num_samples": args.checkpoint_samples, "cull_every": CHECKPOINT_CULL_EVERY}
+    coverage = [float(info["coverage"])]
+    curve: list[dict[str, Any]] = []
+    collisions: Counter[str] = Counter()
+    steps_run = 0
+    bar = tqdm(
+        range(1, args.steps + 1),
+        desc=f"{args.policy} on {args.scene}",
+        disable=not args.progress,
+        unit="step",
+    )
+    for step in bar:
+        observation, terminated, truncated, info = timed_step(policy, env, observation, info, times)
+        clock = time.perf_counter()
+        source.add_frame(observation)
+        times["mapping"] += time.perf_counter() - clock
+        steps_run = step
+        coverage.append(float(info["coverage"]))
+        if info.get("collided", False):
+            collisions[info.get("collision_reason", "") or "unknown"] += 1
+        last = terminated or truncated or step == args.steps
+        if gif_every and (step % gif_every == 0 or last):
+            clock = time.perf_counter()
+            frames.append((step, _frame(env, args.gif_width)))
+            times["pictures"] += time.perf_counter() - clock
+        if step in checkpoints or (last and args.checkpoints > 0):
+            clock = time.perf_counter()
+            curve.append(_curve_point(step, _score(env, source.mesh(), **cheap)))
+            times["checkpoints"] += time.perf_counter() - clock
+        if step % 10 == 0:
+            bar.set_postfix(coverage=f"{100 * coverage[-1]:.1f}%", refresh=False)
+        if last:
+            break
+    bar.close()
+    return Episode(
+        steps_run=steps_run,
+        coverage=coverage,
+        completion_curve=curve,
+        poses=base.poses,
+        goals=chosen_goals(policy),
+        frames=frames,
+        collisions=collisions,
+        path_length_m=float(info.get("path_length_m", 0.0)),
+        times_s=times,
+        mesh=source.mesh(),
+        map_source=source.label,
+        camera_size=(base.camera.width, base.camera.height),
+        policy_detail_s=dict(getattr(policy, "timings", {}) or {}),
+    )
+
+
+def prepare(args: DemoArgs) -> tuple[Any, Any]:
+    """The scene and the policy of the settings, checked before any work.
+
+    Raises:
+        DemoInputError: bad settings, an unknown policy or scene (the message says which).
+    """
+    from naruto_gym.scenes.catalogue import resolve_scene
+
+    try:
+        check_args(args)
+        policy = build_policy(args)
+        scene = resolve_scene(args.scene, args.up_axis)
+    except (ValueError, FileNotFoundError) as error:
+        raise DemoInputError(str(error)) from error
+    return scene, policy
+
+
+def run_demo(args: DemoArgs) -> dict[str, Any]:
+    """Run the episode, score it, write every output into ``args.out``; return the metrics.
+
+    Raises:
+        DemoInputError: bad settings, an unknown policy or scene.
+    """
+    from naruto_agent.demo import outputs, viewer
+
+    load_start = os.getloadavg()
+    scene, policy = prepare(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    env = make_env(args, scene, policy.preferred_action_mode)
+    try:
+        started = time.perf_counter()
+        try:
+            episode = run_episode(args, env, policy)
+        finally:
+            policy.close()
+        loop_s = time.perf_counter() - started
+        clock = time.perf_counter()
+        final = _score(env, episode.mesh, num_samples=args.eval_samples)
+        evaluation_s = time.perf_counter() - clock
+        metrics = outputs.metrics_record(
+            args=asdict(args),
+            episode=episode,
+            final=final,
+            seconds={"episode": loop_s, "evaluation": evaluation_s},
+            load_average=[load_start, os.getloadavg()],
+        )
+        clock = time.perf_counter()
+        base = env.unwrapped
+        written = outputs.write_all(out, episode, metrics, base, title=_title(args))
+        if args.viewer:
+            page = viewer.write_viewer(
+                out / "viewer.html",
+                episode.mesh,
+                base.scene,
+                episode.poses,
+                base.camera,
+                episode.goals,
+                title=_title(args),
+            )
+            if page is not None:
+                written.append(page)
+        metrics["seconds"]["outputs"] = time.perf_counter() - clock
+        metrics["outputs"] = sorted([path.name for path in written] + ["metrics.json"])
+        outputs.write_metrics(out / "metrics.json", metrics)
+    finally:
+        env.close()
+    print(outputs.summary_text(metrics, out))
+    return metrics
+
+
+def _title(args: DemoArgs) -> str:
+    name = f"NARUTO ({args.mapper})" if args.policy == "naruto" else args.policy
+    return f"{name} on {args.scene}, seed {args.seed}"
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of ``naruto-demo``: bad input ends with a one-line error (exit status 2).
+
+    Returns None, which a console script turns into exit status 0 (the metrics are in
+    ``metrics.json``; :func:`run_demo` returns them too).
+    """
+    args = parse_args(argv)
+    try:
+        run_demo(args)
+    except DemoInputError as error:
+        print(f"naruto-demo: error: {error}", file=sys.stderr)
+        raise SystemExit(2) from error
