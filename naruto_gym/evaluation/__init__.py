@@ -1,6 +1,6 @@
 """Reconstruction scoring: metrics, mesh culling, a reference TSDF mapper, one-call scoring."""
 
-from naruto_gym.evaluation.culling import cull_mesh, visible_vertex_mask
+from naruto_gym.evaluation.culling import CullingCache, cull_mesh, visible_vertex_mask
 from naruto_gym.evaluation.metrics import (
     ReconstructionMetrics,
     mean_absolute_distance_cm,
@@ -14,6 +14,7 @@ from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper, resolve_open3d_d
 from naruto_gym.scenes.mesh_scene import sample_mesh_surface
 
 __all__ = [
+    "CullingCache",
     "EpisodeReconstruction",
     "ReconstructionMetrics",
     "TsdfFusionMapper",

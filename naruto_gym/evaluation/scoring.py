@@ -21,6 +21,7 @@ from naruto_gym.evaluation.culling import (
     DEFAULT_CULL_DEPTH_SCALE,
     DEFAULT_CULL_EVERY,
     DEFAULT_DEPTH_MARGIN_M,
+    CullingCache,
     cull_mesh,
 )
 from naruto_gym.evaluation.metrics import (
@@ -63,6 +64,7 @@ def evaluate_reconstruction(
     renderer: RgbdRenderer | None = None,
     progress: bool = False,
     observable_mask: Callable[[np.ndarray], np.ndarray] | None = None,
+    cull_cache: CullingCache | None = None,
 ) -> ReconstructionMetrics:
     """Score a reconstructed mesh against the ground-truth scene, culled by the trajectory.
 
@@ -84,6 +86,8 @@ def evaluate_reconstruction(
         progress: show a progress bar while culling.
         observable_mask: also score completion over the ground-truth samples this mask
             keeps (e.g. ``ObservableSurface.mask``: surface some free viewpoint can see).
+        cull_cache: a :class:`~naruto_gym.evaluation.culling.CullingCache` shared by the
+            scorings of one episode (same result, less work on a longer trajectory).
 
     Returns:
         :class:`ReconstructionMetrics`, with ``faces_evaluated`` / ``faces_culled`` filled in.
@@ -112,6 +116,7 @@ def evaluate_reconstruction(
             depth_margin_m=depth_margin_m,
             depth_scale=cull_depth_scale,
             progress=progress,
+            cache=cull_cache,
         )
         culled = before - len(faces)
         if len(faces) == 0:
@@ -170,11 +175,14 @@ class EpisodeReconstruction:
             device=device,
         )
         self._poses: list[np.ndarray] = []
+        # Checkpoints re-score a growing trajectory: culling reuses the earlier verdicts.
+        self._cull_cache = CullingCache()
 
     def reset(self) -> None:
         """Start a new episode."""
         self.mapper.reset()
         self._poses = []
+        self._cull_cache.clear()
 
     def add_frame(
         self, rgb: np.ndarray | None, depth: np.ndarray, camera_to_world: np.ndarray
@@ -220,8 +228,13 @@ class EpisodeReconstruction:
         mesh = self.mesh()
         if len(mesh.faces) == 0:
             empty = dict.fromkeys(
-                ("accuracy_cm", "completion_cm", "completion_ratio_pct", "precision_pct",
-                 "fscore_pct"),
+                (
+                    "accuracy_cm",
+                    "completion_cm",
+                    "completion_ratio_pct",
+                    "precision_pct",
+                    "fscore_pct",
+                ),
             )
             return {**empty, **base, "note": "empty reconstruction: no valid depth was fused"}
         metrics = evaluate_reconstruction(
@@ -236,5 +249,6 @@ class EpisodeReconstruction:
             cull_every=cull_every,
             renderer=renderer,
             observable_mask=observable_mask,
+            cull_cache=self._cull_cache,
         )
         return {**metrics.as_dict(), **base}

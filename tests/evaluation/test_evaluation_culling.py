@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from naruto_gym.evaluation import cull_mesh, visible_vertex_mask
+from naruto_gym.evaluation import CullingCache, cull_mesh, culling, visible_vertex_mask
+from naruto_gym.evaluation.culling import visible_vertex_mask_reference
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 from naruto_gym.scenes.mesh_scene import scene_from_trimesh
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
@@ -67,9 +68,10 @@ def test_margin_is_respected():
     scene = wall_scene()
     vertices, faces = small_quad(2.05)
     assert len(cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene)[1]) == 0
-    assert len(
-        cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene, depth_margin_m=0.06)[1]
-    ) == 2
+    assert (
+        len(cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, scene, depth_margin_m=0.06)[1])
+        == 2
+    )
 
 
 def test_face_outside_the_frustum_is_dropped_and_one_visible_vertex_keeps_a_face():
@@ -127,3 +129,115 @@ def test_bad_inputs_raise_clear_errors():
         cull_mesh(vertices, faces, FORWARD_POSE[None], CAMERA, "scene.ply")
     with pytest.raises(ValueError, match="out of range"):
         cull_mesh(vertices, faces + 10, FORWARD_POSE[None], CAMERA, scene)
+
+
+# -- the fast culling against the straightforward per-pose loop ------------------------------
+def cluttered_room(seed: int):
+    """Ground truth: a 6 x 5 x 3 m room (walls facing in) with random boxes and thin posts,
+    some narrower than a pixel of the coarse guide images; reconstruction vertices scattered
+    on and around its surfaces (some hidden inside boxes, some behind walls)."""
+    rng = np.random.default_rng(seed)
+    room = trimesh.creation.box(extents=(6.0, 5.0, 3.0))
+    room.invert()
+    parts = [room]
+    for _ in range(12):
+        size = rng.uniform([0.02, 0.02, 0.3], [1.0, 1.0, 2.5])
+        box = trimesh.creation.box(extents=size)
+        box.apply_translation([rng.uniform(-2.5, 2.5), rng.uniform(-2.0, 2.0), size[2] / 2 - 1.5])
+        parts.append(box)
+    scene = scene_from_trimesh(trimesh.util.concatenate(parts), name=f"clutter{seed}")
+    on_surface = scene.sample_surface(6000, seed=seed) + rng.normal(0.0, 0.03, (6000, 3))
+    anywhere = rng.uniform([-3.5, -3.0, -2.0], [3.5, 3.0, 2.0], (1500, 3))
+    vertices = np.concatenate([on_surface, anywhere])
+    return scene, vertices, rng
+
+
+def random_poses(rng: np.random.Generator, count: int) -> np.ndarray:
+    eyes = rng.uniform([-2.8, -2.3, -0.5], [2.8, 2.3, 1.0], (count, 3))
+    targets = eyes + rng.normal(0.0, 1.0, (count, 3)) * [1.0, 1.0, 0.3]
+    return np.stack(
+        [pose_looking_at(eye, target) for eye, target in zip(eyes, targets, strict=True)]
+    )
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fast_culling_equals_the_per_pose_loop(seed):
+    scene, vertices, rng = cluttered_room(seed)
+    poses = random_poses(rng, 40)
+    renderer = RgbdRenderer(scene, CAMERA)
+    for every, margin in ((1, 0.03), (3, 0.0), (2, 0.15)):
+        expected = visible_vertex_mask_reference(vertices, poses, CAMERA, renderer, every, margin)
+        # Neither all nor nothing: the comparison has occluded and visible vertices to get right.
+        assert 0.2 < expected.mean() < 0.9
+        mask = visible_vertex_mask(vertices, poses, CAMERA, renderer, every, margin)
+        np.testing.assert_array_equal(mask, expected)
+
+
+def test_fast_culling_equals_the_loop_with_tiny_casts_and_rounds(monkeypatch):
+    # Many chunks per round and one pair per vertex per round: every bookkeeping path runs.
+    monkeypatch.setattr(culling, "MAX_RAYS_PER_CAST", 257)
+    monkeypatch.setattr(culling, "MAX_LIKELY_PER_ROUND", 1)
+    monkeypatch.setattr(culling, "MAX_UNLIKELY_PER_ROUND", 3)
+    monkeypatch.setattr(culling, "BLOCK_SIZE_M", 0.2)
+    scene, vertices, rng = cluttered_room(3)
+    poses = random_poses(rng, 25)
+    expected = visible_vertex_mask_reference(vertices, poses, CAMERA, scene, every=1)
+    np.testing.assert_array_equal(visible_vertex_mask(vertices, poses, CAMERA, scene, 1), expected)
+
+
+def test_fast_depth_image_culling_equals_the_loop():
+    scene, vertices, rng = cluttered_room(4)
+    poses = random_poses(rng, 12)
+    renderer = RgbdRenderer(scene, CAMERA)
+    for scale in (1.0, 0.5):
+        expected = visible_vertex_mask_reference(
+            vertices, poses, CAMERA, renderer, every=2, depth_scale=scale
+        )
+        mask = visible_vertex_mask(vertices, poses, CAMERA, renderer, every=2, depth_scale=scale)
+        np.testing.assert_array_equal(mask, expected)
+
+
+def test_nothing_in_any_frustum():
+    scene, vertices, _ = cluttered_room(5)
+    looking_down_from_outside = pose_looking_at([0.0, 0.0, 30.0], [0.0, 0.0, 40.0])
+    poses = np.stack([looking_down_from_outside] * 3)
+    assert not visible_vertex_mask(vertices, poses, CAMERA, scene).any()
+    assert not visible_vertex_mask(vertices, poses, CAMERA, scene, depth_scale=0.5).any()
+    assert not visible_vertex_mask_reference(vertices, poses, CAMERA, scene).any()
+    assert visible_vertex_mask(np.zeros((0, 3)), poses, CAMERA, scene).shape == (0,)
+    with pytest.raises(ValueError, match="NaN"):
+        visible_vertex_mask(np.full((2, 3), np.nan), poses, CAMERA, scene)
+
+
+def test_cache_carries_verdicts_along_a_growing_trajectory():
+    scene, vertices, rng = cluttered_room(6)
+    poses = random_poses(rng, 30)
+    renderer = RgbdRenderer(scene, CAMERA)
+    cache = CullingCache()
+    for count, jitter_share in ((10, 0.0), (20, 0.3), (30, 0.5)):
+        # A later mesh keeps some vertices bit for bit, moves others and adds new ones.
+        moved = rng.random(len(vertices)) < jitter_share
+        vertices = vertices.copy()
+        vertices[moved] += rng.normal(0.0, 0.01, (int(moved.sum()), 3))
+        vertices = np.concatenate([vertices, rng.uniform(-2.5, 2.5, (200, 3))])
+        expected = visible_vertex_mask_reference(vertices, poses[:count], CAMERA, renderer)
+        mask = visible_vertex_mask(vertices, poses[:count], CAMERA, renderer, cache=cache)
+        np.testing.assert_array_equal(mask, expected)
+    # Other settings, other poses (not an extension): the cache must not leak verdicts.
+    for other_poses in (poses, random_poses(rng, 30)):
+        expected = visible_vertex_mask_reference(vertices, other_poses, CAMERA, renderer, 2, 0.0)
+        mask = visible_vertex_mask(vertices, other_poses, CAMERA, renderer, 2, 0.0, cache=cache)
+        np.testing.assert_array_equal(mask, expected)
+    for count in (8, 16):
+        expected = visible_vertex_mask_reference(
+            vertices, poses[:count], CAMERA, renderer, depth_scale=0.5
+        )
+        mask = visible_vertex_mask(
+            vertices, poses[:count], CAMERA, renderer, depth_scale=0.5, cache=cache
+        )
+        np.testing.assert_array_equal(mask, expected)
+    cache.clear()
+    mask = visible_vertex_mask(vertices, poses, CAMERA, renderer, cache=cache)
+    np.testing.assert_array_equal(
+        mask, visible_vertex_mask_reference(vertices, poses, CAMERA, renderer)
+    )
