@@ -29,7 +29,7 @@ from enum import Enum
 
 import numpy as np
 
-from naruto_agent.planning.rotation import plan_rotations, slerp_rotations
+from naruto_agent.planning.rotation import InViewTest, plan_rotations, slerp_rotations
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 
 
@@ -97,6 +97,9 @@ class NarutoStateMachine:
         max_rotation_step_deg: largest turn per frame (NARUTO: 10 degrees).
         arrival_tolerance_m: while moving, an agent farther than this from the node it was
             sent to was stopped (by the env's collision check) and counts as a collision.
+        in_view: None (published) turns to every view at the goal; given (see
+            :func:`~naruto_agent.planning.rotation.plan_rotations`), views already in the
+            image are not turned to.
 
     Attributes:
         state: the current state.
@@ -105,7 +108,8 @@ class NarutoStateMachine:
         plan: the plan being carried out (None before the first one).
     """
 
-    def __init__(self, max_rotation_step_deg: float = 10.0, arrival_tolerance_m: float = 0.01):
+    def __init__(self, max_rotation_step_deg: float = 10.0, arrival_tolerance_m: float = 0.01,
+                 in_view: InViewTest | None = None):
         if not max_rotation_step_deg > 0:
             raise ValueError(f"max_rotation_step_deg must be positive, got "
                              f"{max_rotation_step_deg}")
@@ -113,6 +117,7 @@ class NarutoStateMachine:
             raise ValueError(f"arrival_tolerance_m must be >= 0, got {arrival_tolerance_m}")
         self.max_rotation_step_deg = float(max_rotation_step_deg)
         self.arrival_tolerance_m = float(arrival_tolerance_m)
+        self.in_view = in_view
         self.reset()
 
     def reset(self) -> None:
@@ -192,7 +197,7 @@ class NarutoStateMachine:
                     views = np.asarray(self.plan.views, dtype=np.float64).reshape(-1, 3)
                     far = np.linalg.norm(views - position, axis=1) > _MIN_LOOK_DISTANCE_M
                     turns = plan_rotations(rotation, position, views[far],
-                                           self.max_rotation_step_deg)
+                                           self.max_rotation_step_deg, in_view=self.in_view)
                     self._rotations = deque(turns.rotations)
                     self._go(State.ROTATING_AT_GOAL)
                     continue

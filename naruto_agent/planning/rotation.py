@@ -9,7 +9,8 @@ NARUTO turns the camera in place towards each target view it wants, never by mor
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -20,6 +21,7 @@ __all__ = [
     "RotationPlan",
     "look_at_rotation",
     "order_views_greedily",
+    "image_view_test",
     "plan_rotations",
     "slerp_rotations",
 ]
@@ -92,14 +94,43 @@ class RotationPlan:
 
     Attributes:
         rotations: (K, 3, 3) camera-to-world rotations, one per frame.
-        order: (T,) target indices in visiting order.
-        arrivals: (T,) index into ``rotations`` where each visited view (in ``order``) is
+        order: (T',) indices of the visited targets, in visiting order.
+        arrivals: (T',) index into ``rotations`` where each visited view (in ``order``) is
             reached, exactly.
+        skipped: indices of the targets not turned to because they were already in view.
     """
 
     rotations: np.ndarray
     order: np.ndarray
     arrivals: np.ndarray
+    skipped: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+
+#: ``in_view(eye (3,), rotations (K, 3, 3), targets (T, 3)) -> (K, T) bool``: which targets
+#: a camera at ``eye`` has in its image at each rotation.
+InViewTest = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def image_view_test(
+    width: int, height: int, fx: float, fy: float, cx: float, cy: float,
+    margin: float = 0.1,
+) -> InViewTest:
+    """An :data:`InViewTest` for a pinhole camera: a target is in view when it lies in front
+    of the camera and projects inside the image shrunk by ``margin`` of its size per side."""
+    low_u, high_u = margin * width - 0.5, (1.0 - margin) * width - 0.5
+    low_v, high_v = margin * height - 0.5, (1.0 - margin) * height - 0.5
+
+    def in_view(eye: np.ndarray, rotations: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        offsets = np.asarray(targets, np.float64).reshape(-1, 3) - np.asarray(eye).reshape(3)
+        # Camera-frame coordinates R^T (t - eye) for every rotation and target.
+        local = np.einsum("kji,tj->kti", np.asarray(rotations, np.float64), offsets)
+        z = local[..., 2]
+        safe = np.where(z > 1e-6, z, 1.0)
+        u = fx * local[..., 0] / safe + cx
+        v = fy * local[..., 1] / safe + cy
+        return (z > 1e-6) & (u >= low_u) & (u <= high_u) & (v >= low_v) & (v <= high_v)
+
+    return in_view
 
 
 def plan_rotations(
@@ -108,6 +139,7 @@ def plan_rotations(
     targets: np.ndarray,
     max_step_deg: float = 10.0,
     greedy: bool = True,
+    in_view: InViewTest | None = None,
 ) -> RotationPlan:
     """Turn in place at ``eye`` to look at every target, in bounded SLERP steps.
 
@@ -117,25 +149,56 @@ def plan_rotations(
         targets: (T, 3) points to look at.
         max_step_deg: largest turn per step, degrees (NARUTO: 10).
         greedy: order views by the smallest next turn (NARUTO); else keep the given order.
+        in_view: None (published) turns to every target. Given, a target that the current
+            rotation or any rotation already turned through has in its image is not turned
+            to (the camera has seen it; with a 90-degree field of view the 10 views of a
+            goal often share a few images).
 
     Returns:
         A :class:`RotationPlan` whose last rotation is exactly the look-at rotation of the
-        last visited target.
+        last visited target (empty when every target was already in view).
     """
     current = _rotation(current_rotation, "current_rotation")
     eye = np.asarray(eye, dtype=np.float64).reshape(3)
     targets = np.asarray(targets, dtype=np.float64).reshape(-1, 3)
+    empty = RotationPlan(np.zeros((0, 3, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
     if len(targets) == 0:
-        return RotationPlan(np.zeros((0, 3, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64))
+        return empty
     views = np.stack([look_at_rotation(eye, target) for target in targets])
-    order = order_views_greedily(current, views) if greedy else np.arange(len(views))
+    if in_view is None:
+        order = order_views_greedily(current, views) if greedy else np.arange(len(views))
+        skipped: list[int] = []
+    else:
+        order, skipped = [], []
     chunks = []
     arrivals = []
     count = 0
-    for index in order:
+    remaining = list(range(len(views)))
+    seen_by = current[None]
+    while remaining:
+        if in_view is not None:
+            # Drop the targets some rotation so far has in view, then take the nearest turn.
+            visible = in_view(eye, seen_by, targets[remaining]).any(axis=0)
+            skipped += [index for index, hit in zip(remaining, visible, strict=True) if hit]
+            remaining = [index for index, hit in zip(remaining, visible, strict=True)
+                         if not hit]
+            if not remaining:
+                break
+            traces = np.einsum("ij,tij->t", current, views[remaining])
+            index = remaining.pop(int(np.argmax(traces)) if greedy else 0)
+            order.append(index)
+        else:
+            index = order[len(chunks)]
+            remaining.pop()
         steps = slerp_rotations(current, views[index], max_step_deg)
         chunks.append(steps)
         count += len(steps)
         arrivals.append(count - 1)
         current = views[index]
-    return RotationPlan(np.concatenate(chunks), order, np.asarray(arrivals, dtype=np.int64))
+        seen_by = steps
+    if not chunks:
+        return RotationPlan(empty.rotations, empty.order, empty.arrivals,
+                            np.asarray(skipped, dtype=np.int64))
+    return RotationPlan(np.concatenate(chunks), np.asarray(order, dtype=np.int64),
+                        np.asarray(arrivals, dtype=np.int64),
+                        np.asarray(skipped, dtype=np.int64))

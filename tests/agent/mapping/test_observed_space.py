@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from naruto_agent.mapping.observed_space import ObservedSpace, ObservedSpaceConfig
+from naruto_gym.geometry.transforms import look_at_rotation, make_pose
+from naruto_gym.sensors.pinhole import PinholeCamera
 
 BOUNDS = np.array([[0.0, 0.0, 0.0], [4.0, 4.0, 3.0]])
 
@@ -84,3 +86,31 @@ def test_invalid_settings_are_refused() -> None:
         ObservedSpaceConfig(support_below_m=0.0)
     with pytest.raises(ValueError, match="top_quantile"):
         ObservedSpaceConfig(top_quantile=1.5)
+
+
+def test_frontier_looked_at_without_being_resolved_loses_variance() -> None:
+    """A wall 2.5 m ahead, seen 4 times: the frontier at the edges of the view within the
+    look range falls to half the initial variance; frontier farther away keeps it."""
+    space = _space(support_below_m=None, look_weight=0.25, look_range_m=2.0)
+    camera = PinholeCamera(32, 32, 16.0, 16.0, 15.5, 15.5)
+    eye = np.array([1.0, 2.0, 1.5])
+    pose = make_pose(look_at_rotation(eye, eye + [1.0, 0.0, 0.0]), eye)
+    depth = np.full((32, 32), 2.5, np.float32)
+    for _ in range(4):
+        space.integrate_depth(depth, pose, camera)
+    variance = space.frontier_variance(3.0)
+    frontier = space.frontier()
+    assert frontier.any() and np.all(variance[~frontier] == 0.0)
+    cells = np.argwhere(frontier)
+    distance = np.linalg.norm(space.grid.cell_to_world(cells) - eye, axis=1)
+    values = variance[tuple(cells.T)]
+    # Behind the camera nothing was looked at: the initial variance.
+    assert np.all(values[distance > 2.2] == pytest.approx(3.0))
+    looked = values < 3.0
+    assert looked.any() and np.all(distance[looked] <= 2.0 + 0.1)
+    assert values.min() == pytest.approx(1.5)  # 3 / (1 + 0.25 * 4)
+    # Switched off, the frontier stays at the initial variance.
+    still = _space(support_below_m=None, look_weight=0.0)
+    for _ in range(4):
+        still.integrate_depth(depth, pose, camera)
+    assert np.all(still.frontier_variance(3.0)[still.frontier()] == 3.0)

@@ -14,6 +14,7 @@ from naruto_agent.planning import (
     plan_rotations,
     slerp_rotations,
 )
+from naruto_agent.planning.rotation import image_view_test
 from naruto_gym.geometry.transforms import rotation_angle_between
 
 
@@ -98,3 +99,29 @@ def test_rotation_input_errors():
     with pytest.raises(ValueError, match="coincide"):
         plan_rotations(np.eye(3), np.zeros(3), np.zeros((1, 3)))
     assert len(plan_rotations(np.eye(3), np.zeros(3), np.zeros((0, 3))).rotations) == 0
+
+
+def test_views_already_in_the_image_are_not_turned_to():
+    eye = np.zeros(3)
+    in_view = image_view_test(64, 64, 32.0, 32.0, 31.5, 31.5, margin=0.1)
+    current = look_at_rotation(eye, np.array([1.0, 0.0, 0.0]))
+    ahead = [np.array([2.0, 0.1, 0.05]), np.array([2.0, -0.2, 0.0])]  # in the image now
+    behind = [np.array([-2.0, 0.0, 0.0]), np.array([-2.0, 0.3, 0.0])]  # one turn sees both
+    side = np.array([0.0, 2.0, 0.0])  # seen on the way round to the back
+    targets = np.stack(ahead + behind + [side])
+    full = plan_rotations(current, eye, targets, max_step_deg=10.0)
+    plan = plan_rotations(current, eye, targets, max_step_deg=10.0, in_view=in_view)
+    assert len(full.order) == 5
+    assert {0, 1} <= set(plan.skipped.tolist())
+    assert len(plan.order) + len(plan.skipped) == 5 and len(plan.order) <= 2
+    assert len(plan.rotations) < len(full.rotations)
+    # Every target is in the image of some rotation of the plan (or of the start).
+    seen = in_view(eye, np.concatenate([current[None], plan.rotations]), targets).any(axis=0)
+    assert seen.all()
+    # Steps stay within the limit.
+    previous = current
+    for rotation in plan.rotations:
+        assert np.degrees(rotation_angle_between(previous, rotation)) <= 10.0 + 1e-6
+        previous = rotation
+    # All in view already: nothing to turn.
+    assert len(plan_rotations(current, eye, np.stack(ahead), in_view=in_view).rotations) == 0
