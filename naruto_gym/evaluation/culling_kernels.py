@@ -223,3 +223,47 @@ def frustum_members(
                 out_pixel[found, 1] = v
                 found += 1
     return found
+
+
+@numba.njit(cache=True, nogil=True)
+def build_position_table(keys: np.ndarray, bits: int) -> np.ndarray:
+    """Open-addressing table (``2**bits`` slots, -1 empty) of vertex indices by ``keys``,
+    slotted by the keys' top bits."""
+    table = np.full(1 << bits, -1, dtype=np.int64)
+    mask = np.int64((1 << bits) - 1)
+    shift = np.uint64(64 - bits)
+    for i in range(keys.shape[0]):
+        slot = np.int64(keys[i] >> shift)
+        while table[slot] != -1:
+            slot = (slot + 1) & mask
+        table[slot] = i
+    return table
+
+
+@numba.njit(cache=True, nogil=True)
+def find_positions(
+    table: np.ndarray,
+    bits: int,
+    known: np.ndarray,
+    known_keys: np.ndarray,
+    points: np.ndarray,
+    keys: np.ndarray,
+    match: np.ndarray,
+) -> None:
+    """``match[j]``: index of a ``known`` vertex at exactly ``points[j]``, or -1."""
+    mask = np.int64((1 << bits) - 1)
+    shift = np.uint64(64 - bits)
+    for j in range(points.shape[0]):
+        match[j] = -1
+        slot = np.int64(keys[j] >> shift)
+        while table[slot] != -1:
+            i = table[slot]
+            if (
+                known_keys[i] == keys[j]
+                and known[i, 0] == points[j, 0]
+                and known[i, 1] == points[j, 1]
+                and known[i, 2] == points[j, 2]
+            ):
+                match[j] = i
+                break
+            slot = (slot + 1) & mask
