@@ -280,7 +280,8 @@ def summary_text(metrics: dict[str, Any], folder: Path) -> str:
             f"  coverage {metrics['coverage_pct']:.2f} % | path length "
             f"{metrics['path_length_m']:.2f} m | collisions {metrics['collisions']} | time "
             f"per step {times['total']:.0f} ms ({phases})",
-            f"  episode {metrics['seconds']['episode']:.0f} s, scoring "
+            f"  {metrics['seconds'].get('total', 0.0):.0f} s in all: episode "
+            f"{metrics['seconds']['episode']:.0f} s, scoring "
             f"{metrics['seconds']['evaluation']:.0f} s, outputs "
             f"{metrics['seconds'].get('outputs', 0.0):.0f} s; load average "
             f"{metrics['load_average']['start'][0]:.1f} -> {metrics['load_average']['end'][0]:.1f} "

@@ -336,6 +336,7 @@ def run_demo(args: DemoArgs) -> dict[str, Any]:
     from naruto_agent.demo import outputs, viewer
 
     load_start = os.getloadavg()
+    begun = time.perf_counter()
     scene, policy = prepare(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -373,6 +374,8 @@ def run_demo(args: DemoArgs) -> dict[str, Any]:
             if page is not None:
                 written.append(page)
         metrics["seconds"]["outputs"] = time.perf_counter() - clock
+        # From the call on: policy, scene and env built, the episode, scoring, the files.
+        metrics["seconds"]["total"] = time.perf_counter() - begun
         metrics["outputs"] = sorted([path.name for path in written] + ["metrics.json"])
         outputs.write_metrics(out / "metrics.json", metrics)
     finally:
