@@ -237,8 +237,9 @@ class TsdfUncertaintyMapper:
             cached = self._sdf_view = SdfVolume.from_function(self.sdf, self.bounds, voxel_size)
             self._view_points = cached.grid_points()
         else:
-            changed = self.tsdf.points_near_blocks(self._view_points,
-                                                   self.tsdf.pop_touched_blocks())
+            changed = self.tsdf.grid_near_blocks(cached.origin, cached.voxel_size,
+                                                 cached.shape, self.tsdf.pop_touched_blocks())
+            changed = changed.reshape(-1)
             if changed.any():
                 cached.values.reshape(-1)[changed] = self.sdf(self._view_points[changed])
         return SdfVolume(cached.values.copy(), cached.origin, cached.voxel_size)

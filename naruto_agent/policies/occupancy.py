@@ -4,8 +4,9 @@ Each voxel holds a log-odds of being occupied. A depth frame is integrated by ca
 subsample of its pixels (every ``pixel_stride``-th pixel in both directions): the voxel of each
 hit is made more occupied; voxels that rays pass through (sampled every half voxel, stopping
 one voxel short of the hit) are made more free. Pixels with no hit within ``max_range_m`` mark
-their whole ray up to that range as free. Everything is vectorised numpy, with a fixed number
-of samples per ray and a mask.
+their whole ray up to that range as free. The rays are walked by a compiled kernel
+(:func:`_trace_rays`) that visits every sample once and updates each touched voxel once per
+frame, without the (rays x samples) arrays a vectorised walk needs.
 
 States: *unknown* (never touched by a ray), *free* (log-odds below ``free_threshold``),
 *occupied* (above ``occupied_threshold``). A *frontier* voxel is a free voxel with an unknown
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from scipy import ndimage
 from skimage.graph import MCP_Geometric
@@ -25,6 +27,59 @@ from skimage.graph import MCP_Geometric
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 _FACE_NEIGHBOURS = ndimage.generate_binary_structure(3, 1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _trace_rays(
+    origin: np.ndarray, directions: np.ndarray, ranges: np.ndarray, max_range: float,
+    grid_origin: np.ndarray, voxel: float, shape: np.ndarray, log_odds: np.ndarray,
+    observed: np.ndarray, marks: np.ndarray, frame: int, miss: np.float32, hit: np.float32,
+    low: np.float32, high: np.float32,
+) -> None:
+    """Walk every ray (samples every half voxel up to one voxel short of its hit, or to
+    ``max_range`` without a hit) and update each touched voxel once: a hit voxel by ``hit``,
+    a voxel only passed through by ``miss`` (clamped to [low, high]). ``marks`` (flat, int64)
+    remembers which voxels this ``frame`` touched: 2 * frame + 1 hit, 2 * frame + 2 passed."""
+    nx, ny, nz = shape[0], shape[1], shape[2]
+    hit_mark = 2 * frame + 1
+    free_mark = 2 * frame + 2
+    count = ranges.shape[0]
+    for r in range(count):  # the hits first: a voxel hit in this frame is not also cleared
+        value = ranges[r]
+        if not (np.isfinite(value) and value > 0.0 and value <= max_range):
+            continue
+        i = int(np.floor((origin[0] + directions[r, 0] * value - grid_origin[0]) / voxel))
+        j = int(np.floor((origin[1] + directions[r, 1] * value - grid_origin[1]) / voxel))
+        k = int(np.floor((origin[2] + directions[r, 2] * value - grid_origin[2]) / voxel))
+        if 0 <= i < nx and 0 <= j < ny and 0 <= k < nz:
+            flat = (i * ny + j) * nz + k
+            if marks[flat] != hit_mark:
+                marks[flat] = hit_mark
+                log_odds[flat] = min(log_odds[flat] + hit, high)
+                observed[flat] = True
+    spacing = voxel / 2.0
+    steps = int(np.ceil(max_range / spacing))
+    for r in range(count):
+        value = ranges[r]
+        if value == 0.0:
+            length = max_range
+        elif np.isfinite(value) and value > 0.0:
+            length = value - voxel if value <= max_range else max_range
+        else:
+            continue
+        for step in range(1, steps + 1):
+            distance = step * spacing
+            if distance > length:
+                break
+            i = int(np.floor((origin[0] + directions[r, 0] * distance - grid_origin[0]) / voxel))
+            j = int(np.floor((origin[1] + directions[r, 1] * distance - grid_origin[1]) / voxel))
+            k = int(np.floor((origin[2] + directions[r, 2] * distance - grid_origin[2]) / voxel))
+            if 0 <= i < nx and 0 <= j < ny and 0 <= k < nz:
+                flat = (i * ny + j) * nz + k
+                if marks[flat] != hit_mark and marks[flat] != free_mark:
+                    marks[flat] = free_mark
+                    log_odds[flat] = max(log_odds[flat] + miss, low)
+                    observed[flat] = True
 
 
 @dataclass
@@ -80,6 +135,8 @@ class OccupancyGrid:
         self.log_odds = np.zeros(self.shape, np.float32)
         self.observed = np.zeros(self.shape, bool)
         self._ray_cache: tuple[PinholeCamera, np.ndarray] | None = None
+        self._marks: np.ndarray | None = None  # per-voxel stamp of the frame that touched it
+        self._frame = 0
 
     # -- coordinates ---------------------------------------------------------------------
     def world_to_cell(self, points: np.ndarray) -> np.ndarray:
@@ -187,37 +244,22 @@ class OccupancyGrid:
         a ray with a non-finite or negative range is ignored.
         """
         origin = np.asarray(origin, np.float64).reshape(3)
-        directions = np.asarray(directions, np.float64).reshape(-1, 3)
-        ranges = np.asarray(ranges, np.float64).reshape(-1)
+        directions = np.ascontiguousarray(directions, np.float64).reshape(-1, 3)
+        ranges = np.ascontiguousarray(ranges, np.float64).reshape(-1)
         if len(ranges) != len(directions):
             raise ValueError(f"{len(directions)} directions but {len(ranges)} ranges")
-        valid = np.isfinite(ranges) & (ranges > 0.0)
-        hit = valid & (ranges <= self.max_range_m)
-        free_length = np.where(hit, ranges - self.voxel_size_m, self.max_range_m)
-        free_length = np.where(valid | (ranges == 0.0), free_length, 0.0)
-
-        spacing = self.voxel_size_m / 2.0
-        steps = np.arange(1, int(np.ceil(self.max_range_m / spacing)) + 1) * spacing
-        keep = steps[None, :] <= free_length[:, None]
-        ray_index, step_index = np.nonzero(keep)
-        points = origin + directions[ray_index] * steps[step_index, None]
-        free_cells = self.world_to_cell(points)
-        free_cells = free_cells[self.in_grid(free_cells)]
-        free_flat = np.unique(self._flat(free_cells)) if len(free_cells) else np.zeros(0, np.int64)
-
-        hit_points = origin + directions[hit] * ranges[hit, None]
-        hit_cells = self.world_to_cell(hit_points)
-        hit_cells = hit_cells[self.in_grid(hit_cells)]
-        hit_flat = np.unique(self._flat(hit_cells)) if len(hit_cells) else np.zeros(0, np.int64)
-        # A voxel hit in this frame is not also cleared by rays that graze it.
-        free_flat = np.setdiff1d(free_flat, hit_flat, assume_unique=True)
-
-        log_odds = self.log_odds.reshape(-1)
-        observed = self.observed.reshape(-1)
-        log_odds[free_flat] = np.maximum(log_odds[free_flat] + self.miss_log_odds, self.clamp[0])
-        log_odds[hit_flat] = np.minimum(log_odds[hit_flat] + self.hit_log_odds, self.clamp[1])
-        observed[free_flat] = True
-        observed[hit_flat] = True
+        if self._marks is None or self._marks.size != self.log_odds.size:
+            self._marks = np.zeros(self.log_odds.size, np.int64)
+            self._frame = 0
+        self._frame += 1
+        _trace_rays(
+            origin, directions, ranges, float(self.max_range_m),
+            np.asarray(self.origin, np.float64), float(self.voxel_size_m),
+            np.asarray(self.shape, np.int64), self.log_odds.reshape(-1),
+            self.observed.reshape(-1), self._marks, self._frame,
+            np.float32(self.miss_log_odds), np.float32(self.hit_log_odds),
+            np.float32(self.clamp[0]), np.float32(self.clamp[1]),
+        )
 
     # -- planning ------------------------------------------------------------------------
     def plan_from(self, start_cell: np.ndarray, traversable: np.ndarray) -> PathPlan:

@@ -218,6 +218,34 @@ class TsdfFusionMapper:
             near |= inside & table[index[:, 0], index[:, 1], index[:, 2]]
         return near
 
+    def grid_near_blocks(
+        self, origin: np.ndarray, spacing: float, shape: tuple[int, int, int], blocks: np.ndarray
+    ) -> np.ndarray:
+        """(nx, ny, nz) bool over the regular grid of points ``origin + spacing * index``:
+        exactly :meth:`points_near_blocks` of those points, without visiting each point.
+
+        The test is separable: a point concerns block b when, along every axis, its base
+        cell's block is b - 1 or b. Along an axis the base blocks of the grid's points do not
+        decrease, so each block marks one box of indices.
+        """
+        blocks = np.asarray(blocks, dtype=np.int64).reshape(-1, 3)
+        near = np.zeros(shape, dtype=bool)
+        if len(blocks) == 0:
+            return near
+        origin = np.asarray(origin, dtype=np.float64).reshape(3)
+        low, high = [], []
+        for axis in range(3):
+            # The same arithmetic as SdfVolume.voxel_to_world and points_near_blocks.
+            coordinate = origin[axis] + spacing * np.arange(shape[axis], dtype=np.float64)
+            base = np.floor_divide(np.floor(coordinate / self.voxel_size_m).astype(np.int64),
+                                   self.block_resolution)
+            low.append(np.searchsorted(base, blocks[:, axis] - 1, side="left"))
+            high.append(np.searchsorted(base, blocks[:, axis], side="right"))
+        for x0, x1, y0, y1, z0, z1 in zip(low[0], high[0], low[1], high[1], low[2], high[2],
+                                          strict=True):
+            near[x0:x1, y0:y1, z0:z1] = True
+        return near
+
     # -- outputs -----------------------------------------------------------------------
     @property
     def is_empty(self) -> bool:
