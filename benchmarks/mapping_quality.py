@@ -63,6 +63,9 @@ class Args:
     """folder with mesh.ply and traj.txt"""
     num_frames: int = 2000
     """frames of the trajectory to map (the whole sequence has 2000)"""
+    trajectory: str = ""
+    """poses to map instead of the scene's traj.txt (same format: a flattened 4x4
+    camera-to-world matrix per line), e.g. an agent's episode written by naruto_episode.py"""
     variants: list[str] = field(default_factory=lambda: ["neural", "neural_active", "tsdf"])
     """which mappers to run: neural, neural_active, tsdf"""
     speed_iterations: int = 10
@@ -249,7 +252,10 @@ def main() -> None:
     scene = load_scene(scene_dir / "mesh.ply", up_axis="z", name="replica_office0")
     if args.num_frames < 1:
         sys.exit(f"--num-frames must be at least 1, got {args.num_frames}")
-    poses = load_trajectory(scene_dir / "traj.txt")[: args.num_frames]
+    trajectory = Path(args.trajectory) if args.trajectory else scene_dir / "traj.txt"
+    if not trajectory.is_file():
+        sys.exit(f"trajectory {trajectory} not found; pass --trajectory with a poses file")
+    poses = load_trajectory(trajectory)[: args.num_frames]
     camera = PinholeCamera()
     renderer = RgbdRenderer(scene, camera, max_depth_m=5.0)
     bounds = scene.bounds + np.array([[-1.0], [1.0]]) * args.bounds_padding_m

@@ -13,7 +13,18 @@ Runs :class:`~naruto_agent.naruto.NarutoPolicy` for a step budget on a scene and
 * the time per step by phase: mapping (frame integration + reading the planner view),
   planning (goal search + E-RRT + the state machine) and the env (motion, rendering,
   coverage, and the reference TSDF fusion that ``reconstruct=True`` adds), next to the
-  published per-frame figures on a V100 (NARUTO_NOTES.md section 1) for scale.
+  published per-frame figures on a V100 (NARUTO_NOTES.md section 1) for scale;
+* the wall time by phase as in the paper's Figure 8 (``phases_s``, printed as a table):
+  simulation (motion and rendering of the RGB-D frame and the panorama), mapping (the
+  mapper's iterations and keyframes, without the active ray scoring), active ray scoring
+  (drawing, scoring and picking the oversampled pool; neural mapper), explored-space update
+  (the frontier grid the agent's unknown-space targets come from), planner view, goal
+  search, path planning (E-RRT and the recovery planner), rotation planning (the state
+  machine's own work: SLERP, look-at, target ordering) and collision checks (the agent's
+  checks of its moves on its map); apart from the agent's loop, the env's coverage
+  bookkeeping and the reference TSDF fusion. The env's parts are timed by wrapping its
+  components (renderer, panorama, coverage tracker, reference fusion), the collision checks
+  by wrapping the agent's check; nothing else changes.
 
 It writes a JSON record and two PNGs (the env's top-down render of the trajectory, and the
 coverage curve) under ``benchmarks/results/``. The machine's load average is recorded at the
@@ -82,6 +93,10 @@ class Args:
     """suffix of the output names (default: scene, mapper and steps)"""
     target_snapshots: int = 4
     """top-down pictures of the targets, evenly over the episode (0: none)"""
+    settings: str = ""
+    """JSON object of NarutoPolicy settings, e.g. '{"neural": {"active_score": "grid"}}'"""
+    checkpoint_every: int = 100
+    """write a progress record (coverage, wall time by phase so far) every n steps (0: never)"""
 
 
 def parse_args() -> Args:
@@ -115,24 +130,32 @@ def target_snapshot(env: gym.Env, policy: NarutoPolicy, step: int) -> tuple[np.n
     uncertainty = policy.uncertainty
     values = uncertainty.values.reshape(-1)
     points = uncertainty.grid_points()
-    initial = policy.mapper.config.initial_variance
+    mapper = policy.mapper
+    initial = getattr(mapper, "initial_variance", None) or mapper.config.initial_variance
     frontier = points[np.isclose(values, initial)]
     surface = points[(values > 0) & ~np.isclose(values, initial)]
     surface_values = values[(values > 0) & ~np.isclose(values, initial)]
     surface = surface[np.argsort(-surface_values)[:2000]]
     goals = np.array([p["goal"] for p in policy.plans if "goal" in p]).reshape(-1, 3)
-    layers = {"frontier": frontier, "uncertain surface": surface, "goals": goals,
-              "trajectory": base.trajectory}
+    layers = {
+        "frontier": frontier,
+        "uncertain surface": surface,
+        "goals": goals,
+        "trajectory": base.trajectory,
+    }
     return base._top_down.image.copy(), {"step": step, **layers}
 
 
 def save_target_pictures(env: gym.Env, snapshots: list, path: Path, title: str) -> None:
     top_down = env.unwrapped._top_down
-    figure, axes = plt.subplots(1, len(snapshots), figsize=(4.2 * len(snapshots), 3.8),
-                                squeeze=False)
-    styles = {"frontier": dict(s=2, c="cyan", alpha=0.5),
-              "uncertain surface": dict(s=2, c="orange", alpha=0.5),
-              "goals": dict(s=18, c="white", edgecolors="black", marker="*")}
+    figure, axes = plt.subplots(
+        1, len(snapshots), figsize=(4.2 * len(snapshots), 3.8), squeeze=False
+    )
+    styles = {
+        "frontier": dict(s=2, c="cyan", alpha=0.5),
+        "uncertain surface": dict(s=2, c="orange", alpha=0.5),
+        "goals": dict(s=18, c="white", edgecolors="black", marker="*"),
+    }
     for axis, (image, layers) in zip(axes[0], snapshots, strict=True):
         axis.imshow(image)
         for name, style in styles.items():
@@ -150,28 +173,161 @@ def save_target_pictures(env: gym.Env, snapshots: list, path: Path, title: str) 
     plt.close(figure)
 
 
+class PhaseClock:
+    """Seconds spent inside wrapped callables, by phase name (for the Figure 8 breakdown)."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+
+    def wrap(self, name: str, function):  # noqa: ANN001, ANN201
+        self.seconds.setdefault(name, 0.0)
+
+        def timed(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+            clock = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                self.seconds[name] += time.perf_counter() - clock
+
+        return timed
+
+    def clear(self) -> None:
+        self.seconds = dict.fromkeys(self.seconds, 0.0)
+
+
+def instrument(env: gym.Env, policy: NarutoPolicy, clock: PhaseClock) -> None:
+    """Wrap the env's components and the agent's move check so that ``clock`` times them.
+
+    The wrappers are instance attributes (the panorama function is looked up in the env's
+    module at each call): behaviour is unchanged, only time is recorded.
+    """
+    from naruto_gym.envs import naruto_recon_env
+
+    base = env.unwrapped
+    base.renderer.render = clock.wrap("render", base.renderer.render)
+    if not hasattr(naruto_recon_env.render_panorama, "__wrapped_by_phase_clock__"):
+        panorama = clock.wrap("panorama", naruto_recon_env.render_panorama)
+        panorama.__wrapped_by_phase_clock__ = True
+        naruto_recon_env.render_panorama = panorama
+    base.coverage.update = clock.wrap("coverage", base.coverage.update)
+    if base.reconstruction is not None:
+        base.reconstruction.add_frame = clock.wrap("reference_map", base.reconstruction.add_frame)
+    check = policy._move_is_free
+
+    def move_check(start, end):  # noqa: ANN001, ANN202
+        # A check may read a stale planner view first: that time is the planner view's.
+        view_before = policy.timings["planner_view"]
+        started = time.perf_counter()
+        try:
+            return check(start, end)
+        finally:
+            spent = time.perf_counter() - started
+            clock.seconds["collision_checks"] += spent - (
+                policy.timings["planner_view"] - view_before
+            )
+
+    clock.seconds.setdefault("collision_checks", 0.0)
+    policy._move_is_free = move_check
+
+
+#: Figure 8's phases, in order, then what the env does beyond the agent's loop.
+PHASES = (
+    "simulation",
+    "mapping",
+    "active_ray_scoring",
+    "explored_space",
+    "planner_view",
+    "goal_search",
+    "path_planning",
+    "rotation_planning",
+    "collision_checks",
+)
+OUTSIDE_LOOP = ("coverage_bookkeeping", "reference_tsdf")
+
+
+def phase_seconds(policy: NarutoPolicy, clock: PhaseClock, env_s: float) -> dict[str, float]:
+    """Wall seconds of the episode by phase (Figure 8), from the agent's timings, the
+    mapper's counters and the wrapped components."""
+    timings = policy.timings
+    stats = getattr(policy.mapper, "stats", None)
+    scoring = float(getattr(stats, "scoring_seconds", 0.0))
+    explored = float(getattr(stats, "observed_space_seconds", 0.0))
+    collision = clock.seconds.get("collision_checks", 0.0)
+    outside = clock.seconds.get("coverage", 0.0) + clock.seconds.get("reference_map", 0.0)
+    return {
+        "simulation": env_s - outside,
+        "mapping": timings["mapping"] - scoring - explored,
+        "active_ray_scoring": scoring,
+        "explored_space": explored,
+        "planner_view": timings["planner_view"],
+        "goal_search": timings["goal_search"],
+        "path_planning": timings["rrt"],
+        "rotation_planning": timings["control"] - collision,
+        "collision_checks": collision,
+        "coverage_bookkeeping": clock.seconds.get("coverage", 0.0),
+        "reference_tsdf": clock.seconds.get("reference_map", 0.0),
+    }
+
+
+def print_phase_table(phases: dict[str, float], steps: int, episode_s: float) -> None:
+    loop = sum(phases[name] for name in PHASES)
+    print("\n| phase | total (s) | per step (ms) | share of the agent's loop |")
+    print("|---|---|---|---|")
+    for name in (*PHASES, *OUTSIDE_LOOP):
+        share = f"{100 * phases[name] / loop:.1f} %" if name in PHASES and loop > 0 else "-"
+        print(
+            f"| {name.replace('_', ' ')} | {phases[name]:.1f} | "
+            f"{1000 * phases[name] / max(steps, 1):.1f} | {share} |"
+        )
+    print(
+        f"| agent's loop (sum of the phases) | {loop:.1f} | {1000 * loop / max(steps, 1):.1f} | |"
+    )
+    print(f"| episode wall time | {episode_s:.1f} | {1000 * episode_s / max(steps, 1):.1f} | |")
+
+
 def main(args: Args) -> dict:
     load_start = os.getloadavg()
     # One step more than the budget, so the env's final-metrics wrapper (which scores on
     # truncation) does not run inside a timed step; the metrics are computed below.
     env = gym.make(
-        "NarutoRecon-v0", scene=args.scene, up_axis=args.up_axis, image_scale=args.image_scale,
-        max_episode_steps=args.steps + 1, reconstruct=True, render_mode="rgb_array",
+        "NarutoRecon-v0",
+        scene=args.scene,
+        up_axis=args.up_axis,
+        image_scale=args.image_scale,
+        max_episode_steps=args.steps + 1,
+        reconstruct=True,
+        render_mode="rgb_array",
     )
     base = env.unwrapped
-    policy = NarutoPolicy(mapper=args.mapper, device=args.device)
+    try:
+        settings = json.loads(args.settings) if args.settings else {}
+    except json.JSONDecodeError as error:
+        raise SystemExit(
+            f"--settings must be a JSON object of NarutoPolicy settings: {error}"
+        ) from error
+    if not isinstance(settings, dict):
+        raise SystemExit(f"--settings must be a JSON object, got {args.settings!r}")
+    policy = NarutoPolicy(mapper=args.mapper, device=args.device, **settings)
+    tag = args.tag or f"{Path(args.scene).stem}_{args.mapper}_{args.steps}steps"
+    output_dir = Path(args.output_dir)
+    output_dir.mkdir(parents=True, exist_ok=True)
     policy.bind(EnvContext.from_env(env, step_budget=args.steps))
+    clock_phases = PhaseClock()
+    instrument(env, policy, clock_phases)
     started = time.perf_counter()
     observation, info = env.reset(seed=args.seed, options=policy.reset_options())
+    env_s = time.perf_counter() - started
     clock = time.perf_counter()
     policy.reset(observation, info, seed=args.seed)
     reset_s = time.perf_counter() - clock
 
     coverage = [float(info["coverage"])]
-    env_s = 0.0
     collisions = 0
-    snapshot_steps = set(np.linspace(0, args.steps, args.target_snapshots + 1)[1:]
-                         .astype(int).tolist()) if args.target_snapshots > 0 else set()
+    snapshot_steps = (
+        set(np.linspace(0, args.steps, args.target_snapshots + 1)[1:].astype(int).tolist())
+        if args.target_snapshots > 0
+        else set()
+    )
     snapshots = []
     for step in tqdm(range(1, args.steps + 1), desc=f"NARUTO {args.scene}"):
         action = policy.act(observation, info)
@@ -184,9 +340,28 @@ def main(args: Args) -> dict:
             clock = time.perf_counter()
             snapshots.append(target_snapshot(env, policy, step))
             started += time.perf_counter() - clock  # pictures are not the agent's time
+        if args.checkpoint_every > 0 and step % args.checkpoint_every == 0:
+            progress = {
+                "args": dataclasses.asdict(args),
+                "steps_run": step,
+                "wall_s": time.perf_counter() - started,
+                "phases_s": phase_seconds(policy, clock_phases, env_s),
+                "coverage_curve": np.round(coverage, 5).tolist(),
+                "path_length_m": float(info.get("path_length_m", 0.0)),
+                "load_average": os.getloadavg(),
+            }
+            (output_dir / f"naruto_episode_{tag}_progress.json").write_text(
+                json.dumps(progress, indent=2)
+            )
         if terminated or truncated:
             break
     episode_s = time.perf_counter() - started
+    # The trajectory (one flattened camera-to-world matrix per line, like Replica's
+    # traj.txt), so its frames can be mapped passively for comparison
+    # (benchmarks/mapping_quality.py --trajectory).
+    np.savetxt(
+        output_dir / f"naruto_episode_{tag}_poses.txt", np.asarray(base.poses).reshape(-1, 16)
+    )
     steps_run = len(coverage) - 1
 
     clock = time.perf_counter()
@@ -198,6 +373,7 @@ def main(args: Args) -> dict:
     evaluation_s = time.perf_counter() - clock - mesh_s
 
     timings = policy.timings
+    phases = phase_seconds(policy, clock_phases, env_s)
     per_step = 1000.0 / max(steps_run, 1)
     phases_ms = {
         "mapping": per_step * (timings["mapping"] + timings["planner_view"]),
@@ -208,9 +384,6 @@ def main(args: Args) -> dict:
     plans = policy.plans
     outcomes = Counter(plan.get("outcome", "?") for plan in plans)
     planned = [plan for plan in plans if plan.get("outcome") == "planned"]
-    tag = args.tag or f"{Path(args.scene).stem}_{args.mapper}_{args.steps}steps"
-    output_dir = Path(args.output_dir)
-    output_dir.mkdir(parents=True, exist_ok=True)
     record = {
         "args": dataclasses.asdict(args),
         "steps_run": steps_run,
@@ -229,9 +402,19 @@ def main(args: Args) -> dict:
         "planning_outcomes": dict(outcomes),
         "fallback_searches": sum(bool(plan.get("fallback")) for plan in plans),
         "mean_goal_search_ms": float(np.mean([p["search_ms"] for p in plans if "search_ms" in p]))
-        if plans else 0.0,
+        if plans
+        else 0.0,
         "mean_rrt_ms": float(np.mean([p["rrt_ms"] for p in planned])) if planned else 0.0,
         "time_per_step_ms": phases_ms,
+        "phases_s": phases,
+        "phases_ms_per_step": {name: per_step * seconds for name, seconds in phases.items()},
+        "phase_shares_of_loop": {
+            name: phases[name] / max(sum(phases[p] for p in PHASES), 1e-9) for name in PHASES
+        },
+        "neural_mapper_settings": policy.mapper.config.to_dict()
+        if args.mapper == "neural"
+        else None,
+        "mapping_iterations": int(getattr(getattr(policy.mapper, "stats", None), "iterations", 0)),
         "time_per_step_detail_ms": detail_ms,
         "published_v100_ms_per_frame": PUBLISHED_MS_PER_FRAME,
         "reset_s": reset_s,
@@ -246,29 +429,48 @@ def main(args: Args) -> dict:
     json_path = output_dir / f"naruto_episode_{tag}.json"
     json_path.write_text(json.dumps(record, indent=2))
     Image.fromarray(env.render()).save(output_dir / f"naruto_episode_{tag}_topdown.png")
-    save_curve(coverage, output_dir / f"naruto_episode_{tag}_coverage.png",
-               f"NARUTO ({args.mapper}) on {args.scene}")
+    save_curve(
+        coverage,
+        output_dir / f"naruto_episode_{tag}_coverage.png",
+        f"NARUTO ({args.mapper}) on {args.scene}",
+    )
     if snapshots:
-        save_target_pictures(env, snapshots, output_dir / f"naruto_episode_{tag}_targets.png",
-                             f"NARUTO ({args.mapper}) on {args.scene}: targets and path")
+        save_target_pictures(
+            env,
+            snapshots,
+            output_dir / f"naruto_episode_{tag}_targets.png",
+            f"NARUTO ({args.mapper}) on {args.scene}: targets and path",
+        )
     env.close()
 
-    print(f"\nNARUTO ({args.mapper} mapper) on {args.scene}, {steps_run} steps, "
-          f"image scale {args.image_scale} ({base.camera.width} x {base.camera.height})")
+    print(
+        f"\nNARUTO ({args.mapper} mapper) on {args.scene}, {steps_run} steps, "
+        f"image scale {args.image_scale} ({base.camera.width} x {base.camera.height})"
+    )
     marks = np.linspace(0, steps_run, 6).astype(int)
     print("coverage (%): " + ", ".join(f"step {m}: {100 * coverage[m]:.1f}" for m in marks))
     for name, metrics in (("reference TSDF", reference), ("agent's own mesh", own)):
-        print(f"{name:>17}: accuracy {metrics['accuracy_cm']:.2f} cm, completion "
-              f"{metrics['completion_cm']:.2f} cm, completion ratio "
-              f"{metrics['completion_ratio_pct']:.2f} %")
-    print(f"path length {record['path_length_m']:.2f} m, env collisions {collisions}, "
-          f"planning requests {len(plans)} {dict(outcomes)}")
-    print("time per step (ms): " + ", ".join(f"{k} {v:.1f}" for k, v in phases_ms.items())
-          + "  | published V100: " + ", ".join(f"{k} {v}" for k, v in
-                                              PUBLISHED_MS_PER_FRAME.items()))
+        print(
+            f"{name:>17}: accuracy {metrics['accuracy_cm']:.2f} cm, completion "
+            f"{metrics['completion_cm']:.2f} cm, completion ratio "
+            f"{metrics['completion_ratio_pct']:.2f} %"
+        )
+    print(
+        f"path length {record['path_length_m']:.2f} m, env collisions {collisions}, "
+        f"planning requests {len(plans)} {dict(outcomes)}"
+    )
+    print(
+        "time per step (ms): "
+        + ", ".join(f"{k} {v:.1f}" for k, v in phases_ms.items())
+        + "  | published V100: "
+        + ", ".join(f"{k} {v}" for k, v in PUBLISHED_MS_PER_FRAME.items())
+    )
     print("  detail: " + ", ".join(f"{k} {v:.1f}" for k, v in detail_ms.items()))
-    print(f"load average start {load_start[0]:.2f}, end {record['load_average_end'][0]:.2f} "
-          f"on {os.cpu_count()} cores; written {json_path}")
+    print_phase_table(phases, steps_run, episode_s)
+    print(
+        f"load average start {load_start[0]:.2f}, end {record['load_average_end'][0]:.2f} "
+        f"on {os.cpu_count()} cores; written {json_path}"
+    )
     return record
 
 

@@ -32,8 +32,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 from torch import nn
+
+from naruto_agent.mapping import cpu_kernels
 
 # Spatial-hash primes of Instant-NGP (the first is 1 so that x varies fastest).
 _HASH_PRIMES = (1, 2654435761, 805459861)
@@ -42,9 +45,7 @@ _CORNERS = [(i, j, k) for i in (0, 1) for j in (0, 1) for k in (0, 1)]
 _ONE_BLOB_CUTOFF = 9.0
 
 
-def level_resolutions(
-    num_levels: int, base_resolution: int, finest_resolution: float
-) -> list[int]:
+def level_resolutions(num_levels: int, base_resolution: int, finest_resolution: float) -> list[int]:
     """Grid resolution of each level: a geometric progression from base to finest."""
     if num_levels < 1:
         raise ValueError(f"num_levels must be at least 1, got {num_levels}")
@@ -168,17 +169,20 @@ class _HashGridFunction(torch.autograd.Function):
                 # A weighted histogram per feature: on a CPU several times faster than
                 # index_add_. (Running the features' histograms in Python threads was tried:
                 # slower, as the threads fight the idle-spinning OpenMP workers for the cores.)
-                grad_table = torch.stack([
-                    torch.bincount(flat, weights=value, minlength=ctx.table_rows)
-                    .to(grad_output.dtype)
-                    for value in values
-                ])
+                grad_table = torch.stack(
+                    [
+                        torch.bincount(flat, weights=value, minlength=ctx.table_rows).to(
+                            grad_output.dtype
+                        )
+                        for value in values
+                    ]
+                )
         else:
             grad_table = grad_output.new_zeros((features, ctx.table_rows))
         if num_dense:
             volumes, grid = saved
-            grad_dense = grad_output[:, :num_dense].transpose(0, 1).reshape(
-                num_dense, features, 1, 1, count
+            grad_dense = (
+                grad_output[:, :num_dense].transpose(0, 1).reshape(num_dense, features, 1, 1, count)
             )
             grad_volumes, _ = torch.ops.aten.grid_sampler_3d_backward(
                 grad_dense, volumes, grid, 0, 0, True, [True, False]
@@ -269,6 +273,11 @@ class HashGridEncoding(nn.Module):
             persistent=False,
         )
 
+        # No-gradient queries on a CPU take a compiled loop (:mod:`cpu_kernels`); False keeps
+        # them on the PyTorch path (the reference the tests compare against).
+        self.cpu_kernel = True
+        self._kernel_constants: tuple[np.ndarray, np.ndarray] | None = None
+
     @property
     def output_dim(self) -> int:
         return self.num_levels * self.features_per_level
@@ -316,19 +325,54 @@ class HashGridEncoding(nn.Module):
         xy_weight = {
             (i, j): weights_per_side[i][0] * weights_per_side[j][1] for i in (0, 1) for j in (0, 1)
         }
-        indices = torch.empty((8, *fraction.shape[1:]), dtype=self._index_dtype,
-                              device=fraction.device)
-        weights = torch.empty((8, *fraction.shape[1:]), dtype=fraction.dtype,
-                              device=fraction.device)
+        indices = torch.empty(
+            (8, *fraction.shape[1:]), dtype=self._index_dtype, device=fraction.device
+        )
+        weights = torch.empty(
+            (8, *fraction.shape[1:]), dtype=fraction.dtype, device=fraction.device
+        )
         for c, (i, j, k) in enumerate(_CORNERS):
             torch.bitwise_xor(xy_index[i, j], sides[k][2], out=indices[c])
             torch.mul(xy_weight[i, j], weights_per_side[k][2], out=weights[c])
         return indices.view(8, -1), weights.view(8, -1)
 
+    def _uses_cpu_kernel(self, unit_positions: torch.Tensor) -> bool:
+        """Whether this call can take the compiled no-gradient loop."""
+        return (
+            self.cpu_kernel
+            and cpu_kernels.supports(self.features_per_level)
+            and not unit_positions.is_cuda
+            and not self.table.is_cuda
+            and self.table.dtype == torch.float32
+            and not (torch.is_grad_enabled() and self.table.requires_grad)
+        )
+
+    def _cpu_kernel_features(self, unit_positions: torch.Tensor) -> torch.Tensor:
+        if self._kernel_constants is None:
+            multipliers = self.multipliers[:, :, 0].cpu().numpy().copy()
+            multipliers[:, self.num_dense_levels :] &= self.table_size - 1
+            self._kernel_constants = (
+                np.asarray(self.resolutions, dtype=np.float32),
+                np.ascontiguousarray(multipliers, dtype=np.int64),
+            )
+        scales, multipliers = self._kernel_constants
+        features = cpu_kernels.hash_grid_features(
+            unit_positions.detach().contiguous().numpy(),
+            self.table.detach().numpy(),
+            scales,
+            multipliers,
+            self.num_dense_levels,
+            self.table_size,
+            threads=torch.get_num_threads(),
+        )
+        return torch.from_numpy(features)
+
     def forward(self, unit_positions: torch.Tensor) -> torch.Tensor:
         """(N, 3) positions in [0, 1] -> (N, num_levels * features_per_level) features."""
         count = unit_positions.shape[0]
         unit_positions = unit_positions.clamp(0.0, 1.0).to(self.table.dtype)
+        if self._uses_cpu_kernel(unit_positions):
+            return self._cpu_kernel_features(unit_positions)
         features = _HashGridFunction.apply(self.table, unit_positions, self)
         # (F, L, N) -> (N, L * F), level-major like tiny-cuda-nn's output.
         return features.permute(2, 1, 0).reshape(count, self.output_dim)

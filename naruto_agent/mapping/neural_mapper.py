@@ -39,6 +39,7 @@ from naruto_agent.mapping.observed_space import (
 from naruto_agent.mapping.rendering import (
     RayBatch,
     mapping_losses,
+    measured_point_variance,
     render_rays,
     smoothness_loss,
     surface_variance,
@@ -67,11 +68,19 @@ class _FramePlan:
 
 @dataclass
 class MappingStats:
-    """Counters of the work done, for benchmarks."""
+    """Counters of the work done, for benchmarks.
+
+    ``iteration_seconds`` is the whole of every mapping iteration, the active ray selection
+    included; ``scoring_seconds`` is the part of it spent drawing and scoring the active pool
+    and picking the rays. ``observed_space_seconds`` is the integration of frames and
+    panoramas into the measure of explored space (outside the iterations).
+    """
 
     iterations: int = 0
     mapping_steps: int = 0
     iteration_seconds: float = 0.0
+    scoring_seconds: float = 0.0
+    observed_space_seconds: float = 0.0
     losses: list[dict[str, float]] = field(default_factory=list)
 
     @property
@@ -129,12 +138,15 @@ class NeuralMapper:
         self._directions = torch.from_numpy(camera.ray_directions).to(self._device)
         self._plan: _FramePlan | None = None
         self.frames_integrated = 0
-        self.observed_space = ObservedSpace(self.bounds, ObservedSpaceConfig(
-            voxel_size_m=self.config.uncertainty_voxel_m,
-            max_range_m=self.config.far_m,
-            rays_per_frame=self.config.observed_rays_per_frame,
-            min_cluster_voxels=self.config.frontier_min_cluster_voxels,
-        ))
+        self.observed_space = ObservedSpace(
+            self.bounds,
+            ObservedSpaceConfig(
+                voxel_size_m=self.config.uncertainty_voxel_m,
+                max_range_m=self.config.far_m,
+                rays_per_frame=self.config.observed_rays_per_frame,
+                min_cluster_voxels=self.config.frontier_min_cluster_voxels,
+            ),
+        )
         self.stats = MappingStats()
 
     def _adam(self, parameters, lr: float) -> torch.optim.Optimizer:  # noqa: ANN001
@@ -152,6 +164,13 @@ class NeuralMapper:
     @property
     def active_sampling(self) -> bool:
         return self.config.active_sampling
+
+    @property
+    def active_score(self) -> str:
+        """The active-sampling score in use ("auto" resolved for this mapper's device)."""
+        if self.config.active_score == "auto":
+            return "rendered" if self._device.type == "cuda" else "grid"
+        return self.config.active_score
 
     # -- schedule -------------------------------------------------------------------------
     def _plan_frame(self, frame_index: int) -> _FramePlan:
@@ -199,7 +218,9 @@ class NeuralMapper:
                 f"{self.camera.height} x {self.camera.width}; pass the camera the frames use"
             )
         if self.config.unknown_space:
+            start = time.perf_counter()
             self.observed_space.integrate_depth(depth, pose, self.camera)
+            self.stats.observed_space_seconds += time.perf_counter() - start
         pixels = self.required_pixels(frame_index)
         return self.integrate_pixels(
             pixels, rgb.reshape(-1, 3)[pixels], depth.reshape(-1)[pixels], pose, frame_index
@@ -283,9 +304,10 @@ class NeuralMapper:
             return RayBatch.concatenate(
                 [self.keyframes.sample(cfg.rays_per_iteration, self.generator), current]
             )
+        start = time.perf_counter()
         pool, num_keyframe_rays = self.active_ray_pool(current)
         scores = self.ray_uncertainty(pool)
-        return pool.select(
+        selected = pool.select(
             select_active_rays(
                 scores,
                 num_keyframe_rays=num_keyframe_rays,
@@ -295,6 +317,10 @@ class NeuralMapper:
                 generator=self.generator,
             )
         )
+        if self._device.type == "cuda":
+            torch.cuda.synchronize(self._device)
+        self.stats.scoring_seconds += time.perf_counter() - start
+        return selected
 
     def active_ray_pool(self, current: RayBatch) -> tuple[RayBatch, int]:
         """The oversampled pool active sampling scores: ``active_oversample`` x
@@ -308,9 +334,14 @@ class NeuralMapper:
 
     @torch.no_grad()
     def ray_uncertainty(self, rays: RayBatch) -> torch.Tensor:
-        """(N,) rendered variance sum w^2 sigma^2 of rays (the active-sampling score)."""
-        if self.config.active_score == "surface":
+        """(N,) active-sampling score of rays: the rendered variance sum w^2 sigma^2
+        (``active_score`` "rendered", published), the same over the samples around the
+        measured depth ("surface"), or the grid's variance at the measured surface point
+        ("grid"; see :class:`NeuralMapperConfig`)."""
+        if self.active_score == "surface":
             return surface_variance(self.field, self.uncertainty, rays, self.config)
+        if self.active_score == "grid":
+            return measured_point_variance(self.uncertainty, rays)
         scores = []
         for begin in range(0, len(rays), 4096):
             part = rays.select(slice(begin, begin + 4096))
@@ -393,7 +424,7 @@ class NeuralMapper:
         frontier of unexplored space (``unknown_space``), and 0 everywhere else.
         """
         sdf_volume = SdfVolume.from_function(self.sdf, self.bounds, voxel_size)
-        variance = self.variance(sdf_volume.grid_points()).reshape(sdf_volume.shape)
+        variance = self._variance_on(sdf_volume)
         on_surface = (sdf_volume.values >= 0.0) & (
             sdf_volume.values <= 0.5 * self.config.truncation_m
         )
@@ -406,16 +437,32 @@ class NeuralMapper:
             )
         return sdf_volume, uncertainty_volume
 
+    @torch.no_grad()
+    def _variance_on(self, volume: SdfVolume) -> np.ndarray:
+        """The grid's variance at every voxel of a volume; read straight off the grid (no
+        interpolation) when the volume's voxels are the grid's own."""
+        grid = self.uncertainty
+        if (
+            volume.shape == grid.shape
+            and np.allclose(volume.origin, grid.origin_numpy, atol=1e-6)
+            and abs(volume.voxel_size - grid.voxel_size) < 1e-9
+        ):
+            return grid.variance_grid().cpu().numpy().astype(np.float64)
+        return self.variance(volume.grid_points()).reshape(volume.shape)
+
     @property
     def initial_variance(self) -> float:
         """The variance of a voxel nothing has measured: softplus(init) + min variance."""
-        return float(np.logaddexp(0.0, self.config.uncertainty_init)
-                     + self.config.uncertainty_min_variance)
+        return float(
+            np.logaddexp(0.0, self.config.uncertainty_init) + self.config.uncertainty_min_variance
+        )
 
     def integrate_panorama(self, panorama: np.ndarray, position: np.ndarray) -> None:
         """Add a depth panorama's rays to the observed space (free space all around)."""
         if self.config.unknown_space:
+            start = time.perf_counter()
             self.observed_space.integrate_panorama(panorama, position)
+            self.stats.observed_space_seconds += time.perf_counter() - start
 
     query_volumes = planner_view
 
@@ -460,9 +507,7 @@ class NeuralMapper:
         self._plan = None
 
     @classmethod
-    def from_state_dict(
-        cls, state: dict[str, Any], device: str = "auto"
-    ) -> NeuralMapper:
+    def from_state_dict(cls, state: dict[str, Any], device: str = "auto") -> NeuralMapper:
         """Build a mapper from a saved state (on ``device``)."""
         config = NeuralMapperConfig.from_dict({**state["config"], "device": device})
         mapper = cls(np.asarray(state["bounds"]), PinholeCamera(**state["camera"]), config)
@@ -496,8 +541,10 @@ def select_active_rays(
     taken = torch.zeros(total, dtype=torch.bool, device=device)
     taken[chosen] = True
     parts = [chosen]
-    for begin, end, count in ((0, num_keyframe_rays, random_keyframe),
-                              (num_keyframe_rays, total, current)):
+    for begin, end, count in (
+        (0, num_keyframe_rays, random_keyframe),
+        (num_keyframe_rays, total, current),
+    ):
         free = (~taken[begin:end]).nonzero().squeeze(1) + begin
         if count > 0 and len(free):
             order = torch.randperm(len(free), device=device, generator=generator)

@@ -114,8 +114,9 @@ def truncated_weights(sdf: torch.Tensor, z: torch.Tensor, truncation_m: float) -
 
 
 def _scatter(values: torch.Tensor, flat: torch.Tensor, shape: tuple[int, int], fill: float):
-    full = torch.full((shape[0] * shape[1], *values.shape[1:]), fill, device=values.device,
-                      dtype=values.dtype)
+    full = torch.full(
+        (shape[0] * shape[1], *values.shape[1:]), fill, device=values.device, dtype=values.dtype
+    )
     return full.index_put((flat,), values).view(*shape, *values.shape[1:])
 
 
@@ -137,9 +138,9 @@ def render_rays(
         evaluated = ~(valid & (z > rays.depth[:, None] + config.cull_behind_depth_m))
     flat = evaluated.reshape(-1).nonzero().squeeze(1)
     ray_of_sample = torch.div(flat, samples, rounding_mode="floor")
-    points = rays.origins[ray_of_sample] + rays.directions[ray_of_sample] * z.reshape(-1)[
-        flat, None
-    ]
+    points = (
+        rays.origins[ray_of_sample] + rays.directions[ray_of_sample] * z.reshape(-1)[flat, None]
+    )
     if with_colour:
         sdf_values, rgb_values = field(points)
         rgb_samples = _scatter(rgb_values, flat, (count, samples), 0.0)
@@ -176,7 +177,9 @@ def surface_variance(
     if valid.any():
         sub = rays.select(valid)
         offsets = torch.linspace(
-            -config.surface_range_m, config.surface_range_m, config.num_surface_samples,
+            -config.surface_range_m,
+            config.surface_range_m,
+            config.num_surface_samples,
             device=sub.depth.device,
         )
         z = sub.depth[:, None] + offsets
@@ -188,6 +191,18 @@ def surface_variance(
         sigma2 = uncertainty.variance(points).view(z.shape)
         result[valid] = (weights * weights * sigma2).sum(dim=1)
     return result
+
+
+def measured_point_variance(uncertainty: UncertaintyGrid, rays: RayBatch) -> torch.Tensor:
+    """(N,) the grid's variance sigma^2 at each ray's measured surface point (no field query).
+
+    The cheapest active-sampling score: where the field renders the measured surface, the
+    rendered variance is about ``sigma^2`` there times the ray's ``sum w^2``. Rays without a
+    depth score 0 (they are still drawn among the random rays).
+    """
+    valid = rays.depth > 0
+    points = rays.origins + rays.directions * rays.depth[:, None]
+    return torch.where(valid, uncertainty.variance(points), torch.zeros_like(rays.depth))
 
 
 def smoothness_loss(
@@ -233,13 +248,9 @@ def mapping_losses(
     has_depth = valid[:, None] & output.evaluated
     front = has_depth & (output.z < target - tr)
     band = has_depth & ~front & (output.z <= target + tr)
-    losses["free_space"] = (
-        (output.sdf[front] - 1.0).square().mean() if front.any() else zero
-    )
+    losses["free_space"] = (output.sdf[front] - 1.0).square().mean() if front.any() else zero
     losses["sdf"] = (
-        (output.z[band] + output.sdf[band] * tr - target.expand_as(output.z)[band])
-        .square()
-        .mean()
+        (output.z[band] + output.sdf[band] * tr - target.expand_as(output.z)[band]).square().mean()
         if band.any()
         else zero
     )

@@ -48,6 +48,12 @@ class UncertaintyGrid(nn.Module):
             "strides",
             torch.tensor([self.shape[1] * self.shape[2], self.shape[2], 1], dtype=torch.int64),
         )
+        # Per-axis factor from world offsets to grid_sampler coordinates (+1).
+        self.register_buffer(
+            "coordinate_scale",
+            torch.tensor(2.0 / ((counts - 1) * voxel_size), dtype=torch.float32),
+            persistent=False,
+        )
         self.raw = nn.Parameter(torch.full(self.shape, float(init_value), dtype=torch.float32))
 
     @property
@@ -55,7 +61,20 @@ class UncertaintyGrid(nn.Module):
         return self.origin.detach().cpu().numpy().astype(np.float64)
 
     def raw_at(self, points: torch.Tensor) -> torch.Tensor:
-        """(N,) trilinear raw value at (N, 3) world points (clamped to the grid)."""
+        """(N,) trilinear raw value at (N, 3) world points (clamped to the grid).
+
+        One fused ``grid_sampler`` call (trilinear, border padding = clamping, corners
+        aligned with the voxel centres), forward and backward, instead of eight gathers.
+        """
+        # grid_sampler's coordinate of voxel index i is 2 i / (n - 1) - 1; its last grid
+        # axis indexes the input's last dimension, so (x, y, z) goes in as (z, y, x).
+        coords = (points - self.origin) * self.coordinate_scale - 1.0
+        grid = coords.flip(-1).reshape(1, 1, 1, -1, 3).to(self.raw.dtype)
+        sampled = torch.grid_sampler(self.raw[None, None], grid, 0, 1, True)
+        return sampled.reshape(-1)
+
+    def raw_at_reference(self, points: torch.Tensor) -> torch.Tensor:
+        """:meth:`raw_at` written out over the eight corners (the tests' reference)."""
         index = ((points - self.origin) / self.voxel_size).clamp(min=0.0)
         index = torch.minimum(index, self.upper_index)
         cell = torch.minimum(torch.floor(index), self.upper_index - 1.0)

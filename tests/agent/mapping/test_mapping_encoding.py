@@ -16,15 +16,18 @@ from naruto_agent.mapping.encoding import level_resolutions
 
 def test_fast_hash_grid_matches_naive_forward_and_backward() -> None:
     torch.manual_seed(0)
-    fast = HashGridEncoding(num_levels=6, log2_table_size=12, base_resolution=4,
-                            finest_resolution=90.0, init_scale=0.5)
-    naive = NaiveHashGridEncoding(num_levels=6, log2_table_size=12, base_resolution=4,
-                                  finest_resolution=90.0)
+    fast = HashGridEncoding(
+        num_levels=6, log2_table_size=12, base_resolution=4, finest_resolution=90.0, init_scale=0.5
+    )
+    naive = NaiveHashGridEncoding(
+        num_levels=6, log2_table_size=12, base_resolution=4, finest_resolution=90.0
+    )
     naive.load_state_dict(fast.state_dict())
     assert 0 < fast.num_dense_levels < fast.num_levels  # both paths are exercised
     points = torch.rand(500, 3)
-    points[:5] = torch.tensor([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1.0, 0.0, 0.5],
-                               [0.999, 0.5, 0.0], [0.25, 0.75, 1.0]])
+    points[:5] = torch.tensor(
+        [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1.0, 0.0, 0.5], [0.999, 0.5, 0.0], [0.25, 0.75, 1.0]]
+    )
     out_fast, out_naive = fast(points), naive(points)
     assert out_fast.shape == (500, 12)
     torch.testing.assert_close(out_fast, out_naive, rtol=1e-5, atol=1e-6)
@@ -35,8 +38,9 @@ def test_fast_hash_grid_matches_naive_forward_and_backward() -> None:
 
 
 def test_dense_levels_have_no_collisions_and_every_level_stays_in_its_rows() -> None:
-    grid = HashGridEncoding(num_levels=4, log2_table_size=12, base_resolution=8,
-                            finest_resolution=64.0)
+    grid = HashGridEncoding(
+        num_levels=4, log2_table_size=12, base_resolution=8, finest_resolution=64.0
+    )
     assert grid.num_dense_levels == 1 and grid.dense_side == 10  # (8 + 2)^3 <= 4096 < 15^3
     for level, resolution in enumerate(grid.resolutions):
         axis = torch.arange(resolution + 2)
@@ -52,10 +56,16 @@ def test_fast_hash_grid_handles_all_dense_and_all_hashed_layouts() -> None:
     torch.manual_seed(1)
     points = torch.rand(300, 3)
     for log2_table_size, expected_dense in ((20, 3), (6, 0)):
-        fast = HashGridEncoding(num_levels=3, log2_table_size=log2_table_size,
-                                base_resolution=4, finest_resolution=20.0, init_scale=0.5)
-        naive = NaiveHashGridEncoding(num_levels=3, log2_table_size=log2_table_size,
-                                      base_resolution=4, finest_resolution=20.0)
+        fast = HashGridEncoding(
+            num_levels=3,
+            log2_table_size=log2_table_size,
+            base_resolution=4,
+            finest_resolution=20.0,
+            init_scale=0.5,
+        )
+        naive = NaiveHashGridEncoding(
+            num_levels=3, log2_table_size=log2_table_size, base_resolution=4, finest_resolution=20.0
+        )
         naive.load_state_dict(fast.state_dict())
         assert fast.num_dense_levels == expected_dense
         out_fast, out_naive = fast(points), naive(points)
@@ -84,7 +94,9 @@ def test_one_blob_peaks_at_the_bin_of_the_coordinate() -> None:
     blob = OneBlobEncoding(16)
     features = blob(torch.tensor([[0.03, 0.5, 0.97]])).view(3, 16)
     assert features.argmax(dim=1).tolist() == [0, 7, 15] or features.argmax(dim=1).tolist() == [
-        0, 8, 15
+        0,
+        8,
+        15,
     ]
 
 
@@ -105,3 +117,38 @@ def test_one_blob_tails_are_zero_not_denormal() -> None:
     denormal = (features > 0) & (features < torch.finfo(torch.float32).tiny)
     assert not denormal.any()
     assert (features == 0).any() and features.max() > 0.9
+
+
+@pytest.mark.parametrize("log2_table_size", [12, 20, 6])
+def test_compiled_no_gradient_path_matches_the_torch_path(log2_table_size) -> None:
+    torch.manual_seed(2)
+    grid = HashGridEncoding(
+        num_levels=6,
+        features_per_level=2,
+        log2_table_size=log2_table_size,
+        base_resolution=4,
+        finest_resolution=90.0,
+        init_scale=0.5,
+    )
+    # Many points, so the points are split over threads; corners and edges included.
+    points = torch.rand(40_000, 3)
+    points[:4] = torch.tensor([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1.0, 0.0, 0.5], [-0.2, 1.3, 0.5]])
+    with torch.no_grad():
+        assert grid._uses_cpu_kernel(points)
+        compiled = grid(points)
+        grid.cpu_kernel = False
+        assert not grid._uses_cpu_kernel(points)
+        reference = grid(points)
+    # The dense levels' grid_sampler maps coordinates through [-1, 1] and back: float32
+    # rounding of about 1e-5 of the table's scale (0.5 here).
+    torch.testing.assert_close(compiled, reference, rtol=1e-4, atol=5e-5)
+    # With gradients the autograd path runs (the compiled loop has no backward).
+    grid.cpu_kernel = True
+    assert not grid._uses_cpu_kernel(points)
+    grid(points[:10]).sum().backward()
+    assert grid.table.grad is not None and grid.table.grad.abs().sum() > 0
+    # Layouts the loop does not cover take the torch path.
+    wide = HashGridEncoding(num_levels=3, features_per_level=3, log2_table_size=8)
+    with torch.no_grad():
+        assert not wide._uses_cpu_kernel(points)
+        assert wide(points[:10]).shape == (10, 9)

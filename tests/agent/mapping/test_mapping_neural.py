@@ -88,9 +88,15 @@ def test_planner_view_types_and_surface_mask(mapped_room) -> None:
     assert sdf_volume.shape == uncertainty_volume.shape
     np.testing.assert_allclose(sdf_volume.origin, mapped_room.bounds[0])
     on_surface = (sdf_volume.values >= 0) & (sdf_volume.values <= 0.05)
-    # Off the surface only the frontier of unexplored space is uncertain, at the maximum.
+    # Off the surface only the frontier of unexplored space is uncertain: at most the initial
+    # variance (less where frames looked at it without resolving it).
     off = uncertainty_volume.values[~on_surface]
-    assert np.all((off == 0.0) | np.isclose(off, mapped_room.initial_variance))
+    frontier = mapped_room.observed_space.sample(
+        mapped_room.observed_space.frontier_variance(mapped_room.initial_variance),
+        sdf_volume.grid_points(),
+    ).reshape(sdf_volume.shape)[~on_surface]
+    np.testing.assert_allclose(off, frontier, rtol=1e-5)
+    assert np.all(off <= mapped_room.initial_variance + 1e-5)
     assert np.all(uncertainty_volume.values[on_surface] >= 0.01)
     assert on_surface.sum() > 50
 
@@ -136,10 +142,13 @@ def test_select_active_rays_keeps_the_most_uncertain() -> None:
     assert (rest[:100] < 800).all() and (rest[100:] >= 800).all()
 
 
+@pytest.mark.parametrize("score", ["rendered", "grid"])
 def test_active_sampling_picks_rays_into_the_uncertain_region(
-    room_renderer, small_camera, room_bounds
+    room_renderer, small_camera, room_bounds, score
 ) -> None:
-    mapper = NeuralMapper(room_bounds, small_camera, small_config(first_frame_iterations=5))
+    mapper = NeuralMapper(
+        room_bounds, small_camera, small_config(first_frame_iterations=5, active_score=score)
+    )
     poses = orbit_poses(8)
     map_frames(mapper, room_renderer, poses[:6])
     # Make the space x > 1.5 (the +x wall) very uncertain, everything else certain.
@@ -227,3 +236,61 @@ def test_ray_batch_select_and_concatenate() -> None:
     batch = RayBatch(torch.zeros(4, 3), torch.ones(4, 3), torch.zeros(4, 3), torch.arange(4.0))
     both = RayBatch.concatenate([batch, batch.select(torch.tensor([1, 3]))])
     assert both.depth.tolist() == [0, 1, 2, 3, 1, 3]
+
+
+def test_uncertainty_grid_sampler_matches_the_eight_corner_reference(room_bounds) -> None:
+    from naruto_agent.mapping import UncertaintyGrid
+
+    grid = UncertaintyGrid(room_bounds, voxel_size=0.1)
+    with torch.no_grad():
+        grid.raw.copy_(torch.randn(grid.shape, generator=torch.Generator().manual_seed(0)))
+    lower = torch.tensor(room_bounds[0], dtype=torch.float32)
+    extent = torch.tensor(room_bounds[1] - room_bounds[0], dtype=torch.float32)
+    # Points inside and up to 0.3 m outside the box (clamped to its border).
+    points = lower - 0.3 + (extent + 0.6) * torch.rand(5000, 3)
+    fused, reference = grid.raw_at(points), grid.raw_at_reference(points)
+    torch.testing.assert_close(fused, reference, rtol=1e-4, atol=1e-4)
+    fused.square().sum().backward()
+    fused_grad = grid.raw.grad.clone()
+    grid.raw.grad = None
+    reference.square().sum().backward()
+    torch.testing.assert_close(fused_grad, grid.raw.grad, rtol=1e-3, atol=1e-3)
+
+
+def test_grid_score_reads_the_variance_at_the_measured_point(room_bounds, small_camera) -> None:
+    mapper = NeuralMapper(room_bounds, small_camera, small_config(active_score="grid"))
+    with torch.no_grad():
+        cells_x = mapper.bounds[0, 0] + 0.1 * torch.arange(mapper.uncertainty.shape[0])
+        mapper.uncertainty.raw.fill_(-4.0)
+        mapper.uncertainty.raw[cells_x > 1.0] = 6.0
+    origins = torch.zeros(4, 3)
+    directions = torch.tensor([[1.0, 0.0, 0.0]] * 4)
+    depth = torch.tensor([1.8, 0.5, 0.0, 1.5])
+    rays = RayBatch(origins, directions, torch.zeros(4, 3), depth)
+    scores = mapper.ray_uncertainty(rays)
+    expected = mapper.uncertainty.variance(origins + directions * depth[:, None])
+    torch.testing.assert_close(scores[[0, 1, 3]], expected[[0, 1, 3]])
+    assert scores[2] == 0.0  # no depth: no score
+    assert scores[0] > 100 * scores[1]
+    with pytest.raises(ValueError, match="active_score"):
+        NeuralMapperConfig(active_score="fast")
+    # "auto": the published scoring on CUDA, the grid's on a CPU.
+    assert NeuralMapper(room_bounds, small_camera, small_config()).active_score == "grid"
+    assert mapper.active_score == "grid"
+
+
+def test_planner_view_reads_the_variance_off_the_grid(room_bounds, small_camera) -> None:
+    mapper = NeuralMapper(room_bounds, small_camera, small_config())
+    with torch.no_grad():
+        mapper.uncertainty.raw.copy_(
+            torch.randn(mapper.uncertainty.shape, generator=torch.Generator().manual_seed(1))
+        )
+    volume = SdfVolume(np.zeros(mapper.uncertainty.shape), room_bounds[0], 0.1)
+    direct = mapper._variance_on(volume)
+    interpolated = mapper.variance(volume.grid_points()).reshape(volume.shape)
+    np.testing.assert_allclose(direct, interpolated, rtol=1e-4)
+    coarse = SdfVolume(np.zeros((5, 5, 5)), room_bounds[0], 0.2)
+    np.testing.assert_allclose(
+        mapper._variance_on(coarse),
+        mapper.variance(coarse.grid_points()).reshape(coarse.shape),
+    )
