@@ -74,7 +74,8 @@ class Args:
     """torch device of the neural mapper"""
     active_score: str = "surface"
     """how neural_active scores its ray pool: "surface" (the 11 samples around the measured
-    depth, cheap) or "rendered" (every sample, the published scoring, about 3x the cost)"""
+    depth), "grid" (the uncertainty grid at the measured point, no field query), "rendered"
+    (every sample, the published scoring) or "auto" (rendered on CUDA, grid on a CPU)"""
     mesh_voxel_m: float = 0.02
     """marching-cubes voxel of the final meshes"""
     eval_samples: int = 200_000
@@ -124,14 +125,19 @@ def time_iteration(
     }
     for name, (cull, encoding) in variants.items():
         config = NeuralMapperConfig(
-            device=args.device, seed=args.seed, first_frame_iterations=0,
-            cull_behind_depth_m=cull, active_sampling=False,
+            device=args.device,
+            seed=args.seed,
+            first_frame_iterations=0,
+            cull_behind_depth_m=cull,
+            active_sampling=False,
         )
         kwargs = {"hash_encoding_cls": encoding} if encoding is not None else {}
         mapper = NeuralMapper(bounds, camera, config, **kwargs)
         pose = torch.tensor(poses[0], dtype=torch.float32, device=mapper.device)
         rays = NeuralMapper._world_rays(
-            pose, mapper._directions, torch.from_numpy(rgb.reshape(-1, 3)).to(mapper.device),
+            pose,
+            mapper._directions,
+            torch.from_numpy(rgb.reshape(-1, 3)).to(mapper.device),
             torch.from_numpy(depth.reshape(-1)).to(mapper.device),
         )
         generator = torch.Generator().manual_seed(args.seed)
@@ -153,28 +159,31 @@ def time_active_scoring(
     renderer: RgbdRenderer, poses: np.ndarray, bounds: np.ndarray, args: Args
 ) -> dict[str, float]:
     """Seconds to pick one iteration's rays by uncertainty (pool of 8192 keyframe + 400
-    current rays), per scoring mode, and how many of the 500 picked rays the modes share."""
+    current rays), per scoring mode, and how many of the 500 rays each mode picks the
+    published ("rendered") scoring picks too. All modes score the same pool of the same map
+    (mapped from the first 50 frames, a keyframe every 5, without active sampling)."""
     camera = renderer.camera
     results: dict[str, float] = {}
     picked: dict[str, set[int]] = {}
-    # The first 50 frames, a keyframe every 5 (fewer when the run is shorter).
-    frames = [(index, *renderer.render(poses[index]))
-              for index in range(0, min(50, len(poses)), 5)]
-    for score in ("rendered", "surface"):
-        config = NeuralMapperConfig(device=args.device, seed=args.seed, active_score=score,
-                                    first_frame_iterations=20)
-        mapper = NeuralMapper(bounds, camera, config)
-        for index, rgb, depth in frames:
-            mapper.integrate(rgb, depth, poses[index], index)
-        pose = torch.tensor(poses[frames[-1][0]], dtype=torch.float32, device=mapper.device)
-        rgb, depth = frames[-1][1], frames[-1][2]
-        pixels = torch.randperm(depth.size, generator=torch.Generator().manual_seed(args.seed))
-        pixels = pixels[: config.current_frame_rays * config.active_oversample]
-        current = NeuralMapper._world_rays(
-            pose, mapper._directions[pixels.to(mapper.device)],
-            torch.from_numpy(rgb.reshape(-1, 3)[pixels.numpy()]).to(mapper.device),
-            torch.from_numpy(depth.reshape(-1)[pixels.numpy()]).to(mapper.device),
-        )
+    frames = [(index, *renderer.render(poses[index])) for index in range(0, min(50, len(poses)), 5)]
+    config = NeuralMapperConfig(
+        device=args.device, seed=args.seed, first_frame_iterations=20, active_sampling=False
+    )
+    mapper = NeuralMapper(bounds, camera, config)
+    for index, rgb, depth in frames:
+        mapper.integrate(rgb, depth, poses[index], index)
+    pose = torch.tensor(poses[frames[-1][0]], dtype=torch.float32, device=mapper.device)
+    rgb, depth = frames[-1][1], frames[-1][2]
+    pixels = torch.randperm(depth.size, generator=torch.Generator().manual_seed(args.seed))
+    pixels = pixels[: config.current_frame_rays * config.active_oversample]
+    current = NeuralMapper._world_rays(
+        pose,
+        mapper._directions[pixels.to(mapper.device)],
+        torch.from_numpy(rgb.reshape(-1, 3)[pixels.numpy()]).to(mapper.device),
+        torch.from_numpy(depth.reshape(-1)[pixels.numpy()]).to(mapper.device),
+    )
+    for score in ("rendered", "surface", "grid"):
+        mapper.config.active_score = score
         durations = []
         for _ in range(args.speed_iterations + 2):
             mapper.generator.manual_seed(args.seed)
@@ -188,14 +197,19 @@ def time_active_scoring(
         name = f"active ray scoring, {score} (8192-ray pool)"
         results[name] = float(np.median(durations[2:]))
         print(f"  {name}: {results[name] * 1e3:.0f} ms per iteration", flush=True)
-    shared = len(picked["rendered"] & picked["surface"]) / max(len(picked["rendered"]), 1)
-    print(f"  top-500 rays shared by the two scorings: {shared:.0%}", flush=True)
-    results["active top rays shared by rendered and surface scoring"] = shared
+    for score in ("surface", "grid"):
+        shared = len(picked["rendered"] & picked[score]) / max(len(picked["rendered"]), 1)
+        print(f"  top-500 rays {score} shares with rendered: {shared:.0%}", flush=True)
+        results[f"active top rays shared by rendered and {score} scoring"] = shared
     return results
 
 
 def run_neural(
-    scene: Scene, renderer: RgbdRenderer, poses: np.ndarray, bounds: np.ndarray, args: Args,
+    scene: Scene,
+    renderer: RgbdRenderer,
+    poses: np.ndarray,
+    bounds: np.ndarray,
+    args: Args,
     active: bool,
 ) -> tuple[NeuralMapper, dict[str, float]]:
     config = NeuralMapperConfig(
@@ -263,8 +277,10 @@ def main() -> None:
     from naruto_agent.mapping import resolve_device
 
     torch_device = resolve_device(device.device)
-    print(f"device: {torch_device}, torch threads: {torch.get_num_threads()}, "
-          f"frames: {len(poses)}", flush=True)
+    print(
+        f"device: {torch_device}, torch threads: {torch.get_num_threads()}, frames: {len(poses)}",
+        flush=True,
+    )
 
     results: dict[str, object] = {
         "args": dataclasses.asdict(args),
@@ -284,8 +300,9 @@ def main() -> None:
 
     for variant in args.variants:
         if variant in ("neural", "neural_active"):
-            mapper, timing = run_neural(scene, renderer, poses, bounds, args,
-                                        active=variant == "neural_active")
+            mapper, timing = run_neural(
+                scene, renderer, poses, bounds, args, active=variant == "neural_active"
+            )
         elif variant == "tsdf":
             mapper, timing = run_tsdf(renderer, poses, bounds, args)
         else:
@@ -294,11 +311,15 @@ def main() -> None:
         mesh = mapper.extract_mesh(args.mesh_voxel_m)
         mesh_seconds = time.perf_counter() - start
         metrics = evaluate_reconstruction(
-            mesh, scene, poses=poses, camera=camera, num_samples=args.eval_samples,
-            seed=args.seed, renderer=renderer,
+            mesh,
+            scene,
+            poses=poses,
+            camera=camera,
+            num_samples=args.eval_samples,
+            seed=args.seed,
+            renderer=renderer,
         )
-        entry = {**timing, "mesh_s": mesh_seconds, "faces": len(mesh.faces),
-                 **metrics.as_dict()}
+        entry = {**timing, "mesh_s": mesh_seconds, "faces": len(mesh.faces), **metrics.as_dict()}
         results["variants"][variant] = entry
         print(f"{variant}: {json.dumps(entry, default=str)}", flush=True)
         out_dir = Path(args.output).parent
@@ -312,16 +333,22 @@ def main() -> None:
 
 def print_table(results: dict) -> None:
     print()
-    print("| mapper | accuracy (cm) | completion (cm) | completion ratio (%) "
-          "| ms / iteration | total (s) |")
+    print(
+        "| mapper | accuracy (cm) | completion (cm) | completion ratio (%) "
+        "| ms / iteration | total (s) |"
+    )
     print("|---|---|---|---|---|---|")
     for name, entry in results["variants"].items():
         per = entry.get("ms_per_iteration", entry.get("ms_per_frame"))
         unit = "" if "ms_per_iteration" in entry else " (per frame)"
-        print(f"| {name} | {entry['accuracy_cm']:.2f} | {entry['completion_cm']:.2f} | "
-              f"{entry['completion_ratio_pct']:.2f} | {per:.0f}{unit} | {entry['total_s']:.0f} |")
-    print(f"| published passive Co-SLAM (full mesh) | 1.50 | 1.48 | "
-          f"{PUBLISHED_COMPLETION_RATIO:.2f} | ~30 (V100) | |")
+        print(
+            f"| {name} | {entry['accuracy_cm']:.2f} | {entry['completion_cm']:.2f} | "
+            f"{entry['completion_ratio_pct']:.2f} | {per:.0f}{unit} | {entry['total_s']:.0f} |"
+        )
+    print(
+        f"| published passive Co-SLAM (full mesh) | 1.50 | 1.48 | "
+        f"{PUBLISHED_COMPLETION_RATIO:.2f} | ~30 (V100) | |"
+    )
     if "iteration_speed_s" in results:
         print()
         print("| hash grid | ms per iteration (2048 + 100 rays) | speed-up vs plain |")
