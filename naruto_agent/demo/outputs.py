@@ -166,8 +166,8 @@ def write_curves(
     right.set_title("completion of the map")
     if metrics is not None:
         right.set_title(
-            f"completion of the map ({metrics['evaluation']['checkpoint_samples']:,} "
-            f"samples at checkpoints, {metrics['evaluation']['samples']:,} final)",
+            f"completion of the map\n(checkpoints: {metrics['evaluation']['checkpoint_samples']:,}"
+            f" samples; final: {metrics['evaluation']['samples']:,})",
             fontsize=10,
         )
     if points:
@@ -175,7 +175,7 @@ def write_curves(
     for axis in (left, right):
         axis.set_xlabel("step")
         axis.set_ylim(0, 100)
-        axis.set_xlim(0, max(len(rows) - 1, 1))
+        axis.set_xlim(0, 1.04 * max(len(rows) - 1, 1))  # room for the final stars
         axis.grid(alpha=0.3)
     figure.suptitle(title)
     figure.tight_layout()
@@ -218,7 +218,8 @@ def write_trajectory(path: Path, episode: Episode, env: Any, title: str) -> Path
         f"{title}\npath {episode.path_length_m:.1f} m, coverage {100 * episode.coverage[-1]:.1f} %",
         fontsize=10,
     )
-    axis.legend(loc="lower left", fontsize=8, framealpha=0.8)
+    # Below the map, so that it hides no part of the path.
+    axis.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=3, fontsize=8)
     axis.set_axis_off()
     figure.tight_layout()
     figure.savefig(path, dpi=110)
