@@ -20,6 +20,7 @@ whose checkpoint maps are also culled in turn with and without a ``CullingCache`
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
@@ -145,12 +146,15 @@ def culling_report(args: Args) -> dict:
         vertices = np.asarray(replica_reconstruction(scene, poses, camera).vertices)
         label = f"replica_office0_{len(poses)}"
     renderer = RgbdRenderer(scene, camera)
+    load_at_start = os.getloadavg()[0]
     mask = visible_vertex_mask(vertices, poses, camera, renderer)  # also compiles the kernels
     fast_s = median_s(lambda: visible_vertex_mask(vertices, poses, camera, renderer), 2)
     started = time.perf_counter()
     reference = visible_vertex_mask_reference(vertices, poses, camera, renderer)
     reference_s = time.perf_counter() - started
     report = {
+        "load_average_1min_at_start": load_at_start,
+        "load_average_1min_at_end": os.getloadavg()[0],
         "trajectory": label,
         "poses": len(poses),
         "used_poses": len(poses[::2]),
@@ -180,6 +184,7 @@ def culling_report(args: Args) -> dict:
             if not np.array_equal(plain, cached):
                 raise RuntimeError(f"the cached culling differs at step {step}")
         report.update(
+            load_average_1min_after_checkpoints=os.getloadavg()[0],
             checkpoints=[step for step, _ in checkpoints],
             cull_checkpoints_s=plain_s,
             cull_checkpoints_cached_s=cached_s,
