@@ -218,6 +218,7 @@ def run_neural(
     mapper = NeuralMapper(bounds, renderer.camera, config)
     render_seconds = 0.0
     start = time.perf_counter()
+    cpu_start = time.process_time()  # CPU time of the process: compare runs at other loads
     for index in tqdm(range(len(poses)), desc="neural" + (" active" if active else "")):
         pixels = mapper.required_pixels(index)
         if len(pixels) == 0:
@@ -229,6 +230,7 @@ def run_neural(
     total = time.perf_counter() - start
     return mapper, {
         "total_s": total,
+        "cpu_s": time.process_time() - cpu_start,
         "render_s": render_seconds,
         "mapping_s": total - render_seconds,
         "iterations": mapper.stats.iterations,

@@ -315,6 +315,9 @@ def main(args: Args) -> dict:
     clock_phases = PhaseClock()
     instrument(env, policy, clock_phases)
     started = time.perf_counter()
+    # CPU time of the process (all its threads): on a shared machine it moves far less with
+    # the other jobs than wall time, so ratios between runs at different loads use it.
+    cpu_started = time.process_time()
     observation, info = env.reset(seed=args.seed, options=policy.reset_options())
     env_s = time.perf_counter() - started
     clock = time.perf_counter()
@@ -329,6 +332,7 @@ def main(args: Args) -> dict:
         else set()
     )
     snapshots = []
+    snapshot_cpu_s = 0.0
     for step in tqdm(range(1, args.steps + 1), desc=f"NARUTO {args.scene}"):
         action = policy.act(observation, info)
         clock = time.perf_counter()
@@ -337,14 +341,16 @@ def main(args: Args) -> dict:
         coverage.append(float(info["coverage"]))
         collisions += int(info["collided"])
         if step in snapshot_steps:
-            clock = time.perf_counter()
+            clock, cpu_clock = time.perf_counter(), time.process_time()
             snapshots.append(target_snapshot(env, policy, step))
             started += time.perf_counter() - clock  # pictures are not the agent's time
+            snapshot_cpu_s += time.process_time() - cpu_clock
         if args.checkpoint_every > 0 and step % args.checkpoint_every == 0:
             progress = {
                 "args": dataclasses.asdict(args),
                 "steps_run": step,
                 "wall_s": time.perf_counter() - started,
+                "cpu_s": time.process_time() - cpu_started - snapshot_cpu_s,
                 "phases_s": phase_seconds(policy, clock_phases, env_s),
                 "coverage_curve": np.round(coverage, 5).tolist(),
                 "path_length_m": float(info.get("path_length_m", 0.0)),
@@ -356,6 +362,7 @@ def main(args: Args) -> dict:
         if terminated or truncated:
             break
     episode_s = time.perf_counter() - started
+    episode_cpu_s = time.process_time() - cpu_started - snapshot_cpu_s
     # The trajectory (one flattened camera-to-world matrix per line, like Replica's
     # traj.txt), so its frames can be mapped passively for comparison
     # (benchmarks/mapping_quality.py --trajectory).
@@ -419,6 +426,7 @@ def main(args: Args) -> dict:
         "published_v100_ms_per_frame": PUBLISHED_MS_PER_FRAME,
         "reset_s": reset_s,
         "episode_s": episode_s,
+        "episode_cpu_s": episode_cpu_s,
         "mesh_s": mesh_s,
         "evaluation_s": evaluation_s,
         "load_average_start": load_start,
@@ -467,6 +475,7 @@ def main(args: Args) -> dict:
     )
     print("  detail: " + ", ".join(f"{k} {v:.1f}" for k, v in detail_ms.items()))
     print_phase_table(phases, steps_run, episode_s)
+    print(f"episode CPU time (all threads of the process): {episode_cpu_s:.1f} s")
     print(
         f"load average start {load_start[0]:.2f}, end {record['load_average_end'][0]:.2f} "
         f"on {os.cpu_count()} cores; written {json_path}"
