@@ -40,6 +40,7 @@ def _hash_grid_kernel(
     num_dense: int,
     table_size: int,
     out: np.ndarray,
+    column: int,
 ) -> None:
     """Trilinear hash-grid features of points (two features per level).
 
@@ -51,7 +52,9 @@ def _hash_grid_kernel(
             (no hashing), the hash primes reduced modulo T on hashed levels.
         num_dense: the first ``num_dense`` levels are dense.
         table_size: T, a power of two.
-        out: (N, 2 L) float32 output, level-major.
+        out: (N, >= column + 2 L) float32 output; the features go to columns
+            ``column + 2 l + f``, level-major.
+        column: first output column.
     """
     mask = table_size - 1
     t0 = table[0]
@@ -108,14 +111,62 @@ def _hash_grid_kernel(
             w11 = wx1 * wy1
             a000, a001, a010, a011 = w00 * wz0, w00 * wz1, w01 * wz0, w01 * wz1
             a100, a101, a110, a111 = w10 * wz0, w10 * wz1, w11 * wz0, w11 * wz1
-            out[n, 2 * level] = (
+            out[n, column + 2 * level] = (
                 a000 * t0[r000] + a001 * t0[r001] + a010 * t0[r010] + a011 * t0[r011]
                 + a100 * t0[r100] + a101 * t0[r101] + a110 * t0[r110] + a111 * t0[r111]
             )  # fmt: skip
-            out[n, 2 * level + 1] = (
+            out[n, column + 2 * level + 1] = (
                 a000 * t1[r000] + a001 * t1[r001] + a010 * t1[r010] + a011 * t1[r011]
                 + a100 * t1[r100] + a101 * t1[r101] + a110 * t1[r110] + a111 * t1[r111]
             )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True, boundscheck=False)
+def _one_blob_kernel(unit: np.ndarray, bins: int, cutoff: float, out: np.ndarray) -> None:
+    """OneBlob encoding of points into ``out[:, :3 * bins]`` (axis-major, bin-minor).
+
+    Bin ``b`` of a coordinate ``u`` is ``exp(-(t - b)^2 / 2)`` with ``t = bins u - 1/2``
+    (kernel width one bin), 0 beyond ``cutoff`` bins. Three exponentials per axis instead of
+    one per bin: from the nearest bin ``m`` outwards, neighbouring values differ by the
+    factor ``exp(+-(t - m) - 1/2) exp(-k)`` at distance ``k`` (computed in float64).
+    """
+    decay = np.exp(-np.arange(bins).astype(np.float64))
+    cutoff_squared = cutoff * cutoff
+    for n in range(unit.shape[0]):
+        for axis in range(3):
+            t = np.float64(unit[n, axis]) * bins - 0.5
+            m = min(max(int(np.floor(t + 0.5)), 0), bins - 1)
+            d = t - m
+            centre = np.exp(-0.5 * d * d)
+            base = axis * bins
+            out[n, base + m] = centre if d * d <= cutoff_squared else 0.0
+            up = np.exp(d - 0.5)
+            value = centre
+            for b in range(m + 1, bins):
+                value *= up * decay[b - 1 - m]
+                gap = t - b
+                out[n, base + b] = value if gap * gap <= cutoff_squared else 0.0
+            down = np.exp(-d - 0.5)
+            value = centre
+            for b in range(m - 1, -1, -1):
+                value *= down * decay[m - 1 - b]
+                gap = t - b
+                out[n, base + b] = value if gap * gap <= cutoff_squared else 0.0
+
+
+def _field_inputs_part(
+    unit: np.ndarray,
+    table: np.ndarray,
+    scales: np.ndarray,
+    multipliers: np.ndarray,
+    num_dense: int,
+    table_size: int,
+    bins: int,
+    cutoff: float,
+    out: np.ndarray,
+) -> None:
+    _one_blob_kernel(unit, bins, cutoff, out)
+    _hash_grid_kernel(unit, table, scales, multipliers, num_dense, table_size, out, 3 * bins)
 
 
 def _thread_pool(workers: int) -> ThreadPoolExecutor:
@@ -134,6 +185,24 @@ def supports(features_per_level: int) -> bool:
     return features_per_level == 2
 
 
+def _run_split(function, unit: np.ndarray, out: np.ndarray, threads: int, *args) -> None:  # noqa: ANN001
+    """Run ``function(unit[part], *args, out[part])`` over row ranges on up to ``threads``
+    threads (one call for small inputs)."""
+    count = unit.shape[0]
+    parts = max(1, min(int(threads), count // _MIN_POINTS_PER_THREAD))
+    if parts == 1:
+        function(unit, *args, out)
+        return
+    bounds = np.linspace(0, count, parts + 1).astype(np.int64)
+    pool = _thread_pool(parts)
+    futures = [
+        pool.submit(function, unit[begin:end], *args, out[begin:end])
+        for begin, end in zip(bounds[:-1], bounds[1:], strict=True)
+    ]
+    for future in futures:
+        future.result()
+
+
 def hash_grid_features(
     unit: np.ndarray,
     table: np.ndarray,
@@ -143,32 +212,49 @@ def hash_grid_features(
     table_size: int,
     threads: int = 1,
 ) -> np.ndarray:
-    """(N, L * F) float32 hash-grid features of (N, 3) unit positions (see the kernel).
+    """(N, 2 L) float32 hash-grid features of (N, 3) unit positions (see the kernel).
 
     ``threads`` > 1 splits the points over that many threads (the loop releases the GIL).
     """
     unit = np.ascontiguousarray(unit, dtype=np.float32)
     table = np.ascontiguousarray(table, dtype=np.float32)
-    count = unit.shape[0]
-    out = np.empty((count, scales.shape[0] * table.shape[0]), dtype=np.float32)
-    parts = max(1, min(int(threads), count // _MIN_POINTS_PER_THREAD))
-    if parts == 1:
-        _hash_grid_kernel(unit, table, scales, multipliers, num_dense, table_size, out)
-        return out
-    bounds = np.linspace(0, count, parts + 1).astype(np.int64)
-    futures = [
-        _thread_pool(parts).submit(
-            _hash_grid_kernel,
-            unit[begin:end],
-            table,
-            scales,
-            multipliers,
-            num_dense,
-            table_size,
-            out[begin:end],
-        )
-        for begin, end in zip(bounds[:-1], bounds[1:], strict=True)
-    ]
-    for future in futures:
-        future.result()
+    out = np.empty((unit.shape[0], scales.shape[0] * table.shape[0]), dtype=np.float32)
+
+    def part(unit_part, *args):  # noqa: ANN001, ANN002, ANN202
+        *constants, out_part = args
+        _hash_grid_kernel(unit_part, *constants, out_part, 0)
+
+    _run_split(part, unit, out, threads, table, scales, multipliers, num_dense, table_size)
+    return out
+
+
+def field_inputs(
+    unit: np.ndarray,
+    table: np.ndarray,
+    scales: np.ndarray,
+    multipliers: np.ndarray,
+    num_dense: int,
+    table_size: int,
+    bins: int,
+    cutoff: float,
+    threads: int = 1,
+) -> np.ndarray:
+    """(N, 3 bins + 2 L) float32 geometry-decoder input of (N, 3) unit positions: the
+    OneBlob encoding, then the hash-grid features (``NeuralField``'s concatenation)."""
+    unit = np.ascontiguousarray(unit, dtype=np.float32)
+    table = np.ascontiguousarray(table, dtype=np.float32)
+    out = np.empty((unit.shape[0], 3 * bins + scales.shape[0] * table.shape[0]), np.float32)
+    _run_split(
+        _field_inputs_part,
+        unit,
+        out,
+        threads,
+        table,
+        scales,
+        multipliers,
+        num_dense,
+        table_size,
+        bins,
+        float(cutoff),
+    )
     return out

@@ -42,7 +42,7 @@ from naruto_agent.mapping import cpu_kernels
 _HASH_PRIMES = (1, 2654435761, 805459861)
 _CORNERS = [(i, j, k) for i in (0, 1) for j in (0, 1) for k in (0, 1)]
 # OneBlob kernel values beyond this many standard deviations are 0 (they are below 1e-17).
-_ONE_BLOB_CUTOFF = 9.0
+ONE_BLOB_CUTOFF = 9.0
 
 
 def level_resolutions(num_levels: int, base_resolution: int, finest_resolution: float) -> list[int]:
@@ -108,7 +108,7 @@ class OneBlobEncoding(nn.Module):
         squared = offset * offset
         # Far tails are set to exactly 0: exp() of them would be float32 denormals, and a
         # matrix product with denormal inputs runs up to 10x slower on x86 CPUs.
-        values = torch.exp(-0.5 * squared).masked_fill_(squared > _ONE_BLOB_CUTOFF**2, 0.0)
+        values = torch.exp(-0.5 * squared).masked_fill_(squared > ONE_BLOB_CUTOFF**2, 0.0)
         return values.reshape(unit_positions.shape[0], -1)
 
 
@@ -347,7 +347,9 @@ class HashGridEncoding(nn.Module):
             and not (torch.is_grad_enabled() and self.table.requires_grad)
         )
 
-    def _cpu_kernel_features(self, unit_positions: torch.Tensor) -> torch.Tensor:
+    def kernel_constants(self) -> tuple[np.ndarray, np.ndarray]:
+        """(L,) float32 level resolutions and (3, L) int64 row multipliers (hash primes
+        reduced modulo the table size on hashed levels) for :mod:`cpu_kernels`."""
         if self._kernel_constants is None:
             multipliers = self.multipliers[:, :, 0].cpu().numpy().copy()
             multipliers[:, self.num_dense_levels :] &= self.table_size - 1
@@ -355,7 +357,10 @@ class HashGridEncoding(nn.Module):
                 np.asarray(self.resolutions, dtype=np.float32),
                 np.ascontiguousarray(multipliers, dtype=np.int64),
             )
-        scales, multipliers = self._kernel_constants
+        return self._kernel_constants
+
+    def _cpu_kernel_features(self, unit_positions: torch.Tensor) -> torch.Tensor:
+        scales, multipliers = self.kernel_constants()
         features = cpu_kernels.hash_grid_features(
             unit_positions.detach().contiguous().numpy(),
             self.table.detach().numpy(),

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import nn
 
+from naruto_agent.mapping import cpu_kernels
 from naruto_agent.mapping.config import NeuralMapperConfig
-from naruto_agent.mapping.encoding import HashGridEncoding, OneBlobEncoding
+from naruto_agent.mapping.encoding import ONE_BLOB_CUTOFF, HashGridEncoding, OneBlobEncoding
 
 
 def _mlp(in_dim: int, hidden_dim: int, out_dim: int) -> nn.Sequential:
@@ -77,8 +79,30 @@ class NeuralField(nn.Module):
     def sdf(self, points: torch.Tensor) -> torch.Tensor:
         """(N,) SDF in truncation units (skips the colour decoder)."""
         unit = self.normalise(points)
+        if not torch.is_grad_enabled() and self.hash_grid._uses_cpu_kernel(unit):
+            return self._sdf_compiled(unit)
         geometry = self.geometry_mlp(torch.cat([self.one_blob(unit), self.hash_grid(unit)], 1))
         return geometry[:, 0]
+
+    def _sdf_compiled(self, unit: torch.Tensor) -> torch.Tensor:
+        """The SDF without gradients on a CPU: the decoder's input (OneBlob + hash grid) from
+        one compiled loop (:func:`cpu_kernels.field_inputs`), and of the decoder's last layer
+        only the SDF row."""
+        scales, multipliers = self.hash_grid.kernel_constants()
+        inputs = cpu_kernels.field_inputs(
+            unit.detach().contiguous().numpy(),
+            self.hash_grid.table.detach().numpy(),
+            scales,
+            multipliers,
+            self.hash_grid.num_dense_levels,
+            self.hash_grid.table_size,
+            self.one_blob.num_bins,
+            ONE_BLOB_CUTOFF,
+            threads=torch.get_num_threads(),
+        )
+        first, _, last = self.geometry_mlp
+        hidden = torch.relu(F.linear(torch.from_numpy(inputs), first.weight))
+        return F.linear(hidden, last.weight[:1]).squeeze(1)
 
     def grid_features(self, points: torch.Tensor) -> torch.Tensor:
         """(N, levels * features) hash-grid features (for the smoothness loss)."""

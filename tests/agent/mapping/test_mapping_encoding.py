@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 
@@ -152,3 +153,55 @@ def test_compiled_no_gradient_path_matches_the_torch_path(log2_table_size) -> No
     with torch.no_grad():
         assert not wide._uses_cpu_kernel(points)
         assert wide(points[:10]).shape == (10, 9)
+
+
+def test_compiled_field_sdf_matches_the_torch_path() -> None:
+    from naruto_agent.mapping import NeuralMapperConfig
+    from naruto_agent.mapping.field import NeuralField
+
+    torch.manual_seed(3)
+    bounds = torch.tensor([[-2.0, -1.5, 0.0], [2.0, 1.5, 2.5]]).numpy()
+    field = NeuralField(bounds, NeuralMapperConfig(hash_levels=8, hash_log2_table_size=12))
+    with torch.no_grad():
+        field.hash_grid.table.uniform_(-0.5, 0.5)
+    # Inside the box, on its faces and outside it (clamped).
+    points = torch.rand(20_000, 3) * 5.0 - torch.tensor([2.5, 2.0, 0.5])
+    with torch.no_grad():
+        compiled = field.sdf(points)
+        field.hash_grid.cpu_kernel = False
+        reference = field.sdf(points)
+        field.hash_grid.cpu_kernel = True
+        unit = field.normalise(points)
+        assert field.hash_grid._uses_cpu_kernel(unit)
+    torch.testing.assert_close(compiled, reference, rtol=1e-4, atol=1e-5)
+    # With gradients enabled the SDF takes the autograd path and can be trained.
+    field.sdf(points[:50]).sum().backward()
+    assert field.hash_grid.table.grad is not None
+
+
+def test_compiled_one_blob_matches_the_encoding() -> None:
+    from naruto_agent.mapping import cpu_kernels
+    from naruto_agent.mapping.encoding import ONE_BLOB_CUTOFF
+
+    unit = torch.rand(5000, 3)
+    unit[:3] = torch.tensor([[0.0, 1.0, 0.5], [1e-7, 0.9999999, 0.03125], [0.5, 0.5, 0.5]])
+    for bins in (4, 16):
+        grid = HashGridEncoding(
+            num_levels=2, log2_table_size=8, base_resolution=4, finest_resolution=8.0
+        )
+        scales, multipliers = grid.kernel_constants()
+        inputs = cpu_kernels.field_inputs(
+            unit.numpy(),
+            grid.table.detach().numpy(),
+            scales,
+            multipliers,
+            grid.num_dense_levels,
+            grid.table_size,
+            bins,
+            ONE_BLOB_CUTOFF,
+        )
+        expected = OneBlobEncoding(bins)(unit)
+        torch.testing.assert_close(
+            torch.from_numpy(inputs[:, : 3 * bins]), expected, rtol=1e-5, atol=1e-6
+        )
+        assert np.all(inputs[:, : 3 * bins][expected.numpy() == 0.0] == 0.0)
