@@ -75,7 +75,7 @@ class Args:
     active_score: str = "surface"
     """how neural_active scores its ray pool: "surface" (the 11 samples around the measured
     depth), "grid" (the uncertainty grid at the measured point, no field query), "rendered"
-    (every sample, the published scoring) or "auto" (rendered on CUDA, grid on a CPU)"""
+    (every sample, the published scoring)"""
     mesh_voxel_m: float = 0.02
     """marching-cubes voxel of the final meshes"""
     eval_samples: int = 200_000

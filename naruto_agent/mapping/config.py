@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any, Literal
 
 #: Active-sampling scores (see ``NeuralMapperConfig.active_score``).
-ACTIVE_SCORES = ("auto", "rendered", "surface", "grid")
+ACTIVE_SCORES = ("rendered", "surface", "grid")
 
 
 @dataclass
@@ -56,16 +56,14 @@ class NeuralMapperConfig:
         active_top_rays: rays kept for the highest uncertainty (500); the rest of the 2048
             (1548) are random keyframe rays, plus ``current_frame_rays`` current-frame rays.
         active_score: "rendered" renders sum w^2 sigma^2 of every pool ray with the whole
-            sample set (the published scoring); "surface" renders it with the 11 samples
-            around the measured depth only (cheaper on a CPU; the weights sit there);
-            "grid" reads the uncertainty grid's sigma^2 at the measured surface point, with
-            no field query (the cheapest: where the field renders the measured surface, the
-            rendered variance is that sigma^2 times the ray's sum w^2); "auto" (default) is
-            "rendered" on CUDA and "grid" on a CPU. A CPU speed-up: on the 2-core CPU the
-            published scoring costs about as much as the mapping iteration itself (one CPU
-            thread: 265 ms against 250 ms), "surface" about half of it, "grid" 1 ms; the
-            top 500 rays they pick share 92 % ("surface") and 88 % ("grid") with the
-            published pick (office0, 20 frames in). Effect on the map: see the README.
+            sample set (the published scoring, default); two cheaper scorings for a CPU:
+            "surface" renders it with the 11 samples around the measured depth only (the
+            weights sit there), "grid" reads the uncertainty grid's sigma^2 at the measured
+            surface point, with no field query (where the field renders the measured
+            surface, the rendered variance is that sigma^2 times the ray's sum w^2).
+            CPU time against one mapping iteration (``benchmarks/active_scoring_speed.py``):
+            about 1, 0.45 and 0.002; their top 500 rays share 75-92 % ("surface") and
+            41-88 % ("grid") with the published pick, depending on how far mapping is.
 
     Unexplored space (planner view):
         unknown_space: frontier voxels (measured free space next to space no frame has
@@ -128,7 +126,7 @@ class NeuralMapperConfig:
     active_sampling: bool = True
     active_oversample: int = 4
     active_top_rays: int = 500
-    active_score: Literal["auto", "rendered", "surface", "grid"] = "auto"
+    active_score: Literal["rendered", "surface", "grid"] = "rendered"
 
     unknown_space: bool = True
     frontier_min_cluster_voxels: int = 8

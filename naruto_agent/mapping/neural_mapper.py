@@ -165,13 +165,6 @@ class NeuralMapper:
     def active_sampling(self) -> bool:
         return self.config.active_sampling
 
-    @property
-    def active_score(self) -> str:
-        """The active-sampling score in use ("auto" resolved for this mapper's device)."""
-        if self.config.active_score == "auto":
-            return "rendered" if self._device.type == "cuda" else "grid"
-        return self.config.active_score
-
     # -- schedule -------------------------------------------------------------------------
     def _plan_frame(self, frame_index: int) -> _FramePlan:
         cfg = self.config
@@ -338,9 +331,9 @@ class NeuralMapper:
         (``active_score`` "rendered", published), the same over the samples around the
         measured depth ("surface"), or the grid's variance at the measured surface point
         ("grid"; see :class:`NeuralMapperConfig`)."""
-        if self.active_score == "surface":
+        if self.config.active_score == "surface":
             return surface_variance(self.field, self.uncertainty, rays, self.config)
-        if self.active_score == "grid":
+        if self.config.active_score == "grid":
             return measured_point_variance(self.uncertainty, rays)
         scores = []
         for begin in range(0, len(rays), 4096):

@@ -274,9 +274,7 @@ def test_grid_score_reads_the_variance_at_the_measured_point(room_bounds, small_
     assert scores[0] > 100 * scores[1]
     with pytest.raises(ValueError, match="active_score"):
         NeuralMapperConfig(active_score="fast")
-    # "auto": the published scoring on CUDA, the grid's on a CPU.
-    assert NeuralMapper(room_bounds, small_camera, small_config()).active_score == "grid"
-    assert mapper.active_score == "grid"
+    assert NeuralMapperConfig().active_score == "rendered"  # the published scoring
 
 
 def test_planner_view_reads_the_variance_off_the_grid(room_bounds, small_camera) -> None:
