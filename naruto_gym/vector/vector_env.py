@@ -457,18 +457,31 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         targets = limited[:, :3, 3].copy()
         positions = moves.starts.copy()
         moving = ~_allclose_rows(moves.starts, targets)
+        end_clearances = np.full(len(agents), np.nan)
         for group in _groups(self._scenes, agents, moving):
-            self._sweep(agents[group], group, moves, targets, positions)
-        for k in np.flatnonzero(~_allclose_rows(positions, moves.starts)):
-            checker = self._scenes[agents[k]].collision
+            self._sweep(agents[group], group, moves, targets, positions, end_clearances)
+        moved = ~_allclose_rows(positions, moves.starts)
+        for group in _groups(self._scenes, agents, moved):
+            checker = self._scenes[agents[group[0]]].collision
             rule = _escape_rule(checker)
             if rule == "published":
-                # Its panorama rays ride along with the frame's cast (see _render).
-                moves.check_escape[k] = True
-            elif rule != "off" and checker.refuses_escape(moves.starts[k], positions[k]):
-                positions[k] = moves.starts[k]
-                moves.collided[k] = True
-                moves.reasons[k] = "escape"
+                # Their panorama rays ride along with the frame's cast (see _render).
+                moves.check_escape[group] = True
+                continue
+            if rule == "off":
+                continue
+            if rule == "scanned_space":
+                # One lattice lookup for all: an end inside the scanned space is never
+                # refused, so only the others need the exact per-move rule.
+                inside = checker.scanned_space.contains_many(
+                    positions[group], end_clearances[group]
+                )
+                group = group[~inside]
+            for k in group:
+                if checker.refuses_escape(moves.starts[k], positions[k]):
+                    positions[k] = moves.starts[k]
+                    moves.collided[k] = True
+                    moves.reasons[k] = "escape"
         limited[:, :3, 3] = positions
         self._poses[agents] = limited
         self._steps[agents] += 1
@@ -476,11 +489,12 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
 
     def _sweep(
         self, members: np.ndarray, group: np.ndarray, moves: _Moves, targets: np.ndarray,
-        positions: np.ndarray,
+        positions: np.ndarray, end_clearances: np.ndarray,
     ) -> None:
         """``CollisionChecker.move``'s box clip and sphere sweep for moving agents of one
         scene (``group`` indexes ``moves``), with one distance query for all their samples
-        and one cast for all their segment rays."""
+        and one cast for all their segment rays. Where each sweep stops is one of its
+        samples, so its distance to the surface (for the escape rule) comes with it."""
         env = self._scenes[members[0]]
         checker = env.collision
         raycaster = env.raycaster
@@ -514,6 +528,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                 sweeps[k][0], float(lengths[k]), distances[k], float(walls[k]), clearances[k]
             )
             positions[index] = start[k] + fraction * (end[k] - start[k])
+            end_clearances[index] = distances[k][np.searchsorted(sweeps[k][0], fraction)]
             if fraction < 1.0:
                 moves.reasons[index] = "surface"
             elif box[k] < 1.0:

@@ -220,3 +220,27 @@ def test_escape_settings_are_validated():
     off = CollisionChecker(caster, WIDE_BOUNDS, escape_no_hit_threshold=None)
     assert off.escape_rule == "off"
     assert not off.sees_escape(np.array([0.0, 0.0, 4.5]))
+
+
+def test_batched_query_answers_as_the_point_query_with_one_cast_per_batch():
+    """contains_many (what the batched env asks every step) gives contains' answers, near
+    walls, floor, the hole and the top too, and probes all new corners in one cast."""
+    mesh = _open_top_room(floor_hole=True)
+    one_by_one, batched = _space(mesh), _space(mesh)
+    rng = np.random.default_rng(1)
+    points = np.concatenate([
+        rng.uniform(WIDE_BOUNDS[0], WIDE_BOUNDS[1], size=(300, 3)),
+        rng.uniform([-2.05, -2.05, -0.05], [2.05, 2.05, 2.3], size=(300, 3)),  # near surfaces
+        rng.uniform([-0.6, -0.6, -0.3], [0.6, 0.6, 0.4], size=(100, 3)),  # at the hole
+    ])
+    clearances = batched.raycaster.unsigned_distance(points)
+    expected = np.array([one_by_one.contains(p, float(c)) for p, c in
+                         zip(points, clearances, strict=True)])
+    assert 0.2 < expected.mean() < 0.8  # both answers are well represented
+    calls = []
+    cast = batched.raycaster.cast
+    batched.raycaster.cast = lambda *args: calls.append(len(args[0])) or cast(*args)
+    np.testing.assert_array_equal(batched.contains_many(points, clearances), expected)
+    assert len(calls) <= 2  # new corners in one probe, corner-less points in one more
+    np.testing.assert_array_equal(batched.contains_many(points), expected)
+    np.testing.assert_array_equal(batched._empty >= 0, one_by_one._empty >= 0)
