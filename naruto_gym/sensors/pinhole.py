@@ -162,6 +162,7 @@ class RgbdRenderer:
         self.backend: PinholeBackend = backend
         self.threads = int(threads) if threads is not None else default_thread_count()
         self._rasterizer: PinholeRasterizer | None = None
+        self._workers: list[PinholeRasterizer] = []  # per-thread rasterizers of batches
         self._rays: np.ndarray | None = None  # the ray cast's buffer, made on first use
 
     @property
@@ -204,6 +205,59 @@ class RgbdRenderer:
         # Pixels beyond the range are black like misses.
         triangle_ids = np.where(depth.ravel() > 0, hits.triangle_ids, np.int32(-1))
         return PixelHits(depth, triangle_ids, hits.barycentric_uv)
+
+    def render_hits_many(self, camera_to_world: np.ndarray) -> PixelHits:
+        """:meth:`render_hits` of K poses (K, 4, 4) at once, the same hits frame by frame.
+
+        The rasterizer draws whole frames in parallel (each thread its own frames, with its
+        own single-threaded rasterizer): small frames are too small to split, but a batched
+        env has many. The ray cast casts all frames' rays in one call.
+
+        Returns:
+            ``depth`` (K, H, W), ``triangle_ids`` (K * H * W,), ``barycentric_uv``
+            (K * H * W, 2), frame after frame.
+        """
+        poses = np.asarray(camera_to_world, np.float64).reshape(-1, 4, 4)
+        count, pixels = len(poses), self.camera.width * self.camera.height
+        if self.frame_backend != "raster":
+            rays = np.empty((count * pixels, 6), np.float32)
+            for k, pose in enumerate(poses.astype(np.float32)):
+                fill_world_rays(
+                    self.camera.ray_directions, np.ascontiguousarray(pose[:3, :3]),
+                    np.ascontiguousarray(pose[:3, 3]), rays[k * pixels:(k + 1) * pixels],
+                )
+            hits = self.raycaster.cast_packed(rays)
+            depth = hits.distance.copy()
+            depth[~(depth <= self.max_depth_m)] = 0.0
+            triangle_ids = np.where(depth > 0, hits.triangle_ids, np.int32(-1))
+            return PixelHits(depth.reshape(count, self.camera.height, self.camera.width),
+                             triangle_ids, hits.barycentric_uv)
+        depth = np.empty((count, self.camera.height, self.camera.width), np.float32)
+        triangle_ids = np.empty(count * pixels, np.int32)
+        barycentric_uv = np.empty((count * pixels, 2), np.float32)
+        workers = self._frame_rasterizers(min(self.threads, count))
+
+        def draw(part: int) -> None:
+            rasterizer = workers[part]
+            for k in range(part, count, len(workers)):
+                frame = rasterizer.render(poses[k], self.max_depth_m)
+                depth[k] = frame[0]
+                triangle_ids[k * pixels:(k + 1) * pixels] = frame[1]
+                barycentric_uv[k * pixels:(k + 1) * pixels] = frame[2]
+
+        run_parallel(draw, len(workers))
+        return PixelHits(depth, triangle_ids, barycentric_uv)
+
+    def _frame_rasterizers(self, count: int) -> list[PinholeRasterizer]:
+        """``count`` single-threaded rasterizers of this renderer's mesh (scratch space is per
+        rasterizer, so each thread needs its own), built on first use."""
+        while len(self._workers) < count:
+            camera = self.camera
+            self._workers.append(PinholeRasterizer(
+                self.raycaster.vertices, self.raycaster.faces, camera.width, camera.height,
+                camera.fx, camera.fy, camera.cx, camera.cy, threads=1,
+            ))
+        return self._workers[:count]
 
     def shade(self, triangle_ids: np.ndarray, barycentric_uv: np.ndarray) -> np.ndarray:
         """(N, 3) uint8 colours of hits (black for id -1): the scene's colour lookup, split

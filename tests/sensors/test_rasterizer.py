@@ -375,3 +375,23 @@ def test_env_pinhole_backend_setting():
     assert_same_depth(first["depth"], second["depth"])
     cast.close()
     drawn.close()
+
+
+@pytest.mark.parametrize("backend", ["raycast", "raster"])
+def test_frames_of_many_poses_at_once_are_the_frames_one_by_one(backend):
+    """render_hits_many (the batched env's frames, drawn frame-parallel) is render_hits per
+    pose, bit for bit, for both backends."""
+    scene = _scene("replica_like_room")
+    renderer = RgbdRenderer(scene, PinholeCamera(64, 48, 32, 24, 31.5, 23.5), backend=backend,
+                            threads=2)
+    poses = random_poses(scene, 7, 3)
+    many = renderer.render_hits_many(poses)
+    pixels = 64 * 48
+    for k, pose in enumerate(poses):
+        one = renderer.render_hits(pose)
+        frame = slice(k * pixels, (k + 1) * pixels)
+        np.testing.assert_array_equal(many.depth[k], one.depth)
+        np.testing.assert_array_equal(many.triangle_ids[frame], one.triangle_ids)
+        hit = one.triangle_ids >= 0
+        np.testing.assert_array_equal(many.barycentric_uv[frame][hit], one.barycentric_uv[hit])
+    assert (many.triangle_ids >= 0).mean() > 0.5

@@ -21,6 +21,7 @@ SMALL: dict[str, Any] = {
     "camera": PinholeCamera(24, 24, 12, 12, 11.5, 11.5),
     "coverage_samples": 3000,
     "panorama_shape": (8, 16),
+    "pinhole_backend": "raycast",  # the single env's default (the batched env's is "auto")
 }
 
 
@@ -102,6 +103,22 @@ def test_matches_sync_in_open_scene_where_escapes_are_refused(rule):
     assert "surface" in reasons
     if rule == "published":
         assert "escape" in reasons
+
+
+def test_matches_sync_with_rasterized_frames():
+    """Frames of many agents drawn in parallel (one rasterizer per thread) are each agent's
+    single-env rasterized frame."""
+    rng = np.random.default_rng(5)
+    run_both(5, 30, lambda step: rng.integers(0, 10, 5), pinhole_backend="raster")
+
+
+def test_default_frames_are_rasterized_where_cheaper():
+    settings = {k: v for k, v in SMALL.items() if k != "pinhole_backend"}
+    vector = NarutoReconVectorEnv(2, **settings)
+    # 24 x 24 pixels: more than 4 triangles of the default room per pixel, so ray cast.
+    assert vector.scene_envs[0].renderer.frame_backend == "raycast"
+    settings["camera"] = PinholeCamera(64, 64, 32, 32, 31.5, 31.5)
+    assert NarutoReconVectorEnv(2, **settings).scene_envs[0].renderer.frame_backend == "raster"
 
 
 def test_matches_sync_with_delta_actions():
