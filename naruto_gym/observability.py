@@ -13,6 +13,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from naruto_gym.observability_kernels import absorb_hits, emit_rays
 from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.raycaster import RayCaster
 
@@ -88,11 +89,61 @@ def visible_from_any(
     viewpoints: np.ndarray,
     max_range_m: float | None = None,
     tolerance_m: float = 0.02,
+    blocker_slots: int = 8,
 ) -> np.ndarray:
     """Boolean mask of the points with an unoccluded line of sight to some viewpoint.
 
-    Points already seen are not cast again, so the cost falls quickly with each viewpoint.
+    A point is visible from a viewpoint when the ray from the viewpoint towards it hits
+    nothing closer than ``tolerance_m`` short of it (and it lies within ``max_range_m``), the
+    test of :func:`visible_from_any_per_viewpoint`, which this returns the same mask as. Most
+    pairs need no ray: each point remembers the ``blocker_slots`` triangles that last blocked
+    it, and a segment that provably crosses one is blocked (see
+    :mod:`naruto_gym.observability_kernels`); on the generated apartments that leaves about
+    1 ray in 25.
     """
+    points = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3))
+    viewpoints = np.ascontiguousarray(np.asarray(viewpoints, np.float64).reshape(-1, 3))
+    if blocker_slots < 1:
+        raise ValueError(f"blocker_slots must be >= 1, got {blocker_slots}")
+    count = len(points)
+    visible = np.zeros(count, dtype=bool)
+    if count == 0 or len(viewpoints) == 0:
+        return visible
+    triangles = raycaster.vertices.astype(np.float64)[raycaster.faces]
+    blockers = np.full((count, blocker_slots), -1, np.int32)
+    cursor = np.zeros(count, np.int64)
+    forward = np.zeros(count, dtype=bool)
+    pending = np.arange(count, dtype=np.int64)
+    rays = np.empty((count, 6), np.float32)
+    ray_point = np.empty(count, np.int64)
+    ray_reach = np.empty(count, np.float64)
+    max_range = np.inf if max_range_m is None else float(max_range_m)
+    pending_count = count
+    while pending_count > 0:
+        rays_count, pending_count = emit_rays(
+            points, pending, pending_count, viewpoints, float(tolerance_m), max_range,
+            triangles, blockers, cursor, forward, visible, rays, ray_point, ray_reach,
+        )
+        if rays_count == 0:
+            break
+        hits = raycaster.cast_packed(rays[:rays_count])
+        absorb_hits(
+            ray_point, ray_reach, rays_count, hits.distance, hits.triangle_ids, blockers,
+            cursor, forward, visible,
+        )
+    return visible
+
+
+def visible_from_any_per_viewpoint(
+    raycaster: RayCaster,
+    points: np.ndarray,
+    viewpoints: np.ndarray,
+    max_range_m: float | None = None,
+    tolerance_m: float = 0.02,
+) -> np.ndarray:
+    """:func:`visible_from_any` as one ray cast per viewpoint over the points not seen yet
+    (the reference it is tested and timed against; every unobservable point costs a ray per
+    viewpoint here)."""
     points = np.asarray(points, np.float64)
     visible = np.zeros(len(points), dtype=bool)
     for viewpoint in viewpoints:

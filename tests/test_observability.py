@@ -3,10 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import trimesh
 
 from naruto_gym.evaluation.metrics import reconstruction_metrics
-from naruto_gym.observability import ObservableSurface, sample_free_positions, visible_from_any
+from naruto_gym.observability import (
+    ObservableSurface,
+    sample_free_positions,
+    visible_from_any,
+    visible_from_any_per_viewpoint,
+)
+from naruto_gym.observability_kernels import segment_crosses_triangle
 from naruto_gym.scenes.mesh_scene import scene_from_trimesh
 from naruto_gym.sensors.raycaster import RayCaster
 
@@ -88,3 +95,84 @@ def test_metrics_report_completion_over_observable_surface():
     assert metrics.completion_ratio_pct < 75.0
     assert metrics.observable_completion_ratio_pct > 97.0
     assert 20.0 < metrics.observable_share_pct < 75.0
+
+
+class _CountingCaster(RayCaster):
+    """A real caster that also counts the rays it casts."""
+
+    rays = 0
+
+    def cast_packed(self, rays: np.ndarray):
+        self.rays += len(rays)
+        return super().cast_packed(rays)
+
+
+@pytest.mark.parametrize("scene_name", ["replica_like_room", "two_rooms", "procedural:room:7"])
+def test_visible_from_any_equals_the_per_viewpoint_loop(scene_name):
+    from naruto_gym.scenes.catalogue import resolve_scene
+
+    scene = resolve_scene(scene_name)
+    caster = _CountingCaster(scene.vertices, scene.faces)
+    viewpoints = sample_free_positions(
+        caster, scene.face_normals, scene.bounds, 96, 0.1, np.random.default_rng(1)
+    )
+    points = scene.sample_surface(6000, seed=2)
+    caster.rays = 0
+    fast = visible_from_any(caster, points, viewpoints)
+    certified_rays = caster.rays
+    caster.rays = 0
+    reference = visible_from_any_per_viewpoint(caster, points, viewpoints)
+    assert np.array_equal(fast, reference)
+    assert 0.2 < fast.mean() < 0.9  # both kinds of points are present
+    # Remembered blockers spare most rays (those of the points nobody sees, above all).
+    assert certified_rays < caster.rays / 4
+    # Range limit and a tolerance change are honoured the same way.
+    for kwargs in ({"max_range_m": 2.5}, {"tolerance_m": 0.1}):
+        assert np.array_equal(
+            visible_from_any(caster, points, viewpoints, **kwargs),
+            visible_from_any_per_viewpoint(caster, points, viewpoints, **kwargs),
+        )
+
+
+def test_visible_from_any_agrees_where_a_hit_lies_at_the_tolerance():
+    # A 2 cm thick panel on a wall, points on its back, each straight behind a viewpoint: the
+    # panel's front lies exactly the tolerance in front of them, so casts end within rounding
+    # of the tolerance; such pairs are re-cast forward, as the per-viewpoint loop casts them.
+    panel = trimesh.util.concatenate([
+        _box((0.0, 0.0, 0.0), (0.02, 1.0, 1.0)),
+        _box((-0.11, 0.0, 0.0), (0.2, 3.0, 3.0)),
+    ])
+    caster = RayCaster(panel.vertices, panel.faces)
+    rng = np.random.default_rng(0)
+    across = rng.uniform(-0.45, 0.45, (64, 2))
+    points = np.column_stack([np.full(64, -0.01), across])
+    viewpoints = np.column_stack([rng.uniform(0.5, 3.0, 64), across])
+    for tolerance in (0.02, 0.0199, 0.0201):
+        assert np.array_equal(
+            visible_from_any(caster, points, viewpoints, tolerance_m=tolerance),
+            visible_from_any_per_viewpoint(caster, points, viewpoints, tolerance_m=tolerance),
+        )
+    assert visible_from_any(caster, points, viewpoints, tolerance_m=0.0201).all()
+    assert not visible_from_any(caster, points, viewpoints, tolerance_m=0.0199).any()
+
+
+def test_segment_crosses_triangle_only_well_inside():
+    triangles = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
+
+    def crosses(origin, delta, margin=1e-5):
+        return segment_crosses_triangle(*origin, *delta, triangles, 0, margin)
+
+    assert crosses((0.2, 0.2, 1.0), (0.0, 0.0, -2.0))
+    assert crosses((0.2, 0.2, -1.0), (0.0, 0.0, 2.0))  # from behind too
+    assert not crosses((0.2, 0.2, 1.0), (0.0, 0.0, -0.9))  # stops short of it
+    assert not crosses((0.2, 0.2, 1.0), (0.0, 0.0, -1.0))  # ends on it: not well inside
+    assert not crosses((0.6, 0.6, 1.0), (0.0, 0.0, -2.0))  # beside it
+    assert not crosses((0.0, 0.5, 1.0), (0.0, 0.0, -2.0))  # on its edge
+    assert not crosses((0.2, 0.2, 1.0), (1.0, 0.0, 0.0))  # parallel
+
+
+def test_visible_from_any_rejects_bad_blocker_slots():
+    wall = _box((0, 0, 0), (0.1, 2.0, 2.0))
+    caster = RayCaster(wall.vertices, wall.faces)
+    with pytest.raises(ValueError, match="blocker_slots"):
+        visible_from_any(caster, np.zeros((1, 3)), np.ones((1, 3)), blocker_slots=0)
