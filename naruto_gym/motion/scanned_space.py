@@ -24,7 +24,8 @@ orientation, so meshes with flipped normals (common in CAD-made scenes) are judg
 other. Start poses and viewpoints, drawn once, also reject points inside solids by the
 published free-space test's facing criterion (:meth:`ScannedSpace.is_inside`).
 
-Evaluating a point casts 112 rays, too many to repeat at every step of a fast env.
+Evaluating a point casts up to 112 rays (16 where the steepest ring already sees surface all
+around, as above any floor), too many to repeat at every step of a fast env.
 :class:`ScannedSpace` therefore evaluates the corners of a lattice (``voxel_m`` = 5 cm) once,
 lazily, the first time a query needs them, and answers a query from the corners of its cell
 that lie within its clearance (the ball around it that no surface enters, so no wall
@@ -227,6 +228,37 @@ class ScannedSpace:
         nearest = hits.distance.reshape(count, rays).min(axis=1)
         return empty, np.stack([missed, nearest], axis=1)
 
+    def empty_sectors(self, positions: np.ndarray) -> np.ndarray:
+        """Empty support sectors below (N, 3) points: :meth:`probe`'s first answer, casting
+        fewer rays.
+
+        The steepest ring goes first: above a floor it sees surface in every sector, and
+        then the other rings cannot change the answer. Only points it leaves undecided
+        (over a hole, past an edge) cast the remaining rings.
+        """
+        positions = np.asarray(positions, np.float64).reshape(-1, 3)
+        per_ring = self.config.support_sectors * self.config.rays_per_sector
+        first, rest = self.support_directions[:per_ring], self.support_directions[per_ring:]
+        count = len(positions)
+        hit = self.raycaster.cast(
+            np.repeat(positions.astype(np.float32), per_ring, axis=0), np.tile(first, (count, 1))
+        ).hit_mask.reshape(count, per_ring)
+        seen = np.zeros((count, self.config.support_sectors), bool)
+        sectors = self._sectors[:per_ring]
+        for sector in range(self.config.support_sectors):
+            seen[:, sector] = hit[:, sectors == sector].any(axis=1)
+        undecided = np.flatnonzero(~seen.all(axis=1))
+        if len(undecided) and len(rest):
+            rays = len(rest)
+            more = self.raycaster.cast(
+                np.repeat(positions[undecided].astype(np.float32), rays, axis=0),
+                np.tile(rest, (len(undecided), 1)),
+            ).hit_mask.reshape(len(undecided), rays)
+            sectors = self._sectors[per_ring:]
+            for sector in range(self.config.support_sectors):
+                seen[undecided, sector] |= more[:, sectors == sector].any(axis=1)
+        return self.config.support_sectors - seen.sum(axis=1)
+
     def front_facing_share(self, position: np.ndarray) -> float:
         """Share of the surfaces seen all around ``position`` that face it (1 when none)."""
         directions = self.facing_directions
@@ -241,7 +273,7 @@ class ScannedSpace:
         """Exact support and height test of (N, 3) points (casts rays; per step use
         :meth:`contains`)."""
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
-        empty, _ = self.probe(positions)
+        empty = self.empty_sectors(positions)
         return (empty <= self.config.max_empty_sectors) & (positions[:, 2] <= self.top_m)
 
     def is_inside(self, position: np.ndarray) -> bool:
@@ -267,7 +299,7 @@ class ScannedSpace:
         unknown = self._empty[tuple(index.T)] < 0
         if unknown.any():
             todo = np.unique(index[unknown], axis=0)
-            self._empty[tuple(todo.T)] = self.probe(self._corner_points(todo))[0]
+            self._empty[tuple(todo.T)] = self.empty_sectors(self._corner_points(todo))
 
     def fill(self, batch: int = 4096) -> None:
         """Evaluate every lattice corner now (for maps and statistics; the env never needs it)."""

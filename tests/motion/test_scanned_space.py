@@ -241,6 +241,24 @@ def test_batched_query_answers_as_the_point_query_with_one_cast_per_batch():
     cast = batched.raycaster.cast
     batched.raycaster.cast = lambda *args: calls.append(len(args[0])) or cast(*args)
     np.testing.assert_array_equal(batched.contains_many(points, clearances), expected)
-    assert len(calls) <= 2  # new corners in one probe, corner-less points in one more
+    # New corners in one staged probe (steepest ring, then the rest where needed), corner-less
+    # points in one more.
+    assert len(calls) <= 4
     np.testing.assert_array_equal(batched.contains_many(points), expected)
     np.testing.assert_array_equal(batched._empty >= 0, one_by_one._empty >= 0)
+
+
+def test_staged_support_count_equals_the_full_probe():
+    """empty_sectors casts the steepest ring first and the rest only where it leaves a sector
+    empty; the counts are the full probe's, over floor, hole, edges and outside."""
+    space = _space(_open_top_room(floor_hole=True))
+    rng = np.random.default_rng(2)
+    points = np.concatenate([
+        rng.uniform(WIDE_BOUNDS[0], WIDE_BOUNDS[1], size=(400, 3)),
+        rng.uniform([-0.7, -0.7, -0.2], [0.7, 0.7, 0.6], size=(200, 3)),  # the hole
+        rng.uniform([1.8, -2.2, 0.0], [2.4, 2.2, 1.0], size=(200, 3)),  # a wall's line
+    ])
+    full = space.probe(points)[0]
+    np.testing.assert_array_equal(space.empty_sectors(points), full)
+    assert (full == 0).mean() > 0.2 and (full > 0).mean() > 0.2
+    assert len(np.unique(full)) > 3
