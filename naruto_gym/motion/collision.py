@@ -185,8 +185,12 @@ class CollisionChecker:
         # From a start already closer than the radius (an exact start pose), the sphere may
         # move on as long as it gets no closer than it already is.
         clearance = min(self.radius_m, self._cached_clearance(start) - 1e-4)
-        surface_fraction = self.raycaster.free_fraction_of_segment(start, end, max(clearance, 0))
+        surface_fraction, stop_clearance = self.raycaster.sweep(start, end, max(clearance, 0))
         position = start + surface_fraction * (end - start)
+        if surface_fraction > 0.0:
+            # Where the sweep stops is one of its samples: the escape rule's clearance query
+            # there (and the next move's at its start) is already answered.
+            self._last_clearance = (position.copy(), stop_clearance)
         if surface_fraction < 1.0:
             reason = "surface"
         elif box_fraction < 1.0:

@@ -203,6 +203,13 @@ class RayCaster:
 
         Returns 0.0 when even the start violates the clearance.
         """
+        return self.sweep(start, end, clearance)[0]
+
+    def sweep(
+        self, start: np.ndarray, end: np.ndarray, clearance: float
+    ) -> tuple[float, float]:
+        """:meth:`free_fraction_of_segment`, and the distance to the surface where the sweep
+        stops (one of its samples, so it comes free; nan when it cannot leave the start)."""
         start = np.asarray(start, dtype=np.float64)
         end = np.asarray(end, dtype=np.float64)
         fractions, samples, length = segment_samples(start, end, clearance)
@@ -211,7 +218,12 @@ class RayCaster:
         if length > 0:
             # A ray along the segment catches a wall thinner than the sampling step.
             wall = float(self.cast_distance(start[None], ((end - start) / length)[None])[0])
-        return free_fraction_from_distances(fractions, length, surface_distance, wall, clearance)
+        fraction = free_fraction_from_distances(
+            fractions, length, surface_distance, wall, clearance
+        )
+        if fraction <= 0.0:
+            return fraction, float("nan")
+        return fraction, float(surface_distance[np.searchsorted(fractions, fraction)])
 
 
 def segment_samples(
