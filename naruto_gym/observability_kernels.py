@@ -8,8 +8,9 @@ names the triangle that blocked it; the same triangle usually blocks the point f
 viewpoints too (the wall right in front of an outer face blocks it from everywhere inside).
 So each point remembers the last few triangles that blocked it, and a viewpoint whose segment
 provably crosses one of them well inside (an exact segment-triangle test with margins) needs
-no ray. Only the viewpoints no remembered triangle certifies are ray-cast, one per point per
-round, so what a cast teaches serves the point's next viewpoint at once.
+no ray; a ball of neighbouring viewpoints inside the shadow cone one of them casts from the
+point is skipped whole. Only the viewpoints no remembered triangle certifies are ray-cast,
+one per point per round, so what a cast teaches serves the point's next viewpoint at once.
 
 The decision for every (point, viewpoint) pair is the ray cast's, as in the per-viewpoint
 loop: a certificate only skips pairs whose segment crosses a triangle by a margin far above
@@ -24,6 +25,11 @@ import numpy as np
 
 # Certificates need the crossing this far inside the triangle (barycentric) and the segment.
 CERTIFICATE_MARGIN = 1e-5
+# Ball certificates: distance kept from the triangle's plane, angle kept from the cone's sides.
+BALL_MARGIN_M = 1e-4
+BALL_MARGIN_RAD = 1e-3
+# Remembered blockers tried on a whole ball of viewpoints before testing them one by one.
+BALL_BLOCKERS = 4
 # A reverse cast's hit closer than this to the tolerance's end is re-decided by a forward cast.
 AMBIGUOUS_M = 1e-4
 
@@ -57,6 +63,44 @@ def segment_crosses_triangle(
     return margin < t < 1.0 - margin
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def shadow_holds_ball(
+    px: float, py: float, pz: float,
+    triangles: np.ndarray, plane_normals: np.ndarray, plane_offsets: np.ndarray, face: int,
+    cx: float, cy: float, cz: float, radius: float, tolerance_m: float,
+) -> bool:
+    """Whether triangle ``face`` hides point p from every point of the ball (c, radius):
+    the ball lies beyond the triangle's plane and inside the cone from p through the
+    triangle, with margins (``BALL_MARGIN_M`` off the plane, an angle of ``BALL_MARGIN_RAD``
+    off the cone's sides), and p lies farther than ``tolerance_m`` from the plane. Every
+    segment from the ball to p then crosses the triangle well inside it and more than the
+    tolerance before p."""
+    nx, ny, nz = plane_normals[face, 0], plane_normals[face, 1], plane_normals[face, 2]
+    height = nx * px + ny * py + nz * pz - plane_offsets[face]
+    if abs(height) < tolerance_m + BALL_MARGIN_M:
+        return False
+    beyond = nx * cx + ny * cy + nz * cz - plane_offsets[face]
+    if (beyond if height < 0.0 else -beyond) < radius + BALL_MARGIN_M:
+        return False
+    sx, sy, sz = cx - px, cy - py, cz - pz
+    reach = np.sqrt(sx * sx + sy * sy + sz * sz)
+    for edge in range(3):
+        a = triangles[face, edge]
+        b = triangles[face, (edge + 1) % 3]
+        c = triangles[face, (edge + 2) % 3]
+        ax, ay, az = a[0] - px, a[1] - py, a[2] - pz
+        bx, by, bz = b[0] - px, b[1] - py, b[2] - pz
+        mx, my, mz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        norm = np.sqrt(mx * mx + my * my + mz * mz)
+        if norm < 1e-12:
+            return False
+        if mx * (c[0] - px) + my * (c[1] - py) + mz * (c[2] - pz) < 0.0:
+            norm = -norm  # orient the side plane towards the triangle's third corner
+        if (mx * sx + my * sy + mz * sz) / norm < radius + BALL_MARGIN_RAD * reach:
+            return False
+    return True
+
+
 @numba.njit(cache=True, nogil=True)
 def emit_rays(
     points: np.ndarray,
@@ -66,6 +110,11 @@ def emit_rays(
     tolerance_m: float,
     max_range_m: float,
     triangles: np.ndarray,
+    plane_normals: np.ndarray,
+    plane_offsets: np.ndarray,
+    ball_of: np.ndarray,
+    ball_end: np.ndarray,
+    balls: np.ndarray,
     blockers: np.ndarray,
     cursor: np.ndarray,
     forward: np.ndarray,
@@ -81,8 +130,11 @@ def emit_rays(
         points: (N, 3) float64 points.
         pending: (>= pending_count,) int indices of the points still undecided; compacted in
             place to those that got a ray.
-        viewpoints: (V, 3) float64.
-        triangles: (F, 3, 3) float64 triangle corners.
+        viewpoints: (V, 3) float64, grouped into balls of neighbours.
+        triangles: (F, 3, 3) float64 triangle corners; plane_normals (F, 3) and
+            plane_offsets (F,) their planes (unit normal n, n . x = offset).
+        ball_of: (V,) the ball of each viewpoint; ball_end: (B,) one past its last viewpoint;
+            balls: (B, 4) centre and radius (viewpoints of a ball are consecutive).
         blockers: (N, K) int32 remembered blocking triangles per point (-1: none), most
             recent first.
         cursor: (N,) int64 next viewpoint of each point.
@@ -103,10 +155,29 @@ def emit_rays(
         if visible[i]:
             continue
         c = cursor[i]
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
         while c < viewpoints.shape[0]:
+            ball = ball_of[c]
+            if c == 0 or ball_of[c - 1] != ball:
+                # At a ball's first viewpoint: one remembered blocker may hide the whole ball.
+                hidden = False
+                for k in range(min(slots, BALL_BLOCKERS)):
+                    face = blockers[i, k]
+                    if face < 0:
+                        break
+                    if shadow_holds_ball(
+                        px, py, pz, triangles, plane_normals, plane_offsets, face,
+                        balls[ball, 0], balls[ball, 1], balls[ball, 2], balls[ball, 3],
+                        tolerance_m,
+                    ):
+                        hidden = True
+                        break
+                if hidden:
+                    c = ball_end[ball]
+                    continue
             vx, vy, vz = viewpoints[c, 0], viewpoints[c, 1], viewpoints[c, 2]
             # The same float64 arithmetic as the per-viewpoint loop (same float32 rays).
-            dx, dy, dz = points[i, 0] - vx, points[i, 1] - vy, points[i, 2] - vz
+            dx, dy, dz = px - vx, py - vy, pz - vz
             distance = np.sqrt(dx * dx + dy * dy + dz * dz)
             if distance <= 1e-6 or distance > max_range_m:
                 c += 1

@@ -13,7 +13,7 @@ from naruto_gym.observability import (
     visible_from_any,
     visible_from_any_per_viewpoint,
 )
-from naruto_gym.observability_kernels import segment_crosses_triangle
+from naruto_gym.observability_kernels import segment_crosses_triangle, shadow_holds_ball
 from naruto_gym.scenes.mesh_scene import scene_from_trimesh
 from naruto_gym.sensors.raycaster import RayCaster
 
@@ -126,11 +126,15 @@ def test_visible_from_any_equals_the_per_viewpoint_loop(scene_name):
     assert 0.2 < fast.mean() < 0.9  # both kinds of points are present
     # Remembered blockers spare most rays (those of the points nobody sees, above all).
     assert certified_rays < caster.rays / 4
-    # Range limit and a tolerance change are honoured the same way.
-    for kwargs in ({"max_range_m": 2.5}, {"tolerance_m": 0.1}):
+    # Range limit, tolerance, viewpoints tested one by one or in balls: the same mask.
+    for kwargs in ({"max_range_m": 2.5}, {"tolerance_m": 0.1}, {"ball_size": 1},
+                   {"ball_size": 4, "blocker_slots": 1}):
         assert np.array_equal(
             visible_from_any(caster, points, viewpoints, **kwargs),
-            visible_from_any_per_viewpoint(caster, points, viewpoints, **kwargs),
+            visible_from_any_per_viewpoint(
+                caster, points, viewpoints,
+                **{k: v for k, v in kwargs.items() if k in ("max_range_m", "tolerance_m")},
+            ),
         )
 
 
@@ -174,5 +178,23 @@ def test_segment_crosses_triangle_only_well_inside():
 def test_visible_from_any_rejects_bad_blocker_slots():
     wall = _box((0, 0, 0), (0.1, 2.0, 2.0))
     caster = RayCaster(wall.vertices, wall.faces)
-    with pytest.raises(ValueError, match="blocker_slots"):
+    with pytest.raises(ValueError, match="blocker_slots and ball_size"):
         visible_from_any(caster, np.zeros((1, 3)), np.ones((1, 3)), blocker_slots=0)
+
+
+def test_shadow_holds_ball_only_inside_the_cone_beyond_the_triangle():
+    # A large triangle in the plane z = 0, the point 0.5 m below it.
+    triangles = np.array([[[-4.0, -4.0, 0.0], [4.0, -4.0, 0.0], [0.0, 4.0, 0.0]]])
+    normals = np.array([[0.0, 0.0, 1.0]])
+    offsets = np.zeros(1)
+
+    def hidden(centre, radius, point=(0.0, 0.0, -0.5), tolerance=0.02):
+        return shadow_holds_ball(
+            *point, triangles, normals, offsets, 0, *centre, radius, tolerance
+        )
+
+    assert hidden((0.0, 0.0, 2.0), 0.5)
+    assert not hidden((0.0, 0.0, 2.0), 2.5)  # reaches below the plane
+    assert not hidden((0.0, 0.0, -2.0), 0.1)  # on the point's side
+    assert not hidden((12.0, 0.0, 2.0), 0.5)  # outside the cone through the triangle
+    assert not hidden((0.0, 0.0, 2.0), 0.5, point=(0.0, 0.0, -0.01))  # within the tolerance
