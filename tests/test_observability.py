@@ -9,6 +9,8 @@ import trimesh
 from naruto_gym.evaluation.metrics import reconstruction_metrics
 from naruto_gym.observability import (
     ObservableSurface,
+    inside_free_space_many,
+    is_inside_free_space,
     sample_free_positions,
     visible_from_any,
     visible_from_any_per_viewpoint,
@@ -198,3 +200,56 @@ def test_shadow_holds_ball_only_inside_the_cone_beyond_the_triangle():
     assert not hidden((0.0, 0.0, -2.0), 0.1)  # on the point's side
     assert not hidden((12.0, 0.0, 2.0), 0.5)  # outside the cone through the triangle
     assert not hidden((0.0, 0.0, 2.0), 0.5, point=(0.0, 0.0, -0.01))  # within the tolerance
+
+
+def _inside_one_point(caster, normals, position, share):
+    """The whole-sphere free-space test of one point, written out (the reference)."""
+    from naruto_gym.sensors.panorama import EquirectangularCamera
+
+    directions = EquirectangularCamera(16, 32).ray_directions
+    hits = caster.cast(np.asarray(position, np.float32), directions)
+    hit = hits.hit_mask
+    if 1.0 - hit.mean() > share or not hit.any():
+        return False
+    facing = np.einsum("ij,ij->i", normals[hits.triangle_ids[hit]], directions[hit]) < 0
+    return bool(facing.mean() >= 0.9)
+
+
+def test_batched_free_space_test_and_sampling_match_the_one_point_test():
+    from naruto_gym.scenes.catalogue import resolve_scene
+
+    scene = resolve_scene("replica_like_room:no_ceiling+holes")
+    caster = RayCaster(scene.vertices, scene.faces)
+    normals = scene.face_normals
+    points = np.random.default_rng(1).uniform(scene.bounds[0], scene.bounds[1], (200, 3))
+    for share in (0.5, 0.2):
+        expected = [_inside_one_point(caster, normals, p, share) for p in points]
+        assert inside_free_space_many(caster, normals, points, share).tolist() == expected
+        assert [is_inside_free_space(caster, normals, p, share) for p in points] == expected
+        assert 0 < sum(expected) < len(expected)
+        # Sampling with the batched test (the default) keeps the one-point test's positions.
+        one_by_one = sample_free_positions(
+            caster, normals, scene.bounds, 40, 0.1, np.random.default_rng(4), share,
+            is_inside=lambda p, s=share: _inside_one_point(caster, normals, p, s),
+        )
+        batched = sample_free_positions(
+            caster, normals, scene.bounds, 40, 0.1, np.random.default_rng(4), share
+        )
+        np.testing.assert_array_equal(batched, one_by_one)
+
+
+def test_sampling_with_a_batched_test_keeps_the_first_accepted_candidates():
+    scene, caster, _ = _observable()
+    low_half = (lambda p: p[2] < 1.0, lambda ps: np.asarray(ps)[:, 2] < 1.0)
+    for count in (1, 7, 50):
+        one_by_one = sample_free_positions(
+            caster, scene.face_normals, scene.bounds, count, 0.1, np.random.default_rng(2),
+            is_inside=low_half[0],
+        )
+        batched = sample_free_positions(
+            caster, scene.face_normals, scene.bounds, count, 0.1, np.random.default_rng(2),
+            is_inside=low_half[0], is_inside_many=low_half[1],
+        )
+        assert len(batched) == count
+        np.testing.assert_array_equal(batched, one_by_one)
+        assert np.all(batched[:, 2] < 1.0)
