@@ -56,6 +56,9 @@ class Args:
     """surface samples per mesh of the final score"""
     checkpoint_samples: int = 50_000
     """surface samples per mesh at the checkpoints"""
+    eval_samples_per_m2: float = 2_000.0
+    """least sample density (per m^2) of the surface distances are measured to; 0: the sample
+    counts alone, as published (large scenes then score sample spacing, not the map)"""
     reconstruct: bool = True
     """fuse frames with the reference TSDF mapper and score them"""
     device: str = "auto"
@@ -117,6 +120,7 @@ def run(args: Args) -> int:
         eval_points=args.eval_points,
         eval_samples=args.eval_samples,
         checkpoint_samples=args.checkpoint_samples,
+        eval_samples_per_m2=args.eval_samples_per_m2,
         reconstruct=args.reconstruct,
         device=args.device,
         policy_kwargs=_json_dict(args.policy_kwargs, "policy-kwargs"),

@@ -127,7 +127,8 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
                 reasons[info.get("collision_reason", "") or "unknown"] += 1
             if reconstruction is not None and step in checkpoints:
                 clock = time.perf_counter()
-                scores = _score(reconstruction, base, spec.checkpoint_samples)
+                scores = _score(reconstruction, base, spec.checkpoint_samples,
+                                spec.eval_samples_per_m2)
                 evaluation_s += time.perf_counter() - clock
                 completion_curve.append({"step": step, **_curve_point(scores)})
             if terminated or truncated:
@@ -136,7 +137,7 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
         metrics: dict[str, Any] = {}
         if reconstruction is not None:
             clock = time.perf_counter()
-            metrics = _score(reconstruction, base, spec.eval_samples)
+            metrics = _score(reconstruction, base, spec.eval_samples, spec.eval_samples_per_m2)
             evaluation_s += time.perf_counter() - clock
             completion_curve.append({"step": steps_run, **_curve_point(metrics)})
         per_step = max(steps_run, 1)
@@ -173,11 +174,14 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
         env.close()
 
 
-def _score(reconstruction: Any, env: Any, num_samples: int) -> dict[str, Any]:
+def _score(
+    reconstruction: Any, env: Any, num_samples: int, samples_per_m2: float
+) -> dict[str, Any]:
     """Metrics of the episode's reference map, on the whole and on the observable surface."""
     return reconstruction.evaluate(
         env.scene,
         num_samples=num_samples,
+        reference_samples_per_m2=samples_per_m2 or None,
         renderer=env.renderer,
         observable_mask=env.observable_surface.mask,
     )

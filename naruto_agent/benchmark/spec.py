@@ -78,6 +78,10 @@ class EpisodeSpec:
         eval_points: completion-ratio checkpoints during the episode (0: final only).
         eval_samples: surface samples per mesh of the final score (200,000 as published).
         checkpoint_samples: surface samples per mesh at the checkpoints (cheaper).
+        eval_samples_per_m2: least density of a mesh's samples where nearest distances are
+            measured to it (2,000 per m^2, the published density on Replica; 0 for the
+            sample counts alone, as the published evaluation). Large scenes need it: see
+            :mod:`naruto_gym.evaluation.metrics`.
         device: Open3D device of the reference mapper.
     """
 
@@ -93,6 +97,7 @@ class EpisodeSpec:
     eval_points: int = 4
     eval_samples: int = 200_000
     checkpoint_samples: int = 50_000
+    eval_samples_per_m2: float = 2_000.0
     device: str = "auto"
 
     def __post_init__(self) -> None:
@@ -102,6 +107,11 @@ class EpisodeSpec:
             raise ValueError(f"image_scale must be positive, got {self.image_scale}")
         if self.eval_points < 0:
             raise ValueError(f"eval_points must be >= 0, got {self.eval_points}")
+        if not self.eval_samples_per_m2 >= 0:
+            raise ValueError(
+                f"eval_samples_per_m2 must be >= 0 (0: no density bound), got "
+                f"{self.eval_samples_per_m2}"
+            )
 
     @property
     def scene_label(self) -> str:

@@ -4,9 +4,11 @@ from naruto_gym.evaluation.culling import CullingCache, cull_mesh, visible_verte
 from naruto_gym.evaluation.metrics import (
     ReconstructionMetrics,
     mean_absolute_distance_cm,
+    mesh_area,
     nearest_distances,
     point_to_mesh_distance,
     reconstruction_metrics,
+    reference_sample_count,
     trajectory_length,
 )
 from naruto_gym.evaluation.scoring import EpisodeReconstruction, evaluate_reconstruction
@@ -21,9 +23,11 @@ __all__ = [
     "cull_mesh",
     "evaluate_reconstruction",
     "mean_absolute_distance_cm",
+    "mesh_area",
     "nearest_distances",
     "point_to_mesh_distance",
     "reconstruction_metrics",
+    "reference_sample_count",
     "resolve_open3d_device",
     "sample_mesh_surface",
     "trajectory_length",

@@ -26,6 +26,7 @@ from naruto_gym.evaluation.culling import (
 )
 from naruto_gym.evaluation.metrics import (
     DEFAULT_NUM_SAMPLES,
+    DEFAULT_REFERENCE_SAMPLES_PER_M2,
     DEFAULT_THRESHOLD_M,
     ReconstructionMetrics,
     reconstruction_metrics,
@@ -65,6 +66,7 @@ def evaluate_reconstruction(
     progress: bool = False,
     observable_mask: Callable[[np.ndarray], np.ndarray] | None = None,
     cull_cache: CullingCache | None = None,
+    reference_samples_per_m2: float | None = DEFAULT_REFERENCE_SAMPLES_PER_M2,
 ) -> ReconstructionMetrics:
     """Score a reconstructed mesh against the ground-truth scene, culled by the trajectory.
 
@@ -88,6 +90,9 @@ def evaluate_reconstruction(
             keeps (e.g. ``ObservableSurface.mask``: surface some free viewpoint can see).
         cull_cache: a :class:`~naruto_gym.evaluation.culling.CullingCache` shared by the
             scorings of one episode (same result, less work on a longer trajectory).
+        reference_samples_per_m2: least sample density of a mesh where nearest distances
+            are measured to it (2,000 per m^2; None: ``num_samples``, as published). See
+            :mod:`naruto_gym.evaluation.metrics`.
 
     Returns:
         :class:`ReconstructionMetrics`, with ``faces_evaluated`` / ``faces_culled`` filled in.
@@ -136,6 +141,7 @@ def evaluate_reconstruction(
         num_samples=num_samples,
         seed=seed,
         observable_mask=observable_mask,
+        reference_samples_per_m2=reference_samples_per_m2,
     )
     return ReconstructionMetrics(
         **{**metrics.as_dict(), "faces_evaluated": len(faces), "faces_culled": culled, "note": note}
@@ -215,6 +221,7 @@ class EpisodeReconstruction:
         cull_every: int = DEFAULT_CULL_EVERY,
         renderer: RgbdRenderer | None = None,
         observable_mask: Callable[[np.ndarray], np.ndarray] | None = None,
+        reference_samples_per_m2: float | None = DEFAULT_REFERENCE_SAMPLES_PER_M2,
     ) -> dict[str, Any]:
         """Metrics of the fused reconstruction, as a flat dict for an env's ``info``.
 
@@ -250,5 +257,6 @@ class EpisodeReconstruction:
             renderer=renderer,
             observable_mask=observable_mask,
             cull_cache=self._cull_cache,
+            reference_samples_per_m2=reference_samples_per_m2,
         )
         return {**metrics.as_dict(), **base}

@@ -8,8 +8,10 @@ import trimesh
 
 from naruto_gym.evaluation import (
     mean_absolute_distance_cm,
+    mesh_area,
     point_to_mesh_distance,
     reconstruction_metrics,
+    reference_sample_count,
     sample_mesh_surface,
     trajectory_length,
 )
@@ -180,3 +182,27 @@ def test_trajectory_length_of_a_known_path():
         trajectory_length(np.zeros((4, 3, 3)))
     with pytest.raises(ValueError, match="NaN"):
         trajectory_length(np.array([[0, 0, 0], [np.nan, 0, 0]]))
+
+
+def test_large_surfaces_are_sampled_densely_enough_to_see_a_perfect_reconstruction():
+    """On a 1,600 m^2 floor 200,000 samples are 125 per m^2: a perfect reconstruction would
+    miss more than a third at 5 cm from sample spacing alone. The reference side is sampled
+    at 2,000 per m^2, so it scores as perfect; a Replica-sized surface keeps the published
+    200,000 samples on both sides."""
+    truth = square(40.0)
+    floor = trimesh.Trimesh(*truth, process=False).subdivide()  # the same surface, re-meshed
+    sparse = reconstruction_metrics(floor, truth, reference_samples_per_m2=None)
+    assert 50.0 < sparse.completion_ratio_pct < 75.0 and sparse.precision_pct < 75.0
+    dense = reconstruction_metrics(floor, truth)
+    assert dense.completion_ratio_pct > 99.5 and dense.precision_pct > 99.5
+    assert dense.accuracy_cm < 1.5 and dense.completion_cm < 1.5
+    assert dense.num_gt_samples == 200_000 == dense.num_recon_samples
+    assert dense.num_gt_reference_samples == 3_200_000 == dense.num_recon_reference_samples
+    assert mesh_area(*truth) == pytest.approx(1600.0)
+    room = square(10.0)  # 100 m^2, as the Replica office: exactly the published evaluation
+    assert reference_sample_count(100.0, 200_000, 2000.0) == 200_000
+    same = reconstruction_metrics(trimesh.Trimesh(*room).subdivide(), room)
+    published = reconstruction_metrics(
+        trimesh.Trimesh(*room).subdivide(), room, reference_samples_per_m2=None
+    )
+    assert same.as_dict() == published.as_dict()

@@ -193,3 +193,15 @@ def test_ray_backend_gives_the_same_records(tmp_path):
             assert by_ray[key]["coverage_curve"] == record["coverage_curve"]
             assert by_ray[key]["trajectory"] == record["trajectory"]
             assert by_ray[key]["config_hash"] == record["config_hash"]
+
+
+def test_sample_density_is_a_setting_of_the_record():
+    """Records scored at another sample density are out of date (their figures differ)."""
+    dense = EpisodeSpec(scene="replica_like_room", policy="random", seed=0, steps=5)
+    published = EpisodeSpec(scene="replica_like_room", policy="random", seed=0, steps=5,
+                            eval_samples_per_m2=0.0)
+    assert dense.eval_samples_per_m2 == 2000.0
+    assert dense.config_hash != published.config_hash
+    with pytest.raises(ValueError, match="eval_samples_per_m2"):
+        EpisodeSpec(scene="replica_like_room", policy="random", seed=0, steps=5,
+                    eval_samples_per_m2=-1.0)
