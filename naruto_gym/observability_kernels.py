@@ -8,8 +8,9 @@ names the triangle that blocked it; the same triangle usually blocks the point f
 viewpoints too (the wall right in front of an outer face blocks it from everywhere inside).
 So each point remembers the last few triangles that blocked it, and a viewpoint whose segment
 provably crosses one of them well inside (an exact segment-triangle test with margins) needs
-no ray; a ball of neighbouring viewpoints inside the shadow cone one of them casts from the
-point is skipped whole. Only the viewpoints no remembered triangle certifies are ray-cast,
+no ray. The front blocker's shadow cone from the point is precomputed, so most viewpoints
+are answered in a few products; a ball of neighbouring viewpoints inside the cone is skipped
+whole. Only the viewpoints no remembered triangle certifies are ray-cast,
 one per point per round, so what a cast teaches serves the point's next viewpoint at once.
 
 The decision for every (point, viewpoint) pair is the ray cast's, as in the per-viewpoint
@@ -29,7 +30,7 @@ CERTIFICATE_MARGIN = 1e-5
 BALL_MARGIN_M = 1e-4
 BALL_MARGIN_RAD = 1e-3
 # Remembered blockers tried on a whole ball of viewpoints before testing them one by one.
-BALL_BLOCKERS = 4
+BALL_BLOCKERS = 1
 # A reverse cast's hit closer than this to the tolerance's end is re-decided by a forward cast.
 AMBIGUOUS_M = 1e-4
 
@@ -101,6 +102,60 @@ def shadow_holds_ball(
     return True
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def shadow_cone(
+    px: float, py: float, pz: float,
+    triangles: np.ndarray, plane_normals: np.ndarray, plane_offsets: np.ndarray, face: int,
+    tolerance_m: float, cone: np.ndarray,
+) -> bool:
+    """The shadow of triangle ``face`` seen from p, for :func:`cone_hides`, into ``cone``
+    ((4, 4) float64): row 0 the triangle's plane (normal, offset) turned so that p lies on
+    its negative side, rows 1-3 the side planes through p and each edge (normal towards the
+    triangle, squared norm). False when p lies within the tolerance (plus margin) of the
+    plane: then nothing is certified."""
+    nx, ny, nz = plane_normals[face, 0], plane_normals[face, 1], plane_normals[face, 2]
+    offset = plane_offsets[face]
+    height = nx * px + ny * py + nz * pz - offset
+    if abs(height) < tolerance_m + BALL_MARGIN_M:
+        return False
+    if height > 0.0:
+        nx, ny, nz, offset = -nx, -ny, -nz, -offset
+    cone[0, 0], cone[0, 1], cone[0, 2], cone[0, 3] = nx, ny, nz, offset
+    for edge in range(3):
+        a = triangles[face, edge]
+        b = triangles[face, (edge + 1) % 3]
+        c = triangles[face, (edge + 2) % 3]
+        ax, ay, az = a[0] - px, a[1] - py, a[2] - pz
+        bx, by, bz = b[0] - px, b[1] - py, b[2] - pz
+        mx, my, mz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        squared = mx * mx + my * my + mz * mz
+        if squared < 1e-24:
+            return False
+        if mx * (c[0] - px) + my * (c[1] - py) + mz * (c[2] - pz) < 0.0:
+            mx, my, mz = -mx, -my, -mz
+        cone[edge + 1, 0], cone[edge + 1, 1], cone[edge + 1, 2] = mx, my, mz
+        cone[edge + 1, 3] = squared
+    return True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def cone_hides(
+    cone: np.ndarray, px: float, py: float, pz: float, vx: float, vy: float, vz: float
+) -> bool:
+    """Whether the shadow ``cone`` (:func:`shadow_cone`) hides p from viewpoint v: v lies
+    ``BALL_MARGIN_M`` beyond the triangle's plane and ``BALL_MARGIN_RAD`` inside the cone's
+    sides (:func:`shadow_holds_ball` for a ball of radius 0, without a square root)."""
+    if cone[0, 0] * vx + cone[0, 1] * vy + cone[0, 2] * vz - cone[0, 3] < BALL_MARGIN_M:
+        return False
+    wx, wy, wz = vx - px, vy - py, vz - pz
+    limit = BALL_MARGIN_RAD * BALL_MARGIN_RAD * (wx * wx + wy * wy + wz * wz)
+    for side in range(1, 4):
+        along = cone[side, 0] * wx + cone[side, 1] * wy + cone[side, 2] * wz
+        if along <= 0.0 or along * along < limit * cone[side, 3]:
+            return False
+    return True
+
+
 @numba.njit(cache=True, nogil=True)
 def emit_rays(
     points: np.ndarray,
@@ -150,12 +205,15 @@ def emit_rays(
     slots = blockers.shape[1]
     count = 0
     kept = 0
+    cone = np.empty((4, 4))
     for j in range(pending_count):
         i = pending[j]
         if visible[i]:
             continue
         c = cursor[i]
         px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        cone_face = -1  # the front blocker whose shadow ``cone`` holds, -1 for none
+        cone_usable = False
         while c < viewpoints.shape[0]:
             ball = ball_of[c]
             if c == 0 or ball_of[c - 1] != ball:
@@ -176,6 +234,19 @@ def emit_rays(
                     c = ball_end[ball]
                     continue
             vx, vy, vz = viewpoints[c, 0], viewpoints[c, 1], viewpoints[c, 2]
+            # The front blocker's shadow, precomputed once per point and blocker, answers most
+            # viewpoints in a few products.
+            front = blockers[i, 0]
+            if front >= 0:
+                if front != cone_face:
+                    cone_face = front
+                    cone_usable = shadow_cone(
+                        px, py, pz, triangles, plane_normals, plane_offsets, front,
+                        tolerance_m, cone,
+                    )
+                if cone_usable and cone_hides(cone, px, py, pz, vx, vy, vz):
+                    c += 1
+                    continue
             # The same float64 arithmetic as the per-viewpoint loop (same float32 rays).
             dx, dy, dz = px - vx, py - vy, pz - vz
             distance = np.sqrt(dx * dx + dy * dy + dz * dz)

@@ -15,7 +15,12 @@ from naruto_gym.observability import (
     visible_from_any,
     visible_from_any_per_viewpoint,
 )
-from naruto_gym.observability_kernels import segment_crosses_triangle, shadow_holds_ball
+from naruto_gym.observability_kernels import (
+    cone_hides,
+    segment_crosses_triangle,
+    shadow_cone,
+    shadow_holds_ball,
+)
 from naruto_gym.scenes.mesh_scene import scene_from_trimesh
 from naruto_gym.sensors.raycaster import RayCaster
 
@@ -253,3 +258,30 @@ def test_sampling_with_a_batched_test_keeps_the_first_accepted_candidates():
         assert len(batched) == count
         np.testing.assert_array_equal(batched, one_by_one)
         assert np.all(batched[:, 2] < 1.0)
+
+
+def test_precomputed_shadow_cone_agrees_with_the_ball_test_and_the_segment_test():
+    rng = np.random.default_rng(3)
+    triangles = rng.uniform(-1.0, 1.0, (300, 3, 3))
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    offsets = np.einsum("ij,ij->i", normals, triangles[:, 0])
+    cone = np.empty((4, 4))
+    hidden_count = 0
+    for face in range(len(triangles)):
+        point = rng.uniform(-2.0, 2.0, 3)
+        usable = shadow_cone(*point, triangles, normals, offsets, face, 0.02, cone)
+        for viewpoint in rng.uniform(-4.0, 4.0, (20, 3)):
+            by_ball = shadow_holds_ball(
+                *point, triangles, normals, offsets, face, *viewpoint, 0.0, 0.02
+            )
+            hidden = usable and cone_hides(cone, *point, *viewpoint)
+            assert hidden == by_ball
+            if hidden:
+                # The segment from the viewpoint to 2 cm short of the point crosses it.
+                offset = point - viewpoint
+                distance = np.linalg.norm(offset)
+                delta = offset / distance * (distance - 0.02)
+                assert segment_crosses_triangle(*viewpoint, *delta, triangles, face, 1e-6)
+                hidden_count += 1
+    assert hidden_count > 50
