@@ -565,11 +565,23 @@ class PinholeRasterizer:
         self.threads = int(threads) if threads is not None else default_thread_count()
         self.intrinsics = np.array([fx, fy, cx, cy], dtype=np.float64)
         self._buffers: tuple[np.ndarray, ...] | None = None
+        self._splits: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state["_buffers"] = None  # scratch space, rebuilt on first use
         return state
+
+    def _split(self, groups: int, vertex_groups: int) -> tuple[np.ndarray, np.ndarray]:
+        """Triangle and vertex ranges of the threads (fixed per mesh: computed once, as
+        small frames are drawn in a fraction of a millisecond)."""
+        key = (groups, vertex_groups)
+        if key not in self._splits:
+            self._splits[key] = (
+                np.linspace(0, len(self.faces), groups + 1).astype(np.int64),
+                np.linspace(0, len(self.vertices), vertex_groups + 1).astype(np.int64),
+            )
+        return self._splits[key]
 
     def _scratch(self) -> tuple[np.ndarray, ...]:
         if self._buffers is None:
@@ -620,11 +632,9 @@ class PinholeRasterizer:
         # Handing work to another thread costs more than it saves on small frames.
         small = self.width * self.height + len(self.faces) < PARALLEL_MIN_WORK
         groups = 1 if small else self.threads
-        bounds = np.linspace(0, len(self.faces), groups + 1).astype(np.int64)
-
         # Classifying a vertex is cheap: split only long vertex lists between the threads.
         vertex_groups = groups if len(self.vertices) >= PARALLEL_MIN_WORK else 1
-        vertex_bounds = np.linspace(0, len(self.vertices), vertex_groups + 1).astype(np.int64)
+        bounds, vertex_bounds = self._split(groups, vertex_groups)
 
         def classify(group: int) -> None:
             vertex_outcodes(
