@@ -1,8 +1,12 @@
 """Per-episode procedural scenes: what a new scene costs at reset, and memory over a long run.
 
 1. Cost of one new scene, per kind (room, apartment) and coverage sample count: generating the
-   mesh, and building what the env needs of it (ray-casting structure, coverage samples and the
-   observable surface, which dominates), median over ``seeds`` seeds.
+   mesh, and building what the env needs of it (ray-casting structure, coverage samples, the
+   observable surface, a start pose), median over ``seeds`` seeds. The reference in the same
+   run: the observable-surface mask of the same samples from the same viewpoints by the
+   per-viewpoint loop (``visible_from_any_per_viewpoint``, one ray per pending point and
+   viewpoint, what the env used before) against the env's ``visible_from_any``; the masks
+   must agree.
 2. Resident memory over ``steps`` steps of a ``NarutoReconVectorEnv`` on
    ``"procedural:room"`` whose episodes last ``episode_steps`` steps, so every reset draws a
    new scene; memory is sampled every ``sample_every`` steps and plotted.
@@ -23,6 +27,7 @@ import numpy as np
 
 from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
+from naruto_gym.observability import visible_from_any, visible_from_any_per_viewpoint
 from naruto_gym.scenes.procedural import make_random_scene
 from naruto_gym.scenes.stream import SPLIT_SEEDS
 from naruto_gym.sensors.pinhole import PinholeCamera
@@ -39,8 +44,8 @@ class Args:
     """steps of the memory run"""
     episode_steps: int = 50
     """episode length of the memory run (a new scene at every reset)"""
-    coverage_samples: int = 5000
-    """coverage samples of the memory run"""
+    coverage_samples: int = 20_000
+    """coverage samples of the memory run (the env's default)"""
     sample_every: int = 250
     """steps between memory samples"""
     output: str = "benchmarks/results/procedural_scenes.json"
@@ -56,7 +61,7 @@ def resident_mib() -> float:
 
 
 def scene_costs(kind: str, samples: int, seeds: int) -> dict[str, Any]:
-    generate, build = [], []
+    generate, build, mask, reference_mask = [], [], [], []
     low = SPLIT_SEEDS["train"][0]
     for seed in range(low + 100, low + 100 + seeds):
         started = time.perf_counter()
@@ -68,11 +73,27 @@ def scene_costs(kind: str, samples: int, seeds: int) -> dict[str, Any]:
         env.reset(seed=0)
         generate.append(generated - started)
         build.append(time.perf_counter() - generated)
+        # The mask step alone, by both implementations, on the same samples and viewpoints.
+        points = scene.sample_surface(samples, seed=0)
+        viewpoints = env.observable_surface.viewpoints
+        started = time.perf_counter()
+        new = visible_from_any(env.raycaster, points, viewpoints)
+        mask.append(time.perf_counter() - started)
+        started = time.perf_counter()
+        old = visible_from_any_per_viewpoint(env.raycaster, points, viewpoints)
+        reference_mask.append(time.perf_counter() - started)
+        if not np.array_equal(new, old):
+            raise RuntimeError(f"observable masks differ on {kind} seed {seed}")
+    total = np.add(generate, build)
     return {
         "kind": kind, "coverage_samples": samples,
         "generate_s": float(np.median(generate)), "build_s": float(np.median(build)),
-        "total_s": float(np.median(np.add(generate, build))),
-        "max_total_s": float(np.max(np.add(generate, build))),
+        "total_s": float(np.median(total)), "max_total_s": float(np.max(total)),
+        "mask_s": float(np.median(mask)),
+        "reference_mask_s": float(np.median(reference_mask)),
+        "mask_speedup": float(np.median(np.divide(reference_mask, mask))),
+        # The build as it was with the per-viewpoint loop: this run's build, its mask swapped.
+        "reference_total_s": float(np.median(total - np.array(mask) + reference_mask)),
         "load": [round(v, 2) for v in os.getloadavg()],
     }
 
@@ -105,6 +126,8 @@ def memory_run(args: Args) -> dict[str, Any]:
 def main(args: Args) -> dict[str, Any]:
     results: dict[str, Any] = {"args": asdict(args), "load_start": os.getloadavg()}
     print(f"load average at start: {results['load_start']}")
+    # One scene first, untimed: the compiled loops load once per process.
+    scene_costs("room", 1000, 1)
     results["scene_costs"] = []
     for kind in ("room", "apartment"):
         for samples in (20_000, 5000):
@@ -112,8 +135,10 @@ def main(args: Args) -> dict[str, Any]:
             results["scene_costs"].append(row)
             print(f"new {kind:9s} scene, {samples:5d} coverage samples: generate "
                   f"{row['generate_s']:.3f} s + build {row['build_s']:.3f} s = "
-                  f"{row['total_s']:.3f} s median, {row['max_total_s']:.3f} s max "
-                  f"(load {row['load']})")
+                  f"{row['total_s']:.3f} s median, {row['max_total_s']:.3f} s max; "
+                  f"observable mask {row['mask_s']:.3f} s vs {row['reference_mask_s']:.3f} s "
+                  f"per viewpoint ({row['mask_speedup']:.1f}x), so {row['reference_total_s']:.3f} "
+                  f"s with the per-viewpoint loop (load {row['load']})")
     run = memory_run(args)
     results["memory"] = run
     print(f"{args.steps} steps, {run['scenes']} scenes in {run['seconds']:.0f} s: resident "
