@@ -553,6 +553,12 @@ class PinholeRasterizer:
             )
         if not np.isfinite(self.vertices).all():
             raise ValueError("vertices must be finite (found NaN or inf coordinates)")
+        # Meshes with per-face colours repeat each corner once per face (3x on the generated
+        # scenes): every frame projects each distinct position once.
+        unique, inverse = np.unique(self.vertices, axis=0, return_inverse=True)
+        if len(unique) < len(self.vertices):
+            self.vertices = np.ascontiguousarray(unique)
+            faces = inverse.reshape(-1)[faces]
         self.faces = np.ascontiguousarray(faces, dtype=np.int32)
         if width <= 0 or height <= 0 or fx <= 0 or fy <= 0:
             raise ValueError(
