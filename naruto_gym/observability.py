@@ -46,25 +46,34 @@ def inside_free_space_many(
     positions: np.ndarray,
     max_no_hit_share: float = 0.5,
     min_front_facing_share: float = 0.9,
+    chunk: int = 1024,
 ) -> np.ndarray:
-    """:func:`is_inside_free_space` of (N, 3) points, their rays cast in one call ((N,) bool)."""
+    """:func:`is_inside_free_space` of (N, 3) points, ``chunk`` points' rays per cast ((N,)
+    bool)."""
     positions = np.asarray(positions, np.float64).reshape(-1, 3)
+    inside = np.zeros(len(positions), dtype=bool)
     directions = _PROBE.ray_directions
-    count, rays = len(positions), len(directions)
-    hits = raycaster.cast(
-        np.repeat(positions.astype(np.float32), rays, axis=0), np.tile(directions, (count, 1))
-    )
-    hit = hits.hit_mask
-    hit_count = hit.reshape(count, rays).sum(axis=1)
-    open_enough = 1.0 - hit_count / rays <= max_no_hit_share
-    # The same products, in the same einsum, as one point's test.
-    facing = np.einsum(
-        "ij,ij->i", face_normals[hits.triangle_ids[hit]], np.tile(directions, (count, 1))[hit]
-    ) < 0
-    facing_count = np.bincount(np.repeat(np.arange(count), rays)[hit], facing, count)
-    # A point that sees nothing fails: no surface to face it.
-    facing_share = facing_count / np.maximum(hit_count, 1)
-    return open_enough & (hit_count > 0) & (facing_share >= min_front_facing_share)
+    rays = len(directions)
+    for start in range(0, len(positions), chunk):
+        part = positions[start : start + chunk]
+        count = len(part)
+        hits = raycaster.cast(
+            np.repeat(part.astype(np.float32), rays, axis=0), np.tile(directions, (count, 1))
+        )
+        hit = hits.hit_mask
+        hit_count = hit.reshape(count, rays).sum(axis=1)
+        open_enough = 1.0 - hit_count / rays <= max_no_hit_share
+        # The same products, in the same einsum, as one point's test.
+        facing = np.einsum(
+            "ij,ij->i", face_normals[hits.triangle_ids[hit]], np.tile(directions, (count, 1))[hit]
+        ) < 0
+        facing_count = np.bincount(np.repeat(np.arange(count), rays)[hit], facing, count)
+        # A point that sees nothing fails: no surface to face it.
+        facing_share = facing_count / np.maximum(hit_count, 1)
+        inside[start : start + count] = (
+            open_enough & (hit_count > 0) & (facing_share >= min_front_facing_share)
+        )
+    return inside
 
 
 def sample_free_positions(

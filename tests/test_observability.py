@@ -230,6 +230,7 @@ def test_batched_free_space_test_and_sampling_match_the_one_point_test():
     for share in (0.5, 0.2):
         expected = [_inside_one_point(caster, normals, p, share) for p in points]
         assert inside_free_space_many(caster, normals, points, share).tolist() == expected
+        assert inside_free_space_many(caster, normals, points, share, chunk=7).tolist() == expected
         assert [is_inside_free_space(caster, normals, p, share) for p in points] == expected
         assert 0 < sum(expected) < len(expected)
         # Sampling with the batched test (the default) keeps the one-point test's positions.
