@@ -18,6 +18,8 @@ from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.raycaster import RayCaster
 
 _PROBE = EquirectangularCamera(16, 32)
+# Points whose visibility state (remembered blockers, next viewpoint, ray) is held at once.
+_POINTS_PER_CHUNK = 262_144
 
 
 def is_inside_free_space(
@@ -167,28 +169,35 @@ def visible_from_any(
     plane_normals /= np.maximum(np.linalg.norm(plane_normals, axis=1, keepdims=True), 1e-300)
     plane_offsets = np.einsum("ij,ij->i", plane_normals, triangles[:, 0])
     viewpoints, ball_of, ball_end, balls = _balls_of_neighbours(viewpoints, ball_size)
-    blockers = np.full((count, blocker_slots), -1, np.int32)
-    cursor = np.zeros(count, np.int64)
-    forward = np.zeros(count, dtype=bool)
-    pending = np.arange(count, dtype=np.int64)
-    rays = np.empty((count, 6), np.float32)
-    ray_point = np.empty(count, np.int64)
-    ray_reach = np.empty(count, np.float64)
     max_range = np.inf if max_range_m is None else float(max_range_m)
-    pending_count = count
-    while pending_count > 0:
-        rays_count, pending_count = emit_rays(
-            points, pending, pending_count, viewpoints, float(tolerance_m), max_range,
-            triangles, plane_normals, plane_offsets, ball_of, ball_end, balls, blockers, cursor,
-            forward, visible, rays, ray_point, ray_reach,
-        )
-        if rays_count == 0:
-            break
-        hits = raycaster.cast_packed(rays[:rays_count])
-        absorb_hits(
-            ray_point, ray_reach, rays_count, hits.distance, hits.triangle_ids, blockers,
-            cursor, forward, visible,
-        )
+    # Points are independent: bounded chunks bound the per-point state (dense evaluation
+    # samples of a large scene run to millions).
+    for start in range(0, count, _POINTS_PER_CHUNK):
+        stop = min(start + _POINTS_PER_CHUNK, count)
+        part = points[start:stop]
+        size = len(part)
+        blockers = np.full((size, blocker_slots), -1, np.int32)
+        cursor = np.zeros(size, np.int64)
+        forward = np.zeros(size, dtype=bool)
+        pending = np.arange(size, dtype=np.int64)
+        rays = np.empty((size, 6), np.float32)
+        ray_point = np.empty(size, np.int64)
+        ray_reach = np.empty(size, np.float64)
+        part_visible = visible[start:stop]
+        pending_count = size
+        while pending_count > 0:
+            rays_count, pending_count = emit_rays(
+                part, pending, pending_count, viewpoints, float(tolerance_m), max_range,
+                triangles, plane_normals, plane_offsets, ball_of, ball_end, balls, blockers,
+                cursor, forward, part_visible, rays, ray_point, ray_reach,
+            )
+            if rays_count == 0:
+                break
+            hits = raycaster.cast_packed(rays[:rays_count])
+            absorb_hits(
+                ray_point, ray_reach, rays_count, hits.distance, hits.triangle_ids, blockers,
+                cursor, forward, part_visible,
+            )
     return visible
 
 

@@ -286,3 +286,14 @@ def test_precomputed_shadow_cone_agrees_with_the_ball_test_and_the_segment_test(
                 assert segment_crosses_triangle(*viewpoint, *delta, triangles, face, 1e-6)
                 hidden_count += 1
     assert hidden_count > 50
+
+
+def test_visible_from_any_in_chunks_of_points_gives_the_same_mask(monkeypatch):
+    import naruto_gym.observability as observability
+
+    scene, caster, observable = _observable()
+    points = scene.sample_surface(3000, seed=5)
+    whole = visible_from_any(caster, points, observable.viewpoints)
+    monkeypatch.setattr(observability, "_POINTS_PER_CHUNK", 701)
+    np.testing.assert_array_equal(visible_from_any(caster, points, observable.viewpoints), whole)
+    assert 0.2 < whole.mean() < 0.9
