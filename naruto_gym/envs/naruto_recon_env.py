@@ -290,6 +290,7 @@ class NarutoReconEnv(gym.Env):
                 self.bounds,
                 max_no_hit_share=self.collision.max_no_hit_share,
                 is_inside=self.collision.start_test(),
+                is_inside_many=self.collision.start_test_many(),
             )
         return self._observable
 
@@ -496,6 +497,7 @@ class NarutoReconEnv(gym.Env):
             self.collision.max_no_hit_share,
             max_candidates=START_CANDIDATES,
             is_inside=self.collision.start_test(),
+            is_inside_many=self.collision.start_test_many(),
         )
         if len(found) == 0:
             raise RuntimeError(

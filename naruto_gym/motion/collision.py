@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from naruto_gym.motion.scanned_space import ScannedSpace, ScannedSpaceConfig
-from naruto_gym.observability import is_inside_free_space
+from naruto_gym.observability import inside_free_space_many, is_inside_free_space
 from naruto_gym.scenes.mesh_scene import face_normals_of
 from naruto_gym.sensors.panorama import EquirectangularCamera, no_hit_share, render_panorama
 from naruto_gym.sensors.raycaster import RayCaster
@@ -128,6 +128,13 @@ class CollisionChecker:
             return self.scanned_space.is_inside
         normals, share = self.face_normals, self.max_no_hit_share
         return lambda position: is_inside_free_space(self.raycaster, normals, position, share)
+
+    def start_test_many(self) -> Callable[[np.ndarray], np.ndarray]:
+        """:meth:`start_test` of (K, 3) points at once ((K,) bool, the same answers)."""
+        if self.escape_rule == "scanned_space":
+            return self.scanned_space.is_inside_many
+        normals, share = self.face_normals, self.max_no_hit_share
+        return lambda positions: inside_free_space_many(self.raycaster, normals, positions, share)
 
     def clearance(self, position: np.ndarray) -> float:
         """Distance from ``position`` to the nearest surface, metres."""

@@ -284,6 +284,32 @@ class ScannedSpace:
             return False
         return self.front_facing_share(position) >= self.config.min_front_facing_share
 
+    def is_inside_many(self, positions: np.ndarray) -> np.ndarray:
+        """:meth:`is_inside` of (N, 3) points, the same answers from two ray casts (support
+        of all, then the facing test of the supported ones)."""
+        positions = np.asarray(positions, np.float64).reshape(-1, 3)
+        inside = self.evaluate(positions)
+        candidates = np.flatnonzero(inside)
+        if len(candidates) == 0:
+            return inside
+        directions = self.facing_directions
+        rays = len(directions)
+        hits = self.raycaster.cast(
+            np.repeat(positions[candidates].astype(np.float32), rays, axis=0),
+            np.tile(directions, (len(candidates), 1)),
+        )
+        hit = hits.hit_mask.reshape(len(candidates), rays)
+        facing = np.zeros(hit.shape, bool)
+        normals = self.face_normals[hits.triangle_ids.reshape(hit.shape)[hit]]
+        ray_directions = np.broadcast_to(directions, hit.shape + (3,))[hit]
+        facing[hit] = np.einsum("ij,ij->i", normals, ray_directions) < 0
+        counts = hit.sum(axis=1)
+        share = np.ones(len(candidates))
+        seen = counts > 0
+        share[seen] = facing[seen].sum(axis=1) / counts[seen]
+        inside[candidates] = share >= self.config.min_front_facing_share
+        return inside
+
     def outside_degree(self, position: np.ndarray) -> tuple[int, float, float]:
         """How far out ``position`` is, exactly, for comparing two points: (empty support
         sectors, share of support rays hitting nothing, distance of their nearest hit)."""

@@ -262,3 +262,23 @@ def test_staged_support_count_equals_the_full_probe():
     np.testing.assert_array_equal(space.empty_sectors(points), full)
     assert (full == 0).mean() > 0.2 and (full > 0).mean() > 0.2
     assert len(np.unique(full)) > 3
+
+
+def test_start_test_of_many_points_answers_as_one_by_one():
+    """is_inside_many (viewpoints and start poses, drawn in batches) is is_inside per point:
+    supported and facing, over the floor, the hole, outside and inside the walls."""
+    space = _space(_open_top_room(floor_hole=True))
+    rng = np.random.default_rng(3)
+    points = np.concatenate([
+        rng.uniform(WIDE_BOUNDS[0], WIDE_BOUNDS[1], size=(300, 3)),
+        rng.uniform([-2.1, -2.1, -0.1], [2.1, 2.1, 2.2], size=(300, 3)),  # walls' insides too
+    ])
+    expected = np.array([space.is_inside(p) for p in points])
+    assert 0.2 < expected.mean() < 0.8
+    np.testing.assert_array_equal(space.is_inside_many(points), expected)
+    checker = CollisionChecker(space.raycaster, WIDE_BOUNDS, escape_no_hit_threshold=0.5)
+    np.testing.assert_array_equal(checker.start_test_many()(points), expected)
+    published = CollisionChecker(space.raycaster, WIDE_BOUNDS, escape_no_hit_threshold=0.5,
+                                 escape_rule="published")
+    one_by_one = np.array([published.start_test()(p) for p in points])
+    np.testing.assert_array_equal(published.start_test_many()(points), one_by_one)
