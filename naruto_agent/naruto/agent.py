@@ -102,7 +102,11 @@ class NarutoConfig:
             move to check), not while the agent turns in place. The same decisions for a
             mapper whose map changes only at mapping steps; a TSDF fuses every frame, so
             a view read later holds a few more frames. Saves about half the reads.
-        max_rotation_step_deg: largest turn per frame (10 degrees; the env allows 20).
+        max_rotation_step_deg: largest turn per frame: 20 degrees, what the env allows and
+            what the frontier and random policies use (published: 10). On the apartment,
+            5000 steps, seed 0: coverage 64.8 / 88.2 / 94.3 / 98.2 % at steps 500 / 1000 /
+            2000 / 5000 against 36.5 / 81.4 / 93.2 / 97.5 % with 10 degrees, observable
+            completion ratio 97.7 % against 96.1 %.
         skip_views_in_image: at the goal, do not turn to a view whose target is already in
             the image (inside its central 80 %) of the current rotation or of one the
             camera turned through. The published agent turns to all 10 views in 10-degree
@@ -143,7 +147,7 @@ class NarutoConfig:
     planner_voxel_m: float = 0.1
     view_every_mapping_steps: int = 1
     lazy_planner_view: bool = True
-    max_rotation_step_deg: float = 10.0
+    max_rotation_step_deg: float = 20.0
     skip_views_in_image: bool = True
     goal_attempts: int = 3
     reachable_iterations: int = 2000

@@ -76,11 +76,14 @@ def test_actions_are_finite_pose_actions_in_the_space(episode):
     assert all(episode.env.action_space.contains(a) for a in episode.actions)
 
 
-def test_turns_stay_within_10_degrees_and_moves_within_a_step(episode):
+def test_turns_stay_within_the_step_limit_and_moves_within_a_step(episode):
     rotations = episode.poses[:, :3, :3]
     angles = [rotation_angle_between(a, b) for a, b in zip(rotations[:-1], rotations[1:],
                                                             strict=True)]
-    assert max(angles) <= np.deg2rad(10.0) + 1e-3  # float32 poses
+    limit = episode.policy.config.max_rotation_step_deg
+    assert limit == 20.0  # the env's limit (published: 10)
+    assert max(angles) <= np.deg2rad(limit) + 1e-3  # float32 poses
+    assert max(angles) > np.deg2rad(10.5)  # the larger steps are used
     moves = np.linalg.norm(np.diff(episode.poses[:, :3, 3], axis=0), axis=1)
     assert moves.max() <= 0.1 + 1e-4
 
