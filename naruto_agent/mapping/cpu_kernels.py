@@ -11,24 +11,20 @@ the samples along rays). It computes the same function (the same corners, rows a
 weights, in float32; results agree to float rounding).
 
 The loops are serial and release the GIL (``nogil``); :func:`hash_grid_features` splits the
-points over a few Python threads. (A numba parallel threading layer would have to coexist
-with torch's OpenMP pool and the renderer's threads; plain threads do not.)
+points over a few Python threads (the project's shared pool, ``run_parallel``). (A numba
+parallel threading layer would have to coexist with torch's OpenMP pool and the renderer's
+threads; plain threads do not.)
 """
 
 from __future__ import annotations
 
-import threading
-from concurrent.futures import ThreadPoolExecutor
-
 import numba
 import numpy as np
 
+from naruto_gym.sensors.rasterizer import run_parallel
+
 # Below this many points a single call beats the threads' hand-off.
 _MIN_POINTS_PER_THREAD = 8192
-
-_pool: ThreadPoolExecutor | None = None
-_pool_size = 0
-_pool_lock = threading.Lock()
 
 
 @numba.njit(cache=True, nogil=True, boundscheck=False)
@@ -169,17 +165,6 @@ def _field_inputs_part(
     _hash_grid_kernel(unit, table, scales, multipliers, num_dense, table_size, out, 3 * bins)
 
 
-def _thread_pool(workers: int) -> ThreadPoolExecutor:
-    global _pool, _pool_size
-    with _pool_lock:
-        if _pool is None or _pool_size != workers:
-            if _pool is not None:
-                _pool.shutdown(wait=False)
-            _pool = ThreadPoolExecutor(workers, thread_name_prefix="naruto-field")
-            _pool_size = workers
-        return _pool
-
-
 def supports(features_per_level: int) -> bool:
     """Whether the compiled loop handles this layout (two features per level, published)."""
     return features_per_level == 2
@@ -194,13 +179,10 @@ def _run_split(function, unit: np.ndarray, out: np.ndarray, threads: int, *args)
         function(unit, *args, out)
         return
     bounds = np.linspace(0, count, parts + 1).astype(np.int64)
-    pool = _thread_pool(parts)
-    futures = [
-        pool.submit(function, unit[begin:end], *args, out[begin:end])
-        for begin, end in zip(bounds[:-1], bounds[1:], strict=True)
-    ]
-    for future in futures:
-        future.result()
+    run_parallel(
+        lambda k: function(unit[bounds[k]:bounds[k + 1]], *args, out[bounds[k]:bounds[k + 1]]),
+        parts,
+    )
 
 
 def hash_grid_features(
