@@ -65,6 +65,24 @@ def segment_crosses_triangle(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _edge_side_plane(
+    px: float, py: float, pz: float, triangles: np.ndarray, face: int, edge: int
+) -> tuple[float, float, float, float]:
+    """The plane through p and edge ``edge`` of triangle ``face``: its normal (not unit),
+    turned towards the triangle's third corner, and the normal's squared length."""
+    a = triangles[face, edge]
+    b = triangles[face, (edge + 1) % 3]
+    c = triangles[face, (edge + 2) % 3]
+    ax, ay, az = a[0] - px, a[1] - py, a[2] - pz
+    bx, by, bz = b[0] - px, b[1] - py, b[2] - pz
+    mx, my, mz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+    squared = mx * mx + my * my + mz * mz
+    if mx * (c[0] - px) + my * (c[1] - py) + mz * (c[2] - pz) < 0.0:
+        mx, my, mz = -mx, -my, -mz
+    return mx, my, mz, squared
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def shadow_holds_ball(
     px: float, py: float, pz: float,
     triangles: np.ndarray, plane_normals: np.ndarray, plane_offsets: np.ndarray, face: int,
@@ -86,17 +104,10 @@ def shadow_holds_ball(
     sx, sy, sz = cx - px, cy - py, cz - pz
     reach = np.sqrt(sx * sx + sy * sy + sz * sz)
     for edge in range(3):
-        a = triangles[face, edge]
-        b = triangles[face, (edge + 1) % 3]
-        c = triangles[face, (edge + 2) % 3]
-        ax, ay, az = a[0] - px, a[1] - py, a[2] - pz
-        bx, by, bz = b[0] - px, b[1] - py, b[2] - pz
-        mx, my, mz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-        norm = np.sqrt(mx * mx + my * my + mz * mz)
+        mx, my, mz, squared = _edge_side_plane(px, py, pz, triangles, face, edge)
+        norm = np.sqrt(squared)
         if norm < 1e-12:
             return False
-        if mx * (c[0] - px) + my * (c[1] - py) + mz * (c[2] - pz) < 0.0:
-            norm = -norm  # orient the side plane towards the triangle's third corner
         if (mx * sx + my * sy + mz * sz) / norm < radius + BALL_MARGIN_RAD * reach:
             return False
     return True
@@ -122,17 +133,9 @@ def shadow_cone(
         nx, ny, nz, offset = -nx, -ny, -nz, -offset
     cone[0, 0], cone[0, 1], cone[0, 2], cone[0, 3] = nx, ny, nz, offset
     for edge in range(3):
-        a = triangles[face, edge]
-        b = triangles[face, (edge + 1) % 3]
-        c = triangles[face, (edge + 2) % 3]
-        ax, ay, az = a[0] - px, a[1] - py, a[2] - pz
-        bx, by, bz = b[0] - px, b[1] - py, b[2] - pz
-        mx, my, mz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-        squared = mx * mx + my * my + mz * mz
+        mx, my, mz, squared = _edge_side_plane(px, py, pz, triangles, face, edge)
         if squared < 1e-24:
             return False
-        if mx * (c[0] - px) + my * (c[1] - py) + mz * (c[2] - pz) < 0.0:
-            mx, my, mz = -mx, -my, -mz
         cone[edge + 1, 0], cone[edge + 1, 1], cone[edge + 1, 2] = mx, my, mz
         cone[edge + 1, 3] = squared
     return True
