@@ -45,7 +45,7 @@ from functools import cached_property
 import numpy as np
 
 from naruto_gym.scenes.mesh_scene import sample_mesh_surface
-from naruto_gym.sensors.raycaster import RayCaster
+from naruto_gym.sensors.raycaster import RayCaster, RayHits
 
 _GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
 
@@ -216,17 +216,27 @@ class ScannedSpace:
             (inf for none).
         """
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
-        count, rays = len(positions), len(self.support_directions)
-        origins = np.repeat(positions.astype(np.float32), rays, axis=0)
-        hits = self.raycaster.cast(origins, np.tile(self.support_directions, (count, 1)))
-        hit = hits.hit_mask.reshape(count, rays)
-        seen = np.zeros((count, self.config.support_sectors), bool)
-        for sector in range(self.config.support_sectors):
-            seen[:, sector] = hit[:, self._sectors == sector].any(axis=1)
-        empty = self.config.support_sectors - seen.sum(axis=1)
+        hits = self._cast_from(positions, self.support_directions)
+        hit = hits.hit_mask.reshape(len(positions), -1)
+        empty = self.config.support_sectors - self._seen_sectors(hit, self._sectors).sum(axis=1)
         missed = 1.0 - hit.mean(axis=1)
-        nearest = hits.distance.reshape(count, rays).min(axis=1)
+        nearest = hits.distance.reshape(hit.shape).min(axis=1)
         return empty, np.stack([missed, nearest], axis=1)
+
+    def _cast_from(self, positions: np.ndarray, directions: np.ndarray) -> RayHits:
+        """One cast of ``directions`` from every point of (N, 3) ``positions``, point-major."""
+        return self.raycaster.cast(
+            np.repeat(positions.astype(np.float32), len(directions), axis=0),
+            np.tile(directions, (len(positions), 1)),
+        )
+
+    def _seen_sectors(self, hit: np.ndarray, sectors: np.ndarray) -> np.ndarray:
+        """(N, sectors) bool: which sectors some ray of ``hit`` ((N, R), rays of ``sectors``)
+        found surface in."""
+        seen = np.zeros((len(hit), self.config.support_sectors), bool)
+        for sector in range(self.config.support_sectors):
+            seen[:, sector] = hit[:, sectors == sector].any(axis=1)
+        return seen
 
     def empty_sectors(self, positions: np.ndarray) -> np.ndarray:
         """Empty support sectors below (N, 3) points: :meth:`probe`'s first answer, casting
@@ -239,35 +249,35 @@ class ScannedSpace:
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
         per_ring = self.config.support_sectors * self.config.rays_per_sector
         first, rest = self.support_directions[:per_ring], self.support_directions[per_ring:]
-        count = len(positions)
-        hit = self.raycaster.cast(
-            np.repeat(positions.astype(np.float32), per_ring, axis=0), np.tile(first, (count, 1))
-        ).hit_mask.reshape(count, per_ring)
-        seen = np.zeros((count, self.config.support_sectors), bool)
-        sectors = self._sectors[:per_ring]
-        for sector in range(self.config.support_sectors):
-            seen[:, sector] = hit[:, sectors == sector].any(axis=1)
+        hit = self._cast_from(positions, first).hit_mask.reshape(len(positions), per_ring)
+        seen = self._seen_sectors(hit, self._sectors[:per_ring])
         undecided = np.flatnonzero(~seen.all(axis=1))
         if len(undecided) and len(rest):
-            rays = len(rest)
-            more = self.raycaster.cast(
-                np.repeat(positions[undecided].astype(np.float32), rays, axis=0),
-                np.tile(rest, (len(undecided), 1)),
-            ).hit_mask.reshape(len(undecided), rays)
-            sectors = self._sectors[per_ring:]
-            for sector in range(self.config.support_sectors):
-                seen[undecided, sector] |= more[:, sectors == sector].any(axis=1)
+            more = self._cast_from(positions[undecided], rest).hit_mask
+            seen[undecided] |= self._seen_sectors(
+                more.reshape(len(undecided), len(rest)), self._sectors[per_ring:]
+            )
         return self.config.support_sectors - seen.sum(axis=1)
 
     def front_facing_share(self, position: np.ndarray) -> float:
         """Share of the surfaces seen all around ``position`` that face it (1 when none)."""
+        return float(self.front_facing_shares(position)[0])
+
+    def front_facing_shares(self, positions: np.ndarray) -> np.ndarray:
+        """:meth:`front_facing_share` of (N, 3) points, from one cast."""
+        positions = np.asarray(positions, np.float64).reshape(-1, 3)
         directions = self.facing_directions
-        hits = self.raycaster.cast(np.asarray(position, np.float32), directions)
-        hit = hits.hit_mask
-        if not hit.any():
-            return 1.0
-        normals = self.face_normals[hits.triangle_ids[hit]]
-        return float(np.mean(np.einsum("ij,ij->i", normals, directions[hit]) < 0))
+        hits = self._cast_from(positions, directions)
+        hit = hits.hit_mask.reshape(len(positions), len(directions))
+        facing = np.zeros(hit.shape, bool)
+        normals = self.face_normals[hits.triangle_ids.reshape(hit.shape)[hit]]
+        ray_directions = np.broadcast_to(directions, hit.shape + (3,))[hit]
+        facing[hit] = np.einsum("ij,ij->i", normals, ray_directions) < 0
+        counts = hit.sum(axis=1)
+        shares = np.ones(len(positions))
+        seen = counts > 0
+        shares[seen] = facing[seen].sum(axis=1) / counts[seen]
+        return shares
 
     def evaluate(self, positions: np.ndarray) -> np.ndarray:
         """Exact support and height test of (N, 3) points (casts rays; per step use
@@ -290,24 +300,9 @@ class ScannedSpace:
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
         inside = self.evaluate(positions)
         candidates = np.flatnonzero(inside)
-        if len(candidates) == 0:
-            return inside
-        directions = self.facing_directions
-        rays = len(directions)
-        hits = self.raycaster.cast(
-            np.repeat(positions[candidates].astype(np.float32), rays, axis=0),
-            np.tile(directions, (len(candidates), 1)),
-        )
-        hit = hits.hit_mask.reshape(len(candidates), rays)
-        facing = np.zeros(hit.shape, bool)
-        normals = self.face_normals[hits.triangle_ids.reshape(hit.shape)[hit]]
-        ray_directions = np.broadcast_to(directions, hit.shape + (3,))[hit]
-        facing[hit] = np.einsum("ij,ij->i", normals, ray_directions) < 0
-        counts = hit.sum(axis=1)
-        share = np.ones(len(candidates))
-        seen = counts > 0
-        share[seen] = facing[seen].sum(axis=1) / counts[seen]
-        inside[candidates] = share >= self.config.min_front_facing_share
+        if len(candidates):
+            shares = self.front_facing_shares(positions[candidates])
+            inside[candidates] = shares >= self.config.min_front_facing_share
         return inside
 
     def outside_degree(self, position: np.ndarray) -> tuple[int, float, float]:
