@@ -189,7 +189,7 @@ class RgbdRenderer:
         """(H, W) float32 z-depth only (skips colour)."""
         if self.frame_backend == "raster":
             return self.rasterizer.render(camera_to_world, self.max_depth_m, False)[0]
-        return self._cast(camera_to_world)[0]
+        return self._cast(camera_to_world)[0].reshape(self.camera.height, self.camera.width)
 
     def render(self, camera_to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(rgb (H, W, 3) uint8, depth (H, W) float32) at a camera-to-world pose."""
@@ -201,10 +201,7 @@ class RgbdRenderer:
         """Depth, hit triangle and barycentrics of every pixel at a camera-to-world pose."""
         if self.frame_backend == "raster":
             return PixelHits(*self.rasterizer.render(camera_to_world, self.max_depth_m))
-        depth, hits = self._cast(camera_to_world)
-        # Pixels beyond the range are black like misses.
-        triangle_ids = np.where(depth.ravel() > 0, hits.triangle_ids, np.int32(-1))
-        return PixelHits(depth, triangle_ids, hits.barycentric_uv)
+        return self._cast_hits(camera_to_world, (self.camera.height, self.camera.width))
 
     def render_hits_many(self, camera_to_world: np.ndarray) -> PixelHits:
         """:meth:`render_hits` of K poses (K, 4, 4) at once, the same hits frame by frame.
@@ -220,18 +217,7 @@ class RgbdRenderer:
         poses = np.asarray(camera_to_world, np.float64).reshape(-1, 4, 4)
         count, pixels = len(poses), self.camera.width * self.camera.height
         if self.frame_backend != "raster":
-            rays = np.empty((count * pixels, 6), np.float32)
-            for k, pose in enumerate(poses.astype(np.float32)):
-                fill_world_rays(
-                    self.camera.ray_directions, np.ascontiguousarray(pose[:3, :3]),
-                    np.ascontiguousarray(pose[:3, 3]), rays[k * pixels:(k + 1) * pixels],
-                )
-            hits = self.raycaster.cast_packed(rays)
-            depth = hits.distance.copy()
-            depth[~(depth <= self.max_depth_m)] = 0.0
-            triangle_ids = np.where(depth > 0, hits.triangle_ids, np.int32(-1))
-            return PixelHits(depth.reshape(count, self.camera.height, self.camera.width),
-                             triangle_ids, hits.barycentric_uv)
+            return self._cast_hits(poses, (count, self.camera.height, self.camera.width))
         depth = np.empty((count, self.camera.height, self.camera.width), np.float32)
         triangle_ids = np.empty(count * pixels, np.int32)
         barycentric_uv = np.empty((count * pixels, 2), np.float32)
@@ -277,17 +263,29 @@ class RgbdRenderer:
         return rgb
 
     def _cast(self, camera_to_world: np.ndarray) -> tuple[np.ndarray, RayHits]:
-        pose = np.asarray(camera_to_world, dtype=np.float32)
-        if self._rays is None:
-            self._rays = np.empty((self.camera.width * self.camera.height, 6), np.float32)
+        """Cast the pixel rays of one pose (4, 4) or of K poses (K, 4, 4) in one call: the
+        flat z-depths, cut to the range (0 beyond it), and the hits, frame after frame."""
+        poses = np.asarray(camera_to_world, dtype=np.float32).reshape(-1, 4, 4)
+        pixels = self.camera.width * self.camera.height
+        if self._rays is None or len(self._rays) < len(poses) * pixels:
+            self._rays = np.empty((len(poses) * pixels, 6), np.float32)
+        rays = self._rays[: len(poses) * pixels]
         # Directions keep camera z = 1, so the ray parameter of a hit is its z-depth.
-        fill_world_rays(
-            self.camera.ray_directions,
-            np.ascontiguousarray(pose[:3, :3]),
-            np.ascontiguousarray(pose[:3, 3]),
-            self._rays,
-        )
-        hits = self.raycaster.cast_packed(self._rays)
+        for k, pose in enumerate(poses):
+            fill_world_rays(
+                self.camera.ray_directions,
+                np.ascontiguousarray(pose[:3, :3]),
+                np.ascontiguousarray(pose[:3, 3]),
+                rays[k * pixels:(k + 1) * pixels],
+            )
+        hits = self.raycaster.cast_packed(rays)
         depth = hits.distance.copy()
         depth[~(depth <= self.max_depth_m)] = 0.0
-        return depth.reshape(self.camera.height, self.camera.width), hits
+        return depth, hits
+
+    def _cast_hits(self, camera_to_world: np.ndarray, shape: tuple[int, ...]) -> PixelHits:
+        """:meth:`_cast` as pixel hits, depth in ``shape``; pixels beyond the range are black
+        like misses."""
+        depth, hits = self._cast(camera_to_world)
+        triangle_ids = np.where(depth > 0, hits.triangle_ids, np.int32(-1))
+        return PixelHits(depth.reshape(shape), triangle_ids, hits.barycentric_uv)
