@@ -218,12 +218,7 @@ class RayCaster:
         if length > 0:
             # A ray along the segment catches a wall thinner than the sampling step.
             wall = float(self.cast_distance(start[None], ((end - start) / length)[None])[0])
-        fraction = free_fraction_from_distances(
-            fractions, length, surface_distance, wall, clearance
-        )
-        if fraction <= 0.0:
-            return fraction, float("nan")
-        return fraction, float(surface_distance[np.searchsorted(fractions, fraction)])
+        return sweep_stop_from_distances(fractions, length, surface_distance, wall, clearance)
 
 
 def segment_samples(
@@ -241,6 +236,23 @@ def segment_samples(
     fractions = np.linspace(0.0, 1.0, count + 1)
     samples = start[None, :] + fractions[:, None] * delta[None, :]
     return fractions, samples, length
+
+
+def sweep_stop_from_distances(
+    fractions: np.ndarray,
+    length: float,
+    surface_distance: np.ndarray,
+    wall_distance: float,
+    clearance: float,
+) -> tuple[float, float]:
+    """:func:`free_fraction_from_distances`, and the surface distance of the sample where the
+    sweep stops (the stop is one of the samples; nan when the sweep cannot leave the start)."""
+    fraction = free_fraction_from_distances(
+        fractions, length, surface_distance, wall_distance, clearance
+    )
+    if fraction <= 0.0:
+        return fraction, float("nan")
+    return fraction, float(surface_distance[np.searchsorted(fractions, fraction)])
 
 
 def free_fraction_from_distances(

@@ -46,7 +46,7 @@ from naruto_gym.scenes.stream import (
     parse_procedural_name,
 )
 from naruto_gym.sensors.rasterizer import default_thread_count, run_parallel
-from naruto_gym.sensors.raycaster import free_fraction_from_distances, segment_samples
+from naruto_gym.sensors.raycaster import segment_samples, sweep_stop_from_distances
 from naruto_gym.vector.batch_kernels import (
     fill_panorama_rays,
     fill_pinhole_rays,
@@ -531,11 +531,10 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             directions = (end[along] - start[along]) / lengths[along, None]
             walls[along] = raycaster.cast_distance(start[along], directions)
         for k, index in enumerate(group):
-            fraction = free_fraction_from_distances(
+            fraction, end_clearances[index] = sweep_stop_from_distances(
                 sweeps[k][0], float(lengths[k]), distances[k], float(walls[k]), clearances[k]
             )
             positions[index] = start[k] + fraction * (end[k] - start[k])
-            end_clearances[index] = distances[k][np.searchsorted(sweeps[k][0], fraction)]
             if fraction < 1.0:
                 moves.reasons[index] = "surface"
             elif box[k] < 1.0:
