@@ -71,6 +71,16 @@ class ObservedSpaceConfig:
         look_weight: how fast a frontier voxel's variance falls with the frames that looked
             at it without resolving it (0: it stays at the initial variance until resolved).
         look_range_m: a frame looks at a voxel up to this distance (the goal search's 2 m).
+        look_behind_surface_m: a frame also looks at a voxel whose centre lies up to this far
+            behind the surface its pixel measured (0.15 m: the voxel's own cell reaches
+            0.09 m from its centre). Most unresolvable frontier lies under and behind
+            surfaces: free cells the rays grazed, next to the unknown inside furniture. The
+            goal search sees them (its line of sight stops a voxel short of the target), so
+            unless the surface over them counts as a look they keep the initial variance
+            and hold the agent in place. On the apartment after 1000 steps (seed 2), 165 of
+            the 211 such targets near the agent were never looked at in the next 150 frames
+            with a clear line of sight required. -0.1 (a voxel in front of the surface):
+            the line of sight must be clear.
     """
 
     voxel_size_m: float = 0.1
@@ -82,6 +92,7 @@ class ObservedSpaceConfig:
     top_quantile: float = 0.99
     look_weight: float = 0.25
     look_range_m: float = 2.0
+    look_behind_surface_m: float = 0.15
 
     def __post_init__(self) -> None:
         if not (self.voxel_size_m > 0 and self.max_range_m > 0):
@@ -140,8 +151,9 @@ class ObservedSpace:
         self._changed()
 
     def _count_looks(self, depth: np.ndarray, pose: np.ndarray, camera: PinholeCamera) -> None:
-        """Add a look to every voxel the frame sees with a clear line of sight: in the image,
-        within ``look_range_m``, in front of the measured depth (or where nothing was hit)."""
+        """Add a look to every voxel the frame sees: in the image, within ``look_range_m``,
+        in front of the measured depth or at most ``look_behind_surface_m`` behind it (or
+        where nothing was hit)."""
         reach = self.config.look_range_m
         voxel = self.config.voxel_size_m
         low = self.grid.world_to_cell(pose[:3, 3][None] - reach)[0]
@@ -160,7 +172,7 @@ class ObservedSpace:
         near &= (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
         index = np.flatnonzero(near)
         measured = depth[v[index], u[index]]
-        clear = (measured <= 0) | (z[index] < measured - voxel)
+        clear = (measured <= 0) | (z[index] < measured + self.config.look_behind_surface_m)
         seen = cells[index[clear]]
         self.looks[seen[:, 0], seen[:, 1], seen[:, 2]] += 1.0
 

@@ -114,3 +114,28 @@ def test_frontier_looked_at_without_being_resolved_loses_variance() -> None:
     for _ in range(4):
         still.integrate_depth(depth, pose, camera)
     assert np.all(still.frontier_variance(3.0)[still.frontier()] == 3.0)
+
+
+@pytest.mark.parametrize("behind_m", [0.15, -0.1])
+def test_voxels_just_behind_the_measured_surface_are_looked_at(behind_m: float) -> None:
+    """A wall 1.5 m ahead: voxels up to ``look_behind_surface_m`` behind it count a look
+    (the frontier under and behind a surface is seen with the surface), farther ones not;
+    -0.1 requires a clear line of sight, one voxel in front of the surface."""
+    space = _space(support_below_m=None, look_weight=0.25, look_range_m=2.0,
+                   look_behind_surface_m=behind_m)
+    camera = PinholeCamera(32, 32, 16.0, 16.0, 15.5, 15.5)
+    eye = np.array([1.0, 2.05, 1.55])
+    pose = make_pose(look_at_rotation(eye, eye + [1.0, 0.0, 0.0]), eye)
+    space.integrate_depth(np.full((32, 32), 1.5, np.float32), pose, camera)
+    # The voxels straight ahead along the optical axis, by depth of their centres.
+    ahead = np.array([[x, 2.05, 1.55] for x in np.arange(1.25, 2.95, 0.1)])
+    row = space.grid.world_to_cell(ahead)
+    depth = space.grid.cell_to_world(row)[:, 0] - eye[0]
+    looks = space.looks[tuple(row.T)]
+    assert np.all(looks[depth < 1.4] == 1.0)  # well in front of the wall
+    assert np.all(looks[depth > 1.5 + 0.2] == 0.0)  # deep behind it
+    just_behind = (depth > 1.5) & (depth < 1.5 + behind_m)
+    assert just_behind.any() == (behind_m > 0)
+    assert np.all(looks[just_behind] == 1.0)
+    assert np.all(looks[(depth > 1.5 + max(behind_m, 0.0)) | (depth > 1.4) & (behind_m < 0)]
+                  == 0.0)
