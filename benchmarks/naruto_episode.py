@@ -58,6 +58,7 @@ from PIL import Image  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 import naruto_gym  # noqa: E402,F401  (registers the env)
+from naruto_agent.mapping import NeuralMapper  # noqa: E402
 from naruto_agent.naruto import NarutoPolicy  # noqa: E402
 from naruto_agent.policies import EnvContext  # noqa: E402
 from naruto_gym.cli_args import parse_dataclass_args
@@ -97,6 +98,9 @@ class Args:
     """JSON object of NarutoPolicy settings, e.g. '{"neural": {"active_score": "grid"}}'"""
     checkpoint_every: int = 100
     """write a progress record (coverage, wall time by phase so far) every n steps (0: never)"""
+    passive_reference: bool = False
+    """neural mapper: after the episode, map its frames passively (same mapper settings, no
+    active sampling) in this process, and report the episode's time as a ratio to it"""
 
 
 def parse_args() -> Args:
@@ -285,6 +289,41 @@ def print_phase_table(phases: dict[str, float], steps: int, episode_s: float) ->
     print(f"| episode wall time | {episode_s:.1f} | {1000 * episode_s / max(steps, 1):.1f} | |")
 
 
+def passive_reference(env: gym.Env, policy: NarutoPolicy, args: Args) -> dict:
+    """Map the episode's frames passively, right after it in the same process.
+
+    The agent's neural mapper settings without active ray sampling and without the
+    explored-space grid (nothing plans on it), fed the frames of the episode's poses; only
+    the frames the mapper reads are rendered, and rendering is timed apart (the passive
+    reference of the goal "episode at most 2x the passive mapping" is the mapping alone).
+    """
+    base = env.unwrapped
+    config = dataclasses.replace(policy.mapper.config, active_sampling=False,
+                                 unknown_space=False)
+    mapper = NeuralMapper(policy.context.bounds, base.camera, config)
+    render_s = render_cpu_s = 0.0
+    started, cpu_started = time.perf_counter(), time.process_time()
+    for index, pose in enumerate(tqdm(base.poses, desc="passive reference")):
+        if len(mapper.required_pixels(index)) == 0:
+            continue
+        clock, cpu_clock = time.perf_counter(), time.process_time()
+        rgb, depth = base.renderer.render(pose)
+        render_s += time.perf_counter() - clock
+        render_cpu_s += time.process_time() - cpu_clock
+        mapper.integrate(rgb, depth, pose, index)
+    mapping_s = time.perf_counter() - started - render_s
+    mapping_cpu_s = time.process_time() - cpu_started - render_cpu_s
+    metrics = base.evaluate(mapper.extract_mesh(0.02), num_samples=args.eval_samples)
+    return {
+        "frames": len(base.poses),
+        "iterations": mapper.stats.iterations,
+        "mapping_s": mapping_s,
+        "mapping_cpu_s": mapping_cpu_s,
+        "render_s": render_s,
+        "mesh_metrics": scalar_metrics(metrics),
+    }
+
+
 def main(args: Args) -> dict:
     load_start = os.getloadavg()
     # One step more than the budget, so the env's final-metrics wrapper (which scores on
@@ -434,6 +473,17 @@ def main(args: Args) -> dict:
         "cpu_count": os.cpu_count(),
         "host": platform.node(),
     }
+    if args.passive_reference and args.mapper == "neural":
+        passive = passive_reference(env, policy, args)
+        # The env's reference TSDF fusion scores the episode; it is not the agent's work.
+        agent_s = episode_s - phases.get("reference_tsdf", 0.0)
+        passive.update(
+            episode_to_passive_wall=episode_s / passive["mapping_s"],
+            episode_without_reference_tsdf_to_passive_wall=agent_s / passive["mapping_s"],
+            episode_to_passive_cpu=episode_cpu_s / passive["mapping_cpu_s"],
+            load_average_end=os.getloadavg(),
+        )
+        record["passive_reference"] = passive
     json_path = output_dir / f"naruto_episode_{tag}.json"
     json_path.write_text(json.dumps(record, indent=2))
     Image.fromarray(env.render()).save(output_dir / f"naruto_episode_{tag}_topdown.png")
@@ -476,6 +526,16 @@ def main(args: Args) -> dict:
     print("  detail: " + ", ".join(f"{k} {v:.1f}" for k, v in detail_ms.items()))
     print_phase_table(phases, steps_run, episode_s)
     print(f"episode CPU time (all threads of the process): {episode_cpu_s:.1f} s")
+    if "passive_reference" in record:
+        passive = record["passive_reference"]
+        print(
+            f"passive mapping of the same {passive['frames']} frames: {passive['mapping_s']:.1f} s "
+            f"wall, {passive['mapping_cpu_s']:.1f} s CPU; episode / passive: "
+            f"{passive['episode_to_passive_wall']:.2f}x wall "
+            f"({passive['episode_without_reference_tsdf_to_passive_wall']:.2f}x without the "
+            f"reference TSDF), {passive['episode_to_passive_cpu']:.2f}x CPU; passive map "
+            f"completion ratio {passive['mesh_metrics']['completion_ratio_pct']:.2f} %"
+        )
     print(
         f"load average start {load_start[0]:.2f}, end {record['load_average_end'][0]:.2f} "
         f"on {os.cpu_count()} cores; written {json_path}"
