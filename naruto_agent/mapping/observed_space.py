@@ -176,6 +176,13 @@ class ObservedSpace:
         seen = cells[index[clear]]
         self.looks[seen[:, 0], seen[:, 1], seen[:, 2]] += 1.0
 
+    def add_looks(self, points: np.ndarray, looks: float) -> None:
+        """Count ``looks`` more looks at the voxels of world points (e.g. targets an agent went
+        to see that are still unresolved after its visit)."""
+        cells, inside = self.cells_of(points)
+        cells = cells[inside]
+        np.add.at(self.looks, (cells[:, 0], cells[:, 1], cells[:, 2]), np.float32(looks))
+
     def integrate_panorama(self, panorama: np.ndarray, position: np.ndarray) -> None:
         """Integrate an equirectangular radial-distance panorama (0 = no hit) taken at
         ``position`` (rows from straight up to straight down, columns from azimuth -pi;

@@ -77,6 +77,15 @@ class GoalSearchConfig:
             wherever it is; a length L multiplies the score by exp(-d / L), d the straight
             distance from the agent, so that of two goals seeing about as much the nearer
             wins (the agent stops crossing the map back and forth).
+        explore_first_share: None (published) draws the targets from the most uncertain
+            voxels whatever their values. A share s searches first with targets drawn only
+            from voxels at least s times as uncertain as the most uncertain one (unexplored
+            space at the initial variance, surfaces nearly as uncertain), when there are at
+            least ``explore_first_min_voxels`` of them, and with all targets only when no
+            goal sees one of those. Without it, once the unexplored space shrinks below the
+            4000 candidates, surfaces seen once or twice fill most of the 300 targets and
+            the agent polishes the rooms it has seen before finishing the last ones.
+        explore_first_min_voxels: see ``explore_first_share``.
     """
 
     goal_spacing_xy_m: float = 0.2
@@ -93,6 +102,8 @@ class GoalSearchConfig:
     top_k: int = 3
     batch_goals: int = 64
     distance_discount_m: float | None = None
+    explore_first_share: float | None = None
+    explore_first_min_voxels: int = 30
 
     def __post_init__(self) -> None:
         for name in ("goal_spacing_xy_m", "goal_spacing_z_m", "max_range_m"):
@@ -111,6 +122,9 @@ class GoalSearchConfig:
         if self.distance_discount_m is not None and not self.distance_discount_m > 0:
             raise ValueError(f"GoalSearchConfig.distance_discount_m must be positive or None, "
                              f"got {self.distance_discount_m}")
+        if self.explore_first_share is not None and not 0 < self.explore_first_share <= 1:
+            raise ValueError(f"GoalSearchConfig.explore_first_share must be in (0, 1] or None, "
+                             f"got {self.explore_first_share}")
         if not 0.0 <= self.visibility_stop_m < self.max_range_m:
             raise ValueError(f"visibility_stop_m must be in [0, max_range_m), got "
                              f"{self.visibility_stop_m}")
@@ -130,6 +144,7 @@ class GoalSearchResult:
         goals: (top_k', 3) the best goals, best first (only those that see something).
         goal_scores: (top_k',) their scores.
         goal_views: per entry of ``goals``, its (K, 3) views.
+        goal_visible: per entry of ``goals``, every target it sees ((M, 3), M >= K).
         targets: (T, 3) the targets used.
         target_uncertainty: (T,) their uncertainty.
         used_reachable_mask: whether the reachable-voxel fallback ran.
@@ -145,6 +160,7 @@ class GoalSearchResult:
     goals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     goal_scores: np.ndarray = field(default_factory=lambda: np.zeros(0))
     goal_views: list[np.ndarray] = field(default_factory=list)
+    goal_visible: list[np.ndarray] = field(default_factory=list)
     targets: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     target_uncertainty: np.ndarray = field(default_factory=lambda: np.zeros(0))
     used_reachable_mask: bool = False
@@ -350,6 +366,7 @@ def search_goals(
             goals=goals[[index for _, index, _ in best]] if best else np.zeros((0, 3)),
             goal_scores=np.array([score for score, _, _ in best]),
             goal_views=[views for views, _ in goal_views],
+            goal_visible=[targets[row] for _, _, row in best],
             targets=targets,
             target_uncertainty=target_uncertainty,
             diagnostics=diagnostics,
@@ -400,9 +417,11 @@ def uncertainty_aware_goal_search(
 ) -> GoalSearchResult:
     """NARUTO's goal search with its fallback.
 
-    Searches once; if no goal sees any target, grows a goal-free RRT from ``start`` over
-    the whole volume (:func:`~naruto_agent.planning.reachable_voxels`), keeps only targets
-    and goals within one step of that tree, and searches again.
+    With ``config.explore_first_share`` it first searches with the most uncertain tier of
+    targets only (see :class:`GoalSearchConfig`). Then searches once; if no goal sees any
+    target, grows a goal-free RRT from ``start`` over the whole volume
+    (:func:`~naruto_agent.planning.reachable_voxels`), keeps only targets and goals within
+    one step of that tree, and searches again.
 
     Args:
         sdf: the planner's SDF volume.
@@ -415,6 +434,16 @@ def uncertainty_aware_goal_search(
         reachable_iterations: extensions of the fallback tree.
     """
     config = config or GoalSearchConfig()
+    if config.explore_first_share is not None:
+        values = uncertainty.values
+        first = values >= config.explore_first_share * float(values.max(initial=0.0))
+        first &= values > 0.0
+        if int(first.sum()) >= config.explore_first_min_voxels:
+            found = search_goals(sdf, uncertainty, rng, config, goal_mask=goal_mask,
+                                 target_mask=first, origin=start)
+            if found.found:
+                found.diagnostics["explore_first"] = 1.0
+                return found
     found = search_goals(sdf, uncertainty, rng, config, goal_mask=goal_mask, origin=start)
     if found.found:
         return found

@@ -94,6 +94,7 @@ class ProgressMonitor:
         self.frame = 0
         self.escalation = 0
         self.last_recovery_frame = -(10**9)
+        self._recovery_position: np.ndarray | None = None
 
     def record(self, position: np.ndarray, observed_fraction: float) -> None:
         """One frame: where the agent is and how much of space its map has measured."""
@@ -130,12 +131,18 @@ class ProgressMonitor:
         kind = kinds[self.escalation % len(kinds)]
         self.escalation += 1
         self.last_recovery_frame = self.frame
+        self._recovery_position = self._positions[-1].copy() if self._positions else None
         self.failed_plans = 0
         return kind
 
-    def progress_made(self) -> None:
-        """A normal plan went through: the escalation starts over."""
-        self.escalation = 0
+    def progress_made(self, position: np.ndarray) -> None:
+        """A normal plan went through: the escalation starts over, once the agent has moved
+        away from where the last recovery began (a plan whose first move never happens is
+        no progress, and the next stall must escalate, not look around again)."""
+        if self._recovery_position is None or np.linalg.norm(
+            np.asarray(position, np.float64) - self._recovery_position
+        ) >= self.config.min_motion_m:
+            self.escalation = 0
 
     def goal_failed(self, goal: np.ndarray) -> None:
         self.failed_goals.append((np.asarray(goal, np.float64).copy(), self.frame))

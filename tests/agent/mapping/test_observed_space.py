@@ -139,3 +139,14 @@ def test_voxels_just_behind_the_measured_surface_are_looked_at(behind_m: float) 
     assert np.all(looks[just_behind] == 1.0)
     assert np.all(looks[(depth > 1.5 + max(behind_m, 0.0)) | (depth > 1.4) & (behind_m < 0)]
                   == 0.0)
+
+
+def test_added_looks_lower_the_frontier_variance_of_those_voxels_only() -> None:
+    space, _ = _floor_room()
+    frontier = np.argwhere(space.frontier())
+    chosen = space.grid.cell_to_world(frontier[:5])
+    space.add_looks(np.vstack([chosen, [[50.0, 50.0, 50.0]]]), 4.0)  # one point outside
+    variance = space.frontier_variance(3.0)
+    assert np.allclose(variance[tuple(frontier[:5].T)], 1.5)  # 3 / (1 + 0.25 * 4)
+    assert np.allclose(variance[tuple(frontier[5:].T)], 3.0)
+    assert space.looks.sum() == pytest.approx(20.0)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import naruto_gym  # noqa: F401  (registers the env)
+from naruto_agent.mapping.observed_space import ObservedSpace
 from naruto_agent.naruto import TRANSITIONS, NarutoPolicy, State, build_config
 from naruto_agent.policies import EnvContext, make_policy, pose_action
 from naruto_gym.geometry.transforms import rotation_angle_between
@@ -141,6 +142,32 @@ def test_settings_and_errors():
     env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=0.1, action_mode="discrete")
     with pytest.raises(ValueError, match="pose"):
         NarutoPolicy().bind(EnvContext.from_env(env))
+
+
+@pytest.mark.parametrize("looks", [4.0, 0.0])
+def test_a_reached_goal_counts_looks_at_every_target_it_was_chosen_for(monkeypatch, looks):
+    """When the agent starts a new plan at the goal of the last one, the targets the goal
+    search saw from that goal get ``unresolved_visit_looks`` looks (none when it is 0)."""
+    calls = []
+    original = ObservedSpace.add_looks
+
+    def spy(self, points, count):
+        calls.append((np.array(points), count))
+        original(self, points, count)
+
+    monkeypatch.setattr(ObservedSpace, "add_looks", spy)
+    run = run_episode(100, unresolved_visit_looks=looks)
+    if looks == 0:
+        assert calls == []
+        return
+    assert calls and all(count == looks for _, count in calls)
+    # A call comes at a planning request made at the last plan's goal (its look-around
+    # excepted): the visited targets lie within the goal search's range of that goal.
+    planned = [plan for plan in run.policy.plans if plan.get("outcome") == "planned"]
+    goals = np.array([plan["goal"] for plan in planned])
+    for points, _ in calls:
+        reach = np.linalg.norm(points[:, None, :] - goals[None, :, :], axis=2)
+        assert np.any(np.all(reach < 2.0, axis=0))
 
 
 @pytest.mark.slow

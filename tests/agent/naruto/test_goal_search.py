@@ -110,6 +110,14 @@ def test_search_picks_the_goal_that_sees_the_most_uncertainty(sdf):
     assert 1 <= len(result.views) <= config.num_views
     assert np.all(np.diff(result.view_uncertainty) <= 0)
     assert visibility(sdf, result.goal[None], result.views, config).all()
+    # Every target each goal sees, the views among them; their uncertainty is the score.
+    for goal, score, seen in zip(result.goals, result.goal_scores, result.goal_visible,
+                                 strict=True):
+        row = visibility(sdf, goal[None], result.targets, config)[0]
+        assert np.array_equal(seen, result.targets[row])
+        assert result.target_uncertainty[row].sum() == pytest.approx(score)
+    assert all(any(np.array_equal(view, point) for point in result.goal_visible[0])
+               for view in result.views)
 
 
 def test_a_target_behind_the_wall_only_counts_from_its_own_side(sdf):
@@ -183,3 +191,34 @@ def test_same_seed_same_result_and_bad_input(sdf):
         GoalSearchConfig(min_range_m=3.0)
     with pytest.raises(ValueError, match="top_k"):
         GoalSearchConfig(top_k=0)
+
+
+def test_explore_first_prefers_the_most_uncertain_tier_then_falls_back(sdf):
+    """Many half-uncertain surfaces near the agent (left room) against a few voxels at the
+    largest uncertainty far away (right room): with a distance discount the published
+    search takes the near ones; explore-first takes the far tier, and all targets again when
+    no allowed goal sees that tier."""
+    near = [((0.02, y, z), 1.5) for y in np.arange(1.0, 3.01, 0.1) for z in (1.0, 1.5, 2.0)]
+    far = [((5.98, y, 1.5), 3.0) for y in (1.8, 2.0, 2.2)]
+    uncertainty = uncertainty_at(sdf, near + far)
+    start = np.array([1.0, 2.0, 1.5])
+    published = GoalSearchConfig(distance_discount_m=3.0)
+    first = GoalSearchConfig(distance_discount_m=3.0, explore_first_share=0.75,
+                             explore_first_min_voxels=3)
+    rng = np.random.default_rng(0)
+    assert uncertainty_aware_goal_search(sdf, uncertainty, start, rng, published).goal[0] < 2.9
+    chosen = uncertainty_aware_goal_search(sdf, uncertainty, start, rng, first)
+    assert chosen.goal[0] > 3.1 and chosen.diagnostics.get("explore_first") == 1.0
+    assert np.all(chosen.target_uncertainty == 3.0)
+    # Too few voxels in the tier: the published search.
+    few = GoalSearchConfig(distance_discount_m=3.0, explore_first_share=0.75,
+                           explore_first_min_voxels=4)
+    assert uncertainty_aware_goal_search(sdf, uncertainty, start, rng, few).goal[0] < 2.9
+    # Goals only in the left room: nothing sees the tier, all targets are searched.
+    left_only = np.zeros(sdf.shape, bool)
+    left_only[: int(2.8 / sdf.voxel_size)] = True
+    fallback = uncertainty_aware_goal_search(sdf, uncertainty, start, rng, first,
+                                             goal_mask=left_only)
+    assert fallback.found and fallback.goal[0] < 2.9 and "explore_first" not in fallback.diagnostics
+    with pytest.raises(ValueError, match="explore_first_share"):
+        GoalSearchConfig(explore_first_share=1.5)

@@ -51,9 +51,23 @@ def test_failed_plans_escalate_through_every_recovery() -> None:
         assert not monitor.needs_recovery()  # the count starts over
     assert kinds == [RecoveryKind.LOOK_AROUND, RecoveryKind.WANDER, RecoveryKind.RETREAT,
                      RecoveryKind.LOOK_AROUND]
-    monitor.progress_made()
+    monitor.progress_made(np.zeros(3))
     monitor.plan_failed()
     monitor.plan_failed()
+    assert monitor.next_recovery() == RecoveryKind.LOOK_AROUND
+
+
+def test_a_plan_that_never_moves_the_agent_does_not_reset_the_escalation() -> None:
+    """Plans found where the agent stands, whose first move never happens, are no
+    progress: the next stall escalates to wander; once it has moved, it starts over."""
+    monitor = ProgressMonitor(RecoveryConfig(window=5, min_motion_m=0.2))
+    here = np.array([1.0, 1.0, 1.0])
+    for _ in range(5):
+        monitor.record(here, 0.1)
+    assert monitor.next_recovery() == RecoveryKind.LOOK_AROUND
+    monitor.progress_made(here + [0.05, 0.0, 0.0])  # a plan, but the agent has not moved
+    assert monitor.next_recovery() == RecoveryKind.WANDER
+    monitor.progress_made(here + [0.5, 0.0, 0.0])
     assert monitor.next_recovery() == RecoveryKind.LOOK_AROUND
 
 
