@@ -146,7 +146,9 @@ class NarutoConfig:
         seed: seed of the agent's randomness when ``reset`` gets none.
         recovery: stall detection and recovery (:class:`RecoveryConfig`).
         goal_search: the goal search's settings (published, except a distance discount of
-            3 m: of two goals that see about as much, the nearer wins).
+            3 m: of two goals that see about as much, the nearer wins; and explore-first
+            with a share of 0.75: while at least 30 voxels are at 3/4 of the largest
+            uncertainty or more, targets are drawn from those).
         planner: E-RRT settings (the time limit, 2 s, is shorter than the planning module's
             default 5 s: a CPU agent should not stall; the seed is redrawn every request).
         tsdf: settings of the TSDF mapper (``mapper="tsdf"``).
@@ -172,7 +174,8 @@ class NarutoConfig:
     seed: int = 0
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     goal_search: GoalSearchConfig = field(
-        default_factory=lambda: GoalSearchConfig(distance_discount_m=3.0)
+        default_factory=lambda: GoalSearchConfig(distance_discount_m=3.0,
+                                                 explore_first_share=0.75)
     )
     planner: PlannerConfig = field(default_factory=lambda: PlannerConfig(time_limit_s=2.0))
     tsdf: TsdfMapperConfig = field(default_factory=TsdfMapperConfig)
