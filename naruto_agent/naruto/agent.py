@@ -36,6 +36,12 @@ Choices of this implementation beyond the published description (all switchable)
   frames have measured is a target at the initial variance, so the agent heads into rooms
   it has not seen. Goals must lie in measured free space (``goals_in_observed_space``), so
   the agent stands where it knows it can stand when it looks into the unknown.
+* Unexplored space first (``goal_search.explore_first_share``): while enough voxels are
+  nearly as uncertain as the most uncertain one, the targets are drawn from them only, so
+  the agent finishes the rooms it has not seen before it polishes surfaces seen once or
+  twice. A goal reached counts as a look at every target it was chosen for
+  (``unresolved_visit_looks``): what is still unresolved after the visit (frontier under
+  furniture) fades instead of calling the agent back.
 * The depth panorama, when the env gives one, adds the free space all around the agent to
   that measure (``use_panorama``).
 * Never stuck (:mod:`naruto_agent.naruto.recovery`): a refused move (``collided`` /
