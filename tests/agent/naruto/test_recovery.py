@@ -195,3 +195,25 @@ def test_on_an_open_scan_goals_stay_inside_the_scanned_space() -> None:
     assert escapes <= 2
     assert info["coverage"] > 0.5
     env.close()
+
+
+def test_escape_from_inside_a_blocked_ball_takes_a_line_the_move_check_accepts() -> None:
+    """The agent stands within its clearance, next to the blocked ball of a move refused a
+    step ahead (+x), with a wall close behind it (-x): the escape ends well inside free
+    space and every node of it passes the agent's own move check (else it is refused at
+    every try and the agent never moves)."""
+    values = np.full((30, 30, 30), 0.5)
+    values[:10] = -0.1  # a wall up to x = 0.95 m
+    values[10] = 0.04  # the voxels at x = 1.0 m: inside the agent's clearance
+    sdf = SdfVolume(values, np.zeros(3), 0.1)
+    agent = np.array([1.02, 1.5, 1.0])
+    blocked = BlockedSpace(radius_m=0.05)
+    blocked.add(agent + [0.1, 0.0, 0.0])
+    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy.sdf = blocked.apply(sdf)
+    start = float(policy.sdf.sample(agent[None])[0])
+    assert start <= policy.config.planner.clearance_m  # trapped, as the agent was
+    path = policy._escape(agent)
+    assert path is not None and np.allclose(path[0], agent)
+    assert policy.sdf.sample(path[-1][None])[0] > policy.config.planner.clearance_m
+    assert all(policy._move_is_free(a, b) for a, b in zip(path[:-1], path[1:], strict=True))
