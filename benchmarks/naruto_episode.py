@@ -332,16 +332,23 @@ def passive_reference(env: gym.Env, policy: NarutoPolicy, args: Args) -> dict:
     }
 
 
+def json_object(text: str, flag: str, what: str) -> dict:
+    """The dict a ``--flag`` holds as JSON ({} when empty), or exit saying what is wrong."""
+    try:
+        value = json.loads(text) if text else {}
+    except json.JSONDecodeError as error:
+        raise SystemExit(f"{flag} must be a JSON object of {what}: {error}") from error
+    if not isinstance(value, dict):
+        raise SystemExit(f"{flag} must be a JSON object, got {text!r}")
+    return value
+
+
 def main(args: Args) -> dict:
     load_start = os.getloadavg()
+    env_kwargs = json_object(args.env_kwargs, "--env-kwargs", "env arguments")
+    settings = json_object(args.settings, "--settings", "NarutoPolicy settings")
     # One step more than the budget, so the env's final-metrics wrapper (which scores on
     # truncation) does not run inside a timed step; the metrics are computed below.
-    try:
-        env_kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
-    except json.JSONDecodeError as error:
-        raise SystemExit(f"--env-kwargs must be a JSON object of env arguments: {error}") from error
-    if not isinstance(env_kwargs, dict):
-        raise SystemExit(f"--env-kwargs must be a JSON object, got {args.env_kwargs!r}")
     env = gym.make(
         "NarutoRecon-v0",
         scene=args.scene,
@@ -353,14 +360,6 @@ def main(args: Args) -> dict:
         **env_kwargs,
     )
     base = env.unwrapped
-    try:
-        settings = json.loads(args.settings) if args.settings else {}
-    except json.JSONDecodeError as error:
-        raise SystemExit(
-            f"--settings must be a JSON object of NarutoPolicy settings: {error}"
-        ) from error
-    if not isinstance(settings, dict):
-        raise SystemExit(f"--settings must be a JSON object, got {args.settings!r}")
     policy = NarutoPolicy(mapper=args.mapper, device=args.device, **settings)
     tag = args.tag or f"{Path(args.scene).stem}_{args.mapper}_{args.steps}steps"
     output_dir = Path(args.output_dir)

@@ -432,6 +432,10 @@ class NarutoPolicy(Policy):
         if not self.config.check_moves_on_map or (plan is not None and plan.info.get("trusted")):
             return True  # a retreat goes back through space the agent has been in
         self._read_view()
+        return self._keeps_clearance(start, end)
+
+    def _keeps_clearance(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """The move check itself, on the current planner view (see :meth:`_move_is_free`)."""
         sample = self.config.planner.collision_sample_m
         count = max(1, math.ceil(float(np.linalg.norm(end - start)) / sample - 1e-9))
         fractions = np.arange(0, count + 1) / count
@@ -441,9 +445,9 @@ class NarutoPolicy(Policy):
 
     def _escape(self, position: np.ndarray) -> np.ndarray | None:
         """Straight nodes (0.1 m apart) to the nearest voxel well inside free space whose
-        straight line the move check accepts (it never gets deeper into the surface than
-        the agent is; a nearer voxel across a blocked point would be refused at every try),
-        or None."""
+        every node the move check accepts (it never gets deeper into the surface than the
+        agent is; a nearer voxel across a blocked point would be refused at every try), or
+        None."""
         sdf = self.sdf
         radius = self.config.escape_radius_m
         if radius <= 0:
@@ -461,21 +465,16 @@ class NarutoPolicy(Policy):
         free = (sdf.values[voxels[:, 0], voxels[:, 1], voxels[:, 2]]
                 > self._clearance + self.config.planner.collision_sample_m)
         candidates = np.flatnonzero(free & (distance <= radius) & (distance > 1e-9))
-        if len(candidates) == 0:
-            return None
-        candidates = candidates[np.lexsort((candidates, distance[candidates]))]
-        targets = points[candidates]
-        sample = self.config.planner.collision_sample_m
-        fractions = np.linspace(0.0, 1.0, max(2, math.ceil(radius / sample) + 1))
-        lines = position + fractions[None, :, None] * (targets - position)[:, None, :]
-        values = sdf.sample(lines.reshape(-1, 3)).reshape(len(targets), -1)
-        threshold = min(self._clearance, float(values[0, 0]) - 1e-3)
-        passable = np.flatnonzero(np.all(values[:, 1:] > threshold, axis=1))
-        if len(passable) == 0:
-            return None
-        target = targets[passable[0]]
-        steps = max(1, math.ceil(float(np.linalg.norm(target - position)) / 0.1 - 1e-9))
-        return position + (np.arange(0, steps + 1) / steps)[:, None] * (target - position)
+        # Nearest first; the first whose nodes all pass the move check (as they will be
+        # checked when the agent moves).
+        for index in candidates[np.lexsort((candidates, distance[candidates]))]:
+            target = points[index]
+            steps = max(1, math.ceil(float(np.linalg.norm(target - position)) / 0.1 - 1e-9))
+            path = position + (np.arange(0, steps + 1) / steps)[:, None] * (target - position)
+            if all(self._keeps_clearance(a, b) for a, b in zip(path[:-1], path[1:],
+                                                                strict=True)):
+                return path
+        return None
 
     def _count_visit(self, position: np.ndarray) -> None:
         """The targets of the plan just finished count as looked at, if its goal was reached
