@@ -321,7 +321,9 @@ def passive_reference(env: gym.Env, policy: NarutoPolicy, args: Args) -> dict:
         mapper.integrate(rgb, depth, pose, index)
     mapping_s = time.perf_counter() - started - render_s
     mapping_cpu_s = time.process_time() - cpu_started - render_cpu_s
-    metrics = base.evaluate(mapper.extract_mesh(0.02), num_samples=args.eval_samples)
+    metrics = base.evaluate(
+        mapper.extract_mesh(0.02), num_samples=args.eval_samples, sdf=mapper.sdf
+    )
     return {
         "frames": len(base.poses),
         "iterations": mapper.stats.iterations,
@@ -429,7 +431,7 @@ def main(args: Args) -> dict:
     clock_mesh = time.perf_counter()
     mesh = policy.mesh()
     mesh_s = time.perf_counter() - clock_mesh
-    own = base.evaluate(mesh, num_samples=args.eval_samples)
+    own = base.evaluate(mesh, num_samples=args.eval_samples, sdf=policy.mapper.sdf)
     evaluation_s = time.perf_counter() - clock - mesh_s
 
     timings = policy.timings
@@ -529,7 +531,7 @@ def main(args: Args) -> dict:
         print(
             f"{name:>17}: accuracy {metrics['accuracy_cm']:.2f} cm, completion "
             f"{metrics['completion_cm']:.2f} cm, completion ratio "
-            f"{metrics['completion_ratio_pct']:.2f} %"
+            f"{metrics['completion_ratio_pct']:.2f} %, MAD {metrics['mad_cm']:.2f} cm"
         )
     print(
         f"path length {record['path_length_m']:.2f} m, env collisions {collisions}, "

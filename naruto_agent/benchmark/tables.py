@@ -16,6 +16,7 @@ COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("Obs. comp. ratio (%)", "metrics.observable_completion_ratio_pct", 1),
     ("Comp. (cm)", "metrics.completion_cm", 2),
     ("Acc. (cm)", "metrics.accuracy_cm", 2),
+    ("MAD (cm)", "metrics.mad_cm", 2),
     ("Path (m)", "path_length_m", 1),
     ("Collisions", "collisions", 1),
     ("Policy ms/step", "time_per_step_ms.policy", 1),
@@ -69,12 +70,10 @@ def summarise(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def markdown_table(rows: list[dict[str, Any]]) -> str:
     """Markdown table of :func:`summarise` rows (mean +- std over seeds)."""
-    header = ["Scene", "Policy", "Seeds", "Steps", *[title for title, _, _ in COLUMNS]]
+    header = ["Scene", "Policy", "Seeds", "Failed", "Steps", *[title for title, _, _ in COLUMNS]]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for row in rows:
-        cells = [row["scene"], row["policy"], str(len(row["seeds"]))]
-        if row["failed"]:
-            cells[2] += f" ({row['failed']} failed)"
+        cells = [row["scene"], row["policy"], str(len(row["seeds"])), str(row["failed"])]
         cells.append("/".join(str(step) for step in row["steps"]) or "-")
         for _, key, decimals in COLUMNS:
             stat = row[key]

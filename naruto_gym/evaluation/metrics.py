@@ -75,6 +75,9 @@ class ReconstructionMetrics:
             (None when no observability mask was given).
         observable_completion_ratio_pct: completion ratio over the observable samples only.
         observable_completion_cm: completion over the observable samples only.
+        mad_cm: mean |SDF| of the reconstruction's SDF at the ground-truth samples, cm
+            (None when no SDF was given; see :func:`mean_absolute_distance_cm`).
+        observable_mad_cm: the same over the observable samples only.
     """
 
     accuracy_cm: float
@@ -93,6 +96,8 @@ class ReconstructionMetrics:
     observable_share_pct: float | None = None
     observable_completion_ratio_pct: float | None = None
     observable_completion_cm: float | None = None
+    mad_cm: float | None = None
+    observable_mad_cm: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """Plain ``dict`` (JSON-serialisable) of every field."""
@@ -201,6 +206,7 @@ def reconstruction_metrics(
     seed: int = 0,
     observable_mask: Callable[[np.ndarray], np.ndarray] | None = None,
     reference_samples_per_m2: float | None = DEFAULT_REFERENCE_SAMPLES_PER_M2,
+    sdf: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> ReconstructionMetrics:
     """Accuracy, completion, completion ratio, precision and F-score of a reconstruction.
 
@@ -222,6 +228,8 @@ def reconstruction_metrics(
         reference_samples_per_m2: least density of a mesh's samples where it is the
             reference (2,000 per m^2); None for ``num_samples`` on every mesh, as the
             published evaluation.
+        sdf: the reconstruction's signed distance function ((N, 3) metres -> (N,) metres);
+            MAD is then reported at the same ground-truth samples as completion.
 
     Returns:
         The :class:`ReconstructionMetrics`.
@@ -246,14 +254,16 @@ def reconstruction_metrics(
     recall = float(np.mean(completion < threshold_m))
     fscore = 0.0 if precision + recall == 0.0 else 2.0 * precision * recall / (precision + recall)
     observable: dict[str, float] = {}
-    if observable_mask is not None:
-        mask = np.asarray(observable_mask(gt_points), dtype=bool)
+    mask = None if observable_mask is None else np.asarray(observable_mask(gt_points), dtype=bool)
+    if mask is not None:
         observable["observable_share_pct"] = float(mask.mean() * 100.0)
         if mask.any():
             observable["observable_completion_ratio_pct"] = float(
                 np.mean(completion[mask] < threshold_m) * 100.0
             )
             observable["observable_completion_cm"] = float(completion[mask].mean() * 100.0)
+    if sdf is not None:
+        observable.update(_mad_fields(sdf, gt_points, mask))
     arrays = _mesh_arrays(reconstruction)
     return ReconstructionMetrics(
         **observable,
@@ -288,6 +298,33 @@ def point_to_mesh_distance(
     return RayCaster(vertices, faces).unsigned_distance(points).astype(np.float64)
 
 
+def _mad_fields(
+    sdf: Callable[[np.ndarray], np.ndarray], gt_points: np.ndarray, mask: np.ndarray | None
+) -> dict[str, float]:
+    """MAD over every ground-truth sample and, with a mask, over the observable ones."""
+    absolute = _sdf_values(sdf, gt_points)
+    fields = {"mad_cm": float(absolute.mean() * 100.0)}
+    if mask is not None and mask.any():
+        fields["observable_mad_cm"] = float(absolute[mask].mean() * 100.0)
+    return fields
+
+
+def _sdf_values(sdf: Callable[[np.ndarray], np.ndarray], points: np.ndarray) -> np.ndarray:
+    """|SDF| at the points, checked for one finite value per point."""
+    values = np.asarray(sdf(points), dtype=np.float64).reshape(-1)
+    if values.shape != (len(points),):
+        raise ValueError(
+            f"the SDF callable must return one value per point ({len(points)}), "
+            f"got {values.shape}"
+        )
+    if not np.isfinite(values).all():
+        raise ValueError(
+            "the SDF callable returned NaN or infinite values; clamp unobserved space "
+            "(e.g. to the truncation distance) before computing MAD"
+        )
+    return np.abs(values)
+
+
 def mean_absolute_distance_cm(
     sdf_or_mesh: Callable[[np.ndarray], np.ndarray] | SurfaceLike,
     gt_points: np.ndarray,
@@ -309,17 +346,7 @@ def mean_absolute_distance_cm(
     """
     gt_points = _check_points(gt_points, "ground-truth points")
     if callable(sdf_or_mesh):
-        values = np.asarray(sdf_or_mesh(gt_points), dtype=np.float64).reshape(-1)
-        if values.shape != (len(gt_points),):
-            raise ValueError(
-                f"the SDF callable must return one value per point ({len(gt_points)}), "
-                f"got {values.shape}"
-            )
-        if not np.isfinite(values).all():
-            raise ValueError(
-                "the SDF callable returned NaN or infinite values; clamp unobserved space "
-                "(e.g. to the truncation distance) before computing MAD"
-            )
+        values = _sdf_values(sdf_or_mesh, gt_points)
     else:
         arrays = _mesh_arrays(sdf_or_mesh)
         if arrays is None:

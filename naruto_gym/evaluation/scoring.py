@@ -67,6 +67,7 @@ def evaluate_reconstruction(
     observable_mask: Callable[[np.ndarray], np.ndarray] | None = None,
     cull_cache: CullingCache | None = None,
     reference_samples_per_m2: float | None = DEFAULT_REFERENCE_SAMPLES_PER_M2,
+    sdf: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> ReconstructionMetrics:
     """Score a reconstructed mesh against the ground-truth scene, culled by the trajectory.
 
@@ -93,6 +94,8 @@ def evaluate_reconstruction(
         reference_samples_per_m2: least sample density of a mesh where nearest distances
             are measured to it (2,000 per m^2; None: ``num_samples``, as published). See
             :mod:`naruto_gym.evaluation.metrics`.
+        sdf: the reconstruction's signed distance function, for MAD (``mad_cm``: mean |SDF|
+            at the ground-truth samples, not culled, as published).
 
     Returns:
         :class:`ReconstructionMetrics`, with ``faces_evaluated`` / ``faces_culled`` filled in.
@@ -142,6 +145,7 @@ def evaluate_reconstruction(
         seed=seed,
         observable_mask=observable_mask,
         reference_samples_per_m2=reference_samples_per_m2,
+        sdf=sdf,
     )
     return ReconstructionMetrics(
         **{**metrics.as_dict(), "faces_evaluated": len(faces), "faces_culled": culled, "note": note}
@@ -226,7 +230,9 @@ class EpisodeReconstruction:
         """Metrics of the fused reconstruction, as a flat dict for an env's ``info``.
 
         Keys: ``accuracy_cm``, ``completion_cm``, ``completion_ratio_pct``, ``precision_pct``,
-        ``fscore_pct``, ``threshold_m``, sample and face counts, ``note``, plus
+        ``fscore_pct``, ``threshold_m``, sample and face counts, ``note``, ``mad_cm`` (mean
+        |SDF| of the fused map at the ground-truth samples; unobserved space reads as the
+        truncation distance), the ``observable_*`` scores with a mask, plus
         ``trajectory_length_m`` and ``num_frames``. When nothing could be reconstructed (no
         valid depth yet) the metric values are ``None`` and ``note`` says why, rather than
         NaN or an exception in the middle of an episode.
@@ -241,6 +247,7 @@ class EpisodeReconstruction:
                     "completion_ratio_pct",
                     "precision_pct",
                     "fscore_pct",
+                    "mad_cm",
                 ),
             )
             return {**empty, **base, "note": "empty reconstruction: no valid depth was fused"}
@@ -258,5 +265,6 @@ class EpisodeReconstruction:
             observable_mask=observable_mask,
             cull_cache=self._cull_cache,
             reference_samples_per_m2=reference_samples_per_m2,
+            sdf=self.mapper.sdf,
         )
         return {**metrics.as_dict(), **base}

@@ -158,6 +158,26 @@ def test_mad_of_an_analytic_plane_sdf():
         mean_absolute_distance_cm(plane_sdf, np.zeros((0, 3)))
 
 
+def test_metrics_report_mad_of_an_sdf_at_their_ground_truth_samples():
+    truth = union(square(), square(offset=(2.0, 0.0, 0.0)))
+
+    def sdf(points: np.ndarray) -> np.ndarray:
+        # 1 cm off over the first square, 5 cm off over the second
+        return points[:, 2] - np.where(points[:, 0] < 1.5, 0.01, 0.05)
+
+    def first_square_only(points: np.ndarray) -> np.ndarray:
+        return points[:, 0] < 1.5
+
+    metrics = reconstruction_metrics(
+        truth, truth, num_samples=20_000, seed=1, sdf=sdf, observable_mask=first_square_only
+    )
+    assert metrics.mad_cm == pytest.approx(3.0, abs=0.1)  # equal areas: the mean of 1 and 5
+    assert metrics.observable_mad_cm == pytest.approx(1.0, abs=1e-9)
+    assert reconstruction_metrics(truth, truth, num_samples=1000).mad_cm is None
+    with pytest.raises(ValueError, match="NaN"):
+        reconstruction_metrics(truth, truth, num_samples=1000, sdf=lambda p: p[:, 0] * np.nan)
+
+
 def test_mad_and_point_to_mesh_distance_of_a_plain_mesh():
     gt_points = sample_mesh_surface(*square(), 10_000, seed=2)
     # Exact distance: the shifted plane is 3 cm away, and a plane larger than the truth so

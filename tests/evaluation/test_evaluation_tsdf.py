@@ -176,6 +176,9 @@ def test_episode_reconstruction_scores_any_trajectory(room):
     assert result["trajectory_length_m"] == 0.0  # all views from one spot
     assert result["completion_ratio_pct"] > 90.0
     assert result["accuracy_cm"] < 3.0
+    # MAD of the fused SDF: small on what was seen, the truncation where nothing was
+    assert 0.0 < result["mad_cm"] < 100.0 * episode.mapper.truncation_m
+    assert empty["mad_cm"] is None
     episode.reset()
     assert episode.poses.shape == (0, 4, 4) and episode.evaluate(room)["num_frames"] == 0
 

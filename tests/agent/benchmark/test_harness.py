@@ -101,7 +101,7 @@ def _fake_record(policy: str, seed: int, coverage: float, status: str = "ok") ->
             {"step": 2, "completion_ratio_pct": 10.0 * coverage},
             {"step": 4, "completion_ratio_pct": 20.0 * coverage},
         ],
-        "metrics": {"completion_ratio_pct": 50.0 + seed, "accuracy_cm": 1.0},
+        "metrics": {"completion_ratio_pct": 50.0 + seed, "accuracy_cm": 1.0, "mad_cm": 2.0 + seed},
         "path_length_m": 1.0,
         "collisions": seed,
         "time_per_step_ms": {"policy": 1.0, "env": 2.0, "mapping": 3.0},
@@ -119,8 +119,10 @@ def test_summary_table_and_curve_plot(tmp_path):
     row_b = next(row for row in rows if row["policy"] == "b")
     assert row_b["failed"] == 1 and row_b["seeds"] == [0]
     table = markdown_table(rows)
-    assert "30.0 ± 10.0" in table and "(1 failed)" in table
-    assert table.count("\n") == 4  # header, rule, two rows
+    assert "30.0 ± 10.0" in table and "MAD (cm)" in table and "3.00 ± 1.00" in table
+    header, _, line_a, line_b = table.strip().split("\n")
+    failed_column = header.split(" | ").index("Failed")
+    assert line_a.split(" | ")[failed_column] == "0" and line_b.split(" | ")[failed_column] == "1"
     path = plot_curves(records, tmp_path / "curves.png")
     assert path is not None and path.stat().st_size > 1000
 
