@@ -1,0 +1,198 @@
+"""The comparison at the published budgets in one report: the paper's Tables 1, 2 and 6, our data.
+
+Reads the ``naruto-benchmark`` records of the three runs at the published budgets (the Replica
+sample and ``replica_like_room`` at 2000 steps, the apartment at 5000, the MP3D budget) and the
+neural NARUTO episodes of ``benchmarks/naruto_episode.py``, and writes one Markdown report with,
+per scene: every policy's mean +- std over seeds (coverage, completion ratio of the whole and of
+the observable surface, accuracy, completion, MAD of the reference TSDF map, path, refused
+moves, failed episodes, time per step by phase), the published references beside them, and
+which policy has the best completion ratio. It runs no episode; the commands that make the
+records are in the README ("At the published budgets").
+
+Example::
+
+    python benchmarks/published_budgets.py --out benchmarks/results/published_budgets.md
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from naruto_agent.benchmark.records import load_records, write_json_atomic
+from naruto_agent.benchmark.tables import summarise
+from naruto_gym.cli_args import dataclass_parser
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+# (column title, summary key, decimals)
+COLUMNS: tuple[tuple[str, str, int], ...] = (
+    ("coverage (%)", "coverage_pct", 1),
+    ("comp. ratio (%)", "metrics.completion_ratio_pct", 1),
+    ("obs. comp. ratio (%)", "metrics.observable_completion_ratio_pct", 1),
+    ("acc. (cm)", "metrics.accuracy_cm", 2),
+    ("comp. (cm)", "metrics.completion_cm", 2),
+    ("MAD (cm)", "metrics.mad_cm", 2),
+    ("path (m)", "path_length_m", 1),
+    ("collisions", "collisions", 1),
+)
+PHASES = ("policy", "env", "mapping")
+
+# Published figures (NARUTO, CVPR 2024, and later systems on its protocol), per scene label:
+# (row name, completion ratio %, accuracy cm, completion cm, MAD cm), as printed there.
+PUBLISHED: dict[str, list[tuple[str, str, str, str, str]]] = {
+    "replica_office0": [
+        ("published NARUTO (neural, mean of 8 Replica scenes)", "97.20", "1.61", "1.66", "-"),
+        ("published passive scan (Co-SLAM without tracking)", "93.79", "1.96", "2.00", "-"),
+        ("published NARUTO without active ray sampling", "96.89", "-", "-", "-"),
+    ],
+    "apartment": [
+        ("published NARUTO (5 MP3D scenes, 5000 steps)", "90.18", "6.31", "3.00", "1.44"),
+        ("published ANM (the best before it)", "73.15", "7.80", "9.11", "4.29"),
+        ("published frontier exploration", "71.18", "-", "-", "-"),
+        ("later systems on MP3D", "95-97", "-", "-", "-"),
+    ],
+}
+
+
+@dataclass
+class Args:
+    """Arguments of the report (each field is a ``--flag``)."""
+
+    runs: list[str] = field(
+        default_factory=lambda: [
+            str(RESULTS / "replica_2000"),
+            str(RESULTS / "replica_like_room_2000"),
+            str(RESULTS / "apartment_5000"),
+        ]
+    )
+    """harness output folders (one scene each)"""
+    neural_episodes: list[str] = field(
+        default_factory=lambda: [
+            str(RESULTS / "naruto_neural_office0"
+                / "naruto_episode_office0_neural_2000steps_raster_sim.json"),
+            str(RESULTS / "naruto_neural_office0"
+                / "naruto_episode_office0_neural_2000steps_no_active_sampling.json"),
+        ]
+    )
+    """naruto_episode.py records of the neural agent on the Replica sample"""
+    out: str = str(RESULTS / "published_budgets.md")
+    """the Markdown report (a JSON of the same rows is written beside it)"""
+
+
+def _cell(stat: dict[str, float] | None, decimals: int) -> str:
+    if stat is None:
+        return "-"
+    if stat["n"] == 1:
+        return f"{stat['mean']:.{decimals}f}"
+    return f"{stat['mean']:.{decimals}f} ± {stat['std']:.{decimals}f}"
+
+
+def _number(value: float | None, decimals: int) -> str:
+    return "-" if value is None else f"{value:.{decimals}f}"
+
+
+def best_policy(rows: list[dict[str, Any]], key: str) -> tuple[str, float] | None:
+    """The policy with the highest mean of ``key`` among ``rows`` (None if none has it)."""
+    scored = [(row[key]["mean"], row["policy"]) for row in rows if row.get(key)]
+    if not scored:
+        return None
+    mean, policy = max(scored)
+    return policy, mean
+
+
+def neural_rows(paths: list[str], scene: str) -> list[list[str]]:
+    """Table rows of the neural episodes on ``scene``: reference map / the agent's own mesh."""
+    rows = []
+    for path in paths:
+        if not Path(path).is_file():
+            continue
+        record = json.loads(Path(path).read_text())
+        if Path(record["args"]["scene"]).parent.name != scene:
+            continue
+        maps = (record["reference_tsdf_metrics"], record["agent_mesh_metrics"])
+
+        def both(key: str, decimals: int, maps: tuple[dict, dict] = maps) -> str:
+            return " / ".join(_number(metrics.get(key), decimals) for metrics in maps)
+
+        settings = record["args"].get("settings") or ""
+        label = "NARUTO (neural, seed 0): reference map / own mesh"
+        if "active_sampling" in settings:
+            label += ", without active ray sampling"
+        phases = record.get("phases_ms_per_step", {})
+        rows.append([
+            label, "1", "0",
+            _number(100.0 * record["coverage_final"], 1),
+            both("completion_ratio_pct", 2),
+            both("observable_completion_ratio_pct", 2),
+            both("accuracy_cm", 2),
+            both("completion_cm", 2),
+            both("mad_cm", 2),
+            _number(record["path_length_m"], 1),
+            str(record["collisions"]),
+            " / ".join(_number(phases.get(name), 0) for name in ("simulation", "mapping"))
+            + " (sim. / mapping)",
+        ])
+    return rows
+
+
+def scene_report(run_dir: Path, neural: list[str]) -> tuple[str, dict[str, Any]]:
+    """The Markdown section and the JSON summary of one harness run."""
+    records = load_records(run_dir)
+    if not records:
+        raise FileNotFoundError(
+            f"no episode records under {run_dir}/records; run naruto-benchmark there first"
+        )
+    rows = summarise(records)
+    scene = rows[0]["scene"]
+    steps = sorted({step for row in rows for step in row["steps"]})
+    header = ["policy", "episodes", "failed", *[title for title, _, _ in COLUMNS],
+              "policy / env / map ms per step"]
+    lines = [f"### {scene}, {'/'.join(map(str, steps))} steps (`{run_dir.name}`)", "",
+             "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for row in rows:
+        timing = " / ".join(
+            _cell(row.get(f"time_per_step_ms.{phase}"), 0) for phase in PHASES
+        )
+        cells = [row["policy"], str(len(row["seeds"])), str(row["failed"]),
+                 *[_cell(row[key], decimals) for _, key, decimals in COLUMNS], timing]
+        lines.append("| " + " | ".join(cells) + " |")
+    for cells in neural_rows(neural, scene):
+        lines.append("| " + " | ".join(cells) + " |")
+    for name, ratio, accuracy, completion, mad in PUBLISHED.get(scene, []):
+        cells = [name, "", "", "", ratio, "", accuracy, completion, mad, "", "", ""]
+        lines.append("| " + " | ".join(cells) + " |")
+    verdict = {}
+    for title, key in (("whole surface", "metrics.completion_ratio_pct"),
+                       ("observable surface", "metrics.observable_completion_ratio_pct")):
+        best = best_policy(rows, key)
+        if best is not None:
+            verdict[key] = {"policy": best[0], "mean": best[1]}
+            lines.append("")
+            lines.append(f"Best completion ratio of the {title}: **{best[0]}** ({best[1]:.2f} %).")
+    return "\n".join(lines) + "\n", {"scene": scene, "rows": rows, "best": verdict}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = dataclass_parser(Args, description=__doc__.split("\n\n")[0])
+    args = Args(**vars(parser.parse_args(argv)))
+    sections, summaries = [], []
+    for run in args.runs:
+        section, summary = scene_report(Path(run), args.neural_episodes)
+        sections.append(section)
+        summaries.append(summary)
+    report = "## The comparison at the published budgets\n\n" + "\n".join(sections)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(report)
+    write_json_atomic(out.with_suffix(".json"), {"scenes": summaries})
+    print(report)
+    print(f"written {out} and {out.with_suffix('.json')}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,61 @@
+"""The published-budgets report: aggregation of harness records, references, the best policy."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+from naruto_agent.benchmark import write_json_atomic
+
+SCRIPT = Path(__file__).resolve().parents[3] / "benchmarks" / "published_budgets.py"
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("published_budgets", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
+def _record(policy: str, seed: int, ratio: float, status: str = "ok") -> dict:
+    return {
+        "episode_id": f"apartment/{policy}/seed{seed}",
+        "status": status,
+        "scene": "apartment",
+        "policy": policy,
+        "seed": seed,
+        "steps_run": 5000,
+        "coverage_final": ratio / 100.0,
+        "metrics": {
+            "completion_ratio_pct": ratio / 2.0,
+            "observable_completion_ratio_pct": ratio,
+            "accuracy_cm": 1.3,
+            "completion_cm": 6.0,
+            "mad_cm": 2.0 + seed,
+        },
+        "path_length_m": 100.0,
+        "collisions": 2,
+        "time_per_step_ms": {"policy": 10.0, "env": 20.0, "mapping": 30.0},
+    }
+
+
+def test_report_has_every_policy_the_published_rows_and_the_best_policy(tmp_path):
+    module = _script()
+    records = [_record("naruto", seed, 97.0 + seed) for seed in range(3)]
+    records += [_record("frontier", seed, 96.0 + seed) for seed in range(2)]
+    records.append({**_record("frontier", 2, 0.0), "status": "failed", "error": "boom"})
+    for record in records:
+        write_json_atomic(tmp_path / "records" / f"{record['episode_id']}.json", record)
+    section, summary = module.scene_report(tmp_path, neural=[])
+    assert summary["best"]["metrics.observable_completion_ratio_pct"] == {
+        "policy": "naruto", "mean": pytest.approx(98.0)}
+    lines = {line.split(" | ")[0].strip("| "): line for line in section.splitlines()}
+    assert "| 3 | 0 |" in lines["naruto"] and "| 2 | 1 |" in lines["frontier"]
+    assert "3.00 ± 1.00" in lines["naruto"]  # MAD, mean ± std over seeds
+    assert "1.44" in lines["published NARUTO (5 MP3D scenes, 5000 steps)"]
+    with pytest.raises(FileNotFoundError, match="naruto-benchmark"):
+        module.scene_report(tmp_path / "empty", neural=[])
