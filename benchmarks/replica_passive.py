@@ -10,6 +10,11 @@ fuses it at 2 cm. The result is set beside the published passive figure for this
     python benchmarks/replica_passive.py                       # the reported full run
     python benchmarks/replica_passive.py --stride 10 --scale 0.5   # quick look
 
+``--trajectory`` replays another pose file of the same layout (one flattened 4 x 4
+camera-to-world matrix per line), e.g. the ``*_poses.txt`` that ``naruto_episode.py`` writes:
+the reference map of an active episode, rebuilt and scored (MAD included) without running
+its agent again.
+
 Writes ``benchmarks/results/replica_passive.json`` and prints a Markdown table.
 """
 
@@ -29,7 +34,6 @@ from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.evaluation import (
     EpisodeReconstruction,
     cull_mesh,
-    mean_absolute_distance_cm,
     reconstruction_metrics,
     sample_mesh_surface,
     trajectory_length,
@@ -58,6 +62,8 @@ class Args:
     truncation_m: float = 0.08
     num_samples: int = 200_000
     seed: int = 0
+    trajectory: str = ""  # pose file to replay (default: the scan's traj.txt)
+    pinhole_backend: str = "raycast"  # the env's pinhole_backend ("auto": raster where cheaper)
     out: str = "benchmarks/results/replica_passive.json"
     mesh_out: str = ""  # also save the fused mesh here (PLY), e.g. /tmp/office0_tsdf.ply
 
@@ -75,7 +81,10 @@ def main() -> None:
     args = parse_args()
     if not REPLICA.is_dir():
         raise SystemExit(f"{REPLICA} not found: this benchmark needs ../shared/scenes")
-    poses = np.loadtxt(REPLICA / "traj.txt").reshape(-1, 4, 4)[:: args.stride]
+    trajectory = Path(args.trajectory) if args.trajectory else REPLICA / "traj.txt"
+    if not trajectory.is_file():
+        raise SystemExit(f"{trajectory} not found: pass a pose file (16 numbers per line)")
+    poses = np.loadtxt(trajectory).reshape(-1, 4, 4)[:: args.stride]
     # A strided replay takes longer steps: widen the step limits so the poses are reached.
     limits = {} if args.stride == 1 else {"max_translation_m": 1.0, "max_rotation_deg": 180.0}
     env = gym.make(
@@ -85,6 +94,7 @@ def main() -> None:
         image_scale=args.scale,
         panorama_shape=None,  # not needed for a replay; saves a render per step
         reconstruct=True,
+        pinhole_backend=args.pinhole_backend,
         **limits,
     )
     unwrapped = env.unwrapped
@@ -117,7 +127,7 @@ def main() -> None:
     # The floor of the protocol: the ground truth scored against itself (sampling density).
     floor = reconstruction_metrics(scene, scene, num_samples=args.num_samples, seed=args.seed)
     gt_points = sample_mesh_surface(scene.vertices, scene.faces, args.num_samples, args.seed)
-    mad_cm = mean_absolute_distance_cm(unwrapped.reconstruction.mapper.sdf, gt_points)
+    mad_cm = metrics["mad_cm"]  # the fused SDF at the completion's ground-truth samples
     # How much of the ground truth could this trajectory see at all (frustum + occlusion, the
     # culling rule applied to ground-truth samples), and the completion on that part alone.
     replayed = unwrapped.poses
@@ -131,6 +141,7 @@ def main() -> None:
 
     report = {
         "args": asdict(args),
+        "trajectory_file": trajectory.name,
         "frames": int(unwrapped.reconstruction.mapper.num_frames),
         "image": f"{unwrapped.camera.height} x {unwrapped.camera.width}",
         "poses_not_reached": off_target,
@@ -159,8 +170,8 @@ def main() -> None:
     print(f"\nframes fused {report['frames']} at {report['image']}, poses not reached {off_target}")
     print(f"replay {replay_s:.0f} s, culling + metrics {evaluate_s:.1f} s")
     print(
-        f"\n| Replica office0, passive scan ({report['frames']} frames) | mapper | Acc. (cm) "
-        "| Comp. (cm) | Comp. ratio (%) | Traj. (m) |"
+        f"\n| Replica office0, {report['trajectory_file']} ({report['frames']} frames) | mapper "
+        "| Acc. (cm) | Comp. (cm) | Comp. ratio (%) | Traj. (m) |"
     )
     print("|---|---|---|---|---|---|")
     print(
