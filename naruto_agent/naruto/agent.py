@@ -371,7 +371,15 @@ class NarutoPolicy(Policy):
             return
         if np.linalg.norm(self._commanded - position) <= self.config.arrival_tolerance_m:
             return
-        self.blocked.add(self._commanded)
+        radius = self.config.recovery.escape_blocked_radius_m
+        direction = self._commanded - position
+        if info.get("collision_reason") == "escape" and radius > 0:
+            # The scan ends at the refused point: block the space beyond it, in a ball that
+            # touches the refused point and leaves the agent's side alone.
+            self.blocked.add(self._commanded + radius * direction / np.linalg.norm(direction),
+                             radius)
+        else:
+            self.blocked.add(self._commanded)
         if self.sdf is not None:
             self.sdf = self.blocked.apply(self.sdf)
             self._components = None

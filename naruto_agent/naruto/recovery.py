@@ -42,6 +42,12 @@ class RecoveryConfig:
         failed_goal_radius_m: candidate goals this close to a goal that failed are skipped.
         failed_goal_memory_frames: ... for this many frames.
         blocked_radius_m: a refused move blocks the agent's map this far around its target.
+        escape_blocked_radius_m: when the env refused the move for leaving the scanned
+            space (``collision_reason`` "escape", open scans only), the refused point lies
+            in an opening (a window, a floor hole, a wall's missing edge) that the scan ends
+            behind: the agent then blocks a ball of this radius beyond the refused point
+            (touching it, on the far side from the agent), the space behind the opening
+            rather than 5 cm of it per refusal (0.5 m: half a 1 m window; 0: as a surface).
         look_around_views: headings of the turn in place.
         look_around_pitch_deg: the look-around alternates looking this much up and down.
         wander_max_m: the farthest a move to reachable space goes (straight-line distance).
@@ -55,6 +61,7 @@ class RecoveryConfig:
     failed_goal_radius_m: float = 0.3
     failed_goal_memory_frames: int = 300
     blocked_radius_m: float = 0.05
+    escape_blocked_radius_m: float = 0.5
     look_around_views: int = 8
     look_around_pitch_deg: float = 25.0
     wander_max_m: float = 3.0
@@ -66,8 +73,10 @@ class RecoveryConfig:
         for name in ("min_motion_m", "failed_goal_radius_m", "wander_max_m", "retreat_m"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"RecoveryConfig.{name} must be positive")
-        if self.min_observed_gain < 0 or self.blocked_radius_m < 0:
-            raise ValueError("min_observed_gain and blocked_radius_m must be >= 0")
+        if min(self.min_observed_gain, self.blocked_radius_m, self.escape_blocked_radius_m) < 0:
+            raise ValueError(
+                "min_observed_gain, blocked_radius_m and escape_blocked_radius_m must be >= 0"
+            )
 
 
 class RecoveryKind(str, Enum):
@@ -201,21 +210,24 @@ class BlockedSpace:
     def __init__(self, radius_m: float = 0.05) -> None:
         self.radius_m = float(radius_m)
         self.points: list[np.ndarray] = []
+        self.radii: list[float] = []
 
-    def add(self, point: np.ndarray) -> None:
+    def add(self, point: np.ndarray, radius_m: float | None = None) -> None:
+        """Block ``point``, ``radius_m`` around it (default: the space's ``radius_m``)."""
         self.points.append(np.asarray(point, np.float64).copy())
+        self.radii.append(self.radius_m if radius_m is None else float(radius_m))
 
     def apply(self, sdf: SdfVolume) -> SdfVolume:
-        """The SDF with every voxel within ``radius_m`` + half a voxel of a blocked point set
-        to at most minus one voxel (an obstacle the planner keeps its clearance from)."""
+        """The SDF with every voxel within a point's radius + half a voxel of it set to at
+        most minus one voxel (an obstacle the planner keeps its clearance from)."""
         if not self.points:
             return sdf
         values = sdf.values.copy()
-        reach = self.radius_m + 0.5 * sdf.voxel_size
-        span = math.ceil(reach / sdf.voxel_size)
-        axis = np.arange(-span, span + 1)
-        block = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
-        for point in self.points:
+        for point, radius in zip(self.points, self.radii, strict=True):
+            reach = radius + 0.5 * sdf.voxel_size
+            span = math.ceil(reach / sdf.voxel_size)
+            axis = np.arange(-span, span + 1)
+            block = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
             centre = np.rint(sdf.world_to_voxel(point)).astype(np.int64)
             voxels = centre + block
             inside = np.all((voxels >= 0) & (voxels < np.asarray(sdf.shape)), axis=1)

@@ -111,7 +111,8 @@ def test_blocked_points_read_as_obstacles() -> None:
     assert np.all(sdf.values == 0.5)  # the input is left alone
 
 
-def test_a_refused_move_blocks_its_target_and_is_not_repeated() -> None:
+def _first_move(reason: str):
+    """An agent on two_rooms, its first move, and the agent after the env refused it."""
     env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1,
                    max_episode_steps=1000)
     policy = NarutoPolicy(mapper="tsdf", device="cpu")
@@ -124,17 +125,38 @@ def test_a_refused_move_blocks_its_target_and_is_not_repeated() -> None:
         if np.linalg.norm(action[:3] - position) > 1e-3:
             break
     target = action[:3].astype(np.float64)
-    # Tell the agent the env refused that move (as an "escape" refusal would).
-    refused = {**info, "collided": True, "collision_reason": "escape"}
-    policy.act(observation, refused)
+    # Tell the agent the env refused that move.
+    policy.act(observation, {**info, "collided": True, "collision_reason": reason})
+    env.close()
+    return policy, observation, info, position, target
+
+
+def test_a_refused_move_blocks_its_target_and_is_not_repeated() -> None:
+    policy, observation, info, _, target = _first_move("surface")
     assert len(policy.blocked.points) == 1
     assert np.allclose(policy.blocked.points[0], target, atol=1e-5)
+    assert policy.blocked.radii == [policy.config.recovery.blocked_radius_m]
     assert policy.sdf.sample(target[None])[0] < 0
     # No later action moves to the refused target again.
     for _ in range(40):
         action = policy.act(observation, info)
         assert np.linalg.norm(action[:3] - target) > 0.02
-    env.close()
+
+
+def test_an_escape_refusal_blocks_the_space_beyond_the_refused_point() -> None:
+    policy, observation, info, position, target = _first_move("escape")
+    radius = policy.config.recovery.escape_blocked_radius_m
+    direction = (target - position) / np.linalg.norm(target - position)
+    assert np.allclose(policy.blocked.points[0], target + radius * direction, atol=1e-5)
+    assert policy.blocked.radii == [radius]
+    beyond = target + direction * np.array([[0.2], [0.5], [0.8]])
+    assert np.all(policy.sdf.sample(beyond) < 0)
+    # The agent's own side stays as its map had it: it is not walled in.
+    behind = position - 0.2 * direction
+    assert policy.sdf.sample(behind[None])[0] > 0
+    for _ in range(40):
+        action = policy.act(observation, info)
+        assert np.linalg.norm(action[:3] - target) > 0.02
 
 
 def _scenes() -> list:
