@@ -79,6 +79,15 @@ class Args:
         ]
     )
     """naruto_episode.py records of the neural agent on the Replica sample"""
+    neural_replays: list[str] = field(
+        default_factory=lambda: [
+            str(RESULTS / "naruto_neural_office0" / "reference_map_replayed_raster_sim.json"),
+            str(RESULTS / "naruto_neural_office0"
+                / "reference_map_replayed_no_active_sampling.json"),
+        ]
+    )
+    """replica_passive.py --trajectory replays of those episodes' poses, in the same order:
+    the MAD of their reference maps (episodes recorded before MAD was scored)"""
     out: str = str(RESULTS / "published_budgets.md")
     """the Markdown report (a JSON of the same rows is written beside it)"""
 
@@ -104,16 +113,24 @@ def best_policy(rows: list[dict[str, Any]], key: str) -> tuple[str, float] | Non
     return policy, mean
 
 
-def neural_rows(paths: list[str], scene: str) -> list[list[str]]:
-    """Table rows of the neural episodes on ``scene``: reference map / the agent's own mesh."""
+def neural_rows(paths: list[str], replays: list[str], scene: str) -> list[list[str]]:
+    """Table rows of the neural episodes on ``scene``: reference map / the agent's own mesh.
+
+    ``replays`` (same order as ``paths``, may be shorter) are replays of the episodes' poses
+    whose reference-map MAD fills in for episodes recorded without one.
+    """
     rows = []
-    for path in paths:
+    for index, path in enumerate(paths):
         if not Path(path).is_file():
             continue
         record = json.loads(Path(path).read_text())
         if Path(record["args"]["scene"]).parent.name != scene:
             continue
-        maps = (record["reference_tsdf_metrics"], record["agent_mesh_metrics"])
+        reference = dict(record["reference_tsdf_metrics"])
+        replay = Path(replays[index]) if index < len(replays) else None
+        if reference.get("mad_cm") is None and replay is not None and replay.is_file():
+            reference["mad_cm"] = json.loads(replay.read_text())["metrics_culled"]["mad_cm"]
+        maps = (reference, record["agent_mesh_metrics"])
 
         def both(key: str, decimals: int, maps: tuple[dict, dict] = maps) -> str:
             return " / ".join(_number(metrics.get(key), decimals) for metrics in maps)
@@ -139,7 +156,9 @@ def neural_rows(paths: list[str], scene: str) -> list[list[str]]:
     return rows
 
 
-def scene_report(run_dir: Path, neural: list[str]) -> tuple[str, dict[str, Any]]:
+def scene_report(
+    run_dir: Path, neural: list[str], replays: tuple[str, ...] | list[str] = ()
+) -> tuple[str, dict[str, Any]]:
     """The Markdown section and the JSON summary of one harness run."""
     records = load_records(run_dir)
     if not records:
@@ -160,7 +179,7 @@ def scene_report(run_dir: Path, neural: list[str]) -> tuple[str, dict[str, Any]]
         cells = [row["policy"], str(len(row["seeds"])), str(row["failed"]),
                  *[_cell(row[key], decimals) for _, key, decimals in COLUMNS], timing]
         lines.append("| " + " | ".join(cells) + " |")
-    for cells in neural_rows(neural, scene):
+    for cells in neural_rows(neural, list(replays), scene):
         lines.append("| " + " | ".join(cells) + " |")
     for name, ratio, accuracy, completion, mad in PUBLISHED.get(scene, []):
         cells = [name, "", "", "", ratio, "", accuracy, completion, mad, "", "", ""]
@@ -181,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     args = Args(**vars(parser.parse_args(argv)))
     sections, summaries = [], []
     for run in args.runs:
-        section, summary = scene_report(Path(run), args.neural_episodes)
+        section, summary = scene_report(Path(run), args.neural_episodes, args.neural_replays)
         sections.append(section)
         summaries.append(summary)
     report = "## The comparison at the published budgets\n\n" + "\n".join(sections)
