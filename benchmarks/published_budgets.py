@@ -4,10 +4,11 @@ Reads the ``naruto-benchmark`` records of the three runs at the published budget
 sample and ``replica_like_room`` at 2000 steps, the apartment at 5000, the MP3D budget) and the
 neural NARUTO episodes of ``benchmarks/naruto_episode.py``, and writes one Markdown report with,
 per scene: every policy's mean +- std over seeds (coverage, completion ratio of the whole and of
-the observable surface, accuracy, completion, MAD of the reference TSDF map, path, refused
-moves, failed episodes, time per step by phase), the published references beside them, and
-which policy has the best completion ratio. It runs no episode; the commands that make the
-records are in the README ("At the published budgets").
+the observable surface, accuracy, completion, MAD of the reference TSDF map, the policy's own
+map where it has one, path, collisions, failed episodes, time per step by phase), the
+published references beside them, and which policy has the best completion ratio. It runs
+no episode; the commands that make the records are in the README ("At the published
+budgets").
 
 Example::
 
@@ -36,6 +37,8 @@ COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("acc. (cm)", "metrics.accuracy_cm", 2),
     ("comp. (cm)", "metrics.completion_cm", 2),
     ("MAD (cm)", "metrics.mad_cm", 2),
+    ("own map: obs. comp. ratio (%)", "own_map_metrics.observable_completion_ratio_pct", 1),
+    ("own map: MAD (cm)", "own_map_metrics.mad_cm", 2),
     ("path (m)", "path_length_m", 1),
     ("collisions", "collisions", 1),
 )
@@ -148,6 +151,8 @@ def neural_rows(paths: list[str], replays: list[str], scene: str) -> list[list[s
             both("accuracy_cm", 2),
             both("completion_cm", 2),
             both("mad_cm", 2),
+            _number(maps[1].get("observable_completion_ratio_pct"), 1),
+            _number(maps[1].get("mad_cm"), 2),
             _number(record["path_length_m"], 1),
             str(record["collisions"]),
             " / ".join(_number(phases.get(name), 0) for name in ("simulation", "mapping"))
@@ -182,7 +187,7 @@ def scene_report(
     for cells in neural_rows(neural, list(replays), scene):
         lines.append("| " + " | ".join(cells) + " |")
     for name, ratio, accuracy, completion, mad in PUBLISHED.get(scene, []):
-        cells = [name, "", "", "", ratio, "", accuracy, completion, mad, "", "", ""]
+        cells = [name, "", "", "", ratio, "", accuracy, completion, mad, "", "", "", "", ""]
         lines.append("| " + " | ".join(cells) + " |")
     verdict = {}
     for title, key in (("whole surface", "metrics.completion_ratio_pct"),

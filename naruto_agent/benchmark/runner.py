@@ -135,9 +135,11 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
                 break
 
         metrics: dict[str, Any] = {}
+        own_metrics: dict[str, Any] | None = None
         if reconstruction is not None:
             clock = time.perf_counter()
             metrics = _score(reconstruction, base, spec.eval_samples, spec.eval_samples_per_m2)
+            own_metrics = _score_own_map(policy, base, spec)
             evaluation_s += time.perf_counter() - clock
             completion_curve.append({"step": steps_run, **_curve_point(metrics)})
         per_step = max(steps_run, 1)
@@ -154,6 +156,7 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
             "action_mode": policy.preferred_action_mode,
             "camera": base.camera.as_dict(),
             "metrics": metrics,
+            "own_map_metrics": own_metrics,
             "coverage_final": coverage[-1],
             "coverage_curve": np.round(coverage, 5).tolist(),
             "completion_curve": completion_curve,
@@ -184,6 +187,21 @@ def _score(
         reference_samples_per_m2=samples_per_m2 or None,
         renderer=env.renderer,
         observable_mask=env.observable_surface.mask,
+    )
+
+
+def _score_own_map(policy: Any, env: Any, spec: EpisodeSpec) -> dict[str, Any] | None:
+    """Metrics of the policy's own map (MAD with its SDF), None for a policy without one."""
+    own = policy.reconstruction()
+    if own is None:
+        return None
+    if len(own.mesh.faces) == 0:
+        return {"note": "the policy's own map has no surface"}
+    return env.evaluate(
+        own.mesh,
+        num_samples=spec.eval_samples,
+        reference_samples_per_m2=spec.eval_samples_per_m2 or None,
+        sdf=own.sdf,
     )
 
 

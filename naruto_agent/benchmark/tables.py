@@ -17,6 +17,8 @@ COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("Comp. (cm)", "metrics.completion_cm", 2),
     ("Acc. (cm)", "metrics.accuracy_cm", 2),
     ("MAD (cm)", "metrics.mad_cm", 2),
+    ("Own map obs. comp. ratio (%)", "own_map_metrics.observable_completion_ratio_pct", 1),
+    ("Own map MAD (cm)", "own_map_metrics.mad_cm", 2),
     ("Path (m)", "path_length_m", 1),
     ("Collisions", "collisions", 1),
     ("Policy ms/step", "time_per_step_ms.policy", 1),

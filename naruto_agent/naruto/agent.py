@@ -88,6 +88,7 @@ from naruto_agent.policies.base import (
     EnvContext,
     Info,
     Observation,
+    OwnReconstruction,
     Policy,
     clip_pose_action,
     pose_action,
@@ -423,6 +424,12 @@ class NarutoPolicy(Policy):
         if self.mapper is None:
             raise RuntimeError("the agent has no map yet: call reset() first")
         return self.mapper.extract_mesh(voxel_size)
+
+    def reconstruction(self) -> OwnReconstruction | None:
+        """The agent's map (mesh and SDF) for the benchmark harness; None before reset()."""
+        if self.mapper is None:
+            return None
+        return OwnReconstruction(self.mesh(), self.mapper.sdf)
 
     # -- planning ----------------------------------------------------------------------------
     @property

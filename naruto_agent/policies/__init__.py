@@ -22,7 +22,7 @@ from naruto_agent.policies.adapters import (
     action_mode_of_space,
     as_policy,
 )
-from naruto_agent.policies.base import EnvContext, Policy, pose_action
+from naruto_agent.policies.base import EnvContext, OwnReconstruction, Policy, pose_action
 from naruto_agent.policies.frontier import FrontierPolicy
 from naruto_agent.policies.occupancy import OccupancyGrid
 from naruto_agent.policies.passive import PassivePolicy, load_trajectory, subsample_poses
@@ -68,6 +68,7 @@ __all__ = [
     "EnvContext",
     "FrontierPolicy",
     "OccupancyGrid",
+    "OwnReconstruction",
     "PassivePolicy",
     "Policy",
     "RandomPolicy",

@@ -18,8 +18,9 @@ The loop a runner drives::
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -88,6 +89,18 @@ class EnvContext:
         )
 
 
+class OwnReconstruction(NamedTuple):
+    """A policy's own map of the scene, to be scored beside the env's reference map.
+
+    Attributes:
+        mesh: its surface (a ``trimesh.Trimesh`` in world coordinates).
+        sdf: its signed distance function ((N, 3) metres -> (N,) metres), for MAD, or None.
+    """
+
+    mesh: Any
+    sdf: Callable[[np.ndarray], np.ndarray] | None = None
+
+
 class Policy(ABC):
     """Base class of exploration policies.
 
@@ -154,6 +167,11 @@ class Policy(ABC):
     @abstractmethod
     def act(self, observation: Observation, info: Info | None = None) -> Any:
         """The action for the current observation (and the info of the step that produced it)."""
+
+    def reconstruction(self) -> OwnReconstruction | None:
+        """The policy's own map, scored by the benchmark harness beside the reference map;
+        None (the default) for policies that build none."""
+        return None
 
     def close(self) -> None:  # noqa: B027 (optional hook, empty by default)
         """Free resources (optional)."""

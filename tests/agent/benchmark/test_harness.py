@@ -16,6 +16,7 @@ from naruto_agent.benchmark import (
     markdown_table,
     parse_scene,
     pending_specs,
+    run_episode,
     run_local,
     run_ray,
     summarise,
@@ -157,6 +158,7 @@ def test_local_run_records_failures_resumes_and_reports(tmp_path):
     assert good["metrics"]["completion_ratio_pct"] is not None
     assert [point["step"] for point in good["completion_curve"]] == [3, 6]
     assert set(good["time_per_step_ms"]) == {"policy", "env", "mapping"}
+    assert good["own_map_metrics"] is None  # frontier builds no map of surfaces
 
     # A rerun only retries the failed episode; finished records stay untouched.
     paths = {spec.episode_id: spec.record_path(tmp_path) for spec in specs}
@@ -173,6 +175,17 @@ def test_local_run_records_failures_resumes_and_reports(tmp_path):
     assert "two_rooms" in table and "frontier" in table
     assert (tmp_path / "curves.png").stat().st_size > 1000
     assert (tmp_path / "trajectories_two_rooms.png").stat().st_size > 1000
+
+
+def test_a_policy_with_its_own_map_is_scored_on_it_too():
+    spec = build_specs(["two_rooms"], ["naruto"], [0], 30, **TINY)[0]
+    record = run_episode(spec)
+    own, reference = record["own_map_metrics"], record["metrics"]
+    assert own["completion_ratio_pct"] > 0 and own["mad_cm"] > 0
+    assert own["num_gt_samples"] == reference["num_gt_samples"] == TINY["eval_samples"]
+    assert own["mad_cm"] != reference["mad_cm"]  # its own SDF, not the reference map's
+    table = markdown_table(summarise([record]))
+    assert "Own map MAD (cm)" in table and f"{own['mad_cm']:.2f} ± 0.00" in table
 
 
 @pytest.mark.slow
