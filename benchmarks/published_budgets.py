@@ -37,6 +37,7 @@ COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("acc. (cm)", "metrics.accuracy_cm", 2),
     ("comp. (cm)", "metrics.completion_cm", 2),
     ("MAD (cm)", "metrics.mad_cm", 2),
+    ("obs. MAD (cm)", "metrics.observable_mad_cm", 2),
     ("own map: obs. comp. ratio (%)", "own_map_metrics.observable_completion_ratio_pct", 1),
     ("own map: MAD (cm)", "own_map_metrics.mad_cm", 2),
     ("path (m)", "path_length_m", 1),
@@ -132,14 +133,18 @@ def neural_rows(paths: list[str], replays: list[str], scene: str) -> list[list[s
         reference = dict(record["reference_tsdf_metrics"])
         replay = Path(replays[index]) if index < len(replays) else None
         if reference.get("mad_cm") is None and replay is not None and replay.is_file():
-            reference["mad_cm"] = json.loads(replay.read_text())["metrics_culled"]["mad_cm"]
+            replayed = json.loads(replay.read_text())["metrics_culled"]
+            for key in ("mad_cm", "observable_mad_cm"):
+                reference[key] = replayed.get(key)
         maps = (reference, record["agent_mesh_metrics"])
 
         def both(key: str, decimals: int, maps: tuple[dict, dict] = maps) -> str:
             return " / ".join(_number(metrics.get(key), decimals) for metrics in maps)
 
         settings = record["args"].get("settings") or ""
-        label = "NARUTO (neural, seed 0): reference map / own mesh"
+        camera = record["camera"]
+        label = (f"NARUTO (neural, seed {record['args']['seed']}, {camera['height']} x "
+                 f"{camera['width']}): reference map / own mesh")
         if "active_sampling" in settings:
             label += ", without active ray sampling"
         phases = record.get("phases_ms_per_step", {})
@@ -151,6 +156,7 @@ def neural_rows(paths: list[str], replays: list[str], scene: str) -> list[list[s
             both("accuracy_cm", 2),
             both("completion_cm", 2),
             both("mad_cm", 2),
+            both("observable_mad_cm", 2),
             _number(maps[1].get("observable_completion_ratio_pct"), 1),
             _number(maps[1].get("mad_cm"), 2),
             _number(record["path_length_m"], 1),
@@ -170,7 +176,10 @@ def scene_report(
         raise FileNotFoundError(
             f"no episode records under {run_dir}/records; run naruto-benchmark there first"
         )
-    rows = summarise(records)
+    rows = summarise(
+        records,
+        tuple(key for _, key, _ in COLUMNS) + tuple(f"time_per_step_ms.{p}" for p in PHASES),
+    )
     scene = rows[0]["scene"]
     steps = sorted({step for row in rows for step in row["steps"]})
     header = ["policy", "episodes", "failed", *[title for title, _, _ in COLUMNS],
@@ -187,7 +196,7 @@ def scene_report(
     for cells in neural_rows(neural, list(replays), scene):
         lines.append("| " + " | ".join(cells) + " |")
     for name, ratio, accuracy, completion, mad in PUBLISHED.get(scene, []):
-        cells = [name, "", "", "", ratio, "", accuracy, completion, mad, "", "", "", "", ""]
+        cells = [name, "", "", "", ratio, "", accuracy, completion, mad, *[""] * 6]
         lines.append("| " + " | ".join(cells) + " |")
     verdict = {}
     for title, key in (("whole surface", "metrics.completion_ratio_pct"),

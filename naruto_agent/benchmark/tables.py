@@ -40,11 +40,19 @@ def record_value(record: dict[str, Any], key: str) -> float | None:
     return None if value is None else float(value)
 
 
-def summarise(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def summarise(
+    records: list[dict[str, Any]], keys: tuple[str, ...] | None = None
+) -> list[dict[str, Any]]:
     """One row per (scene, policy): seeds, failures, and mean / std of every column.
+
+    Args:
+        records: episode records.
+        keys: the values to aggregate (:func:`record_value` keys); default: the table's
+            columns.
 
     The std is the sample standard deviation over seeds (0 with one seed).
     """
+    keys = keys or tuple(key for _, key, _ in COLUMNS)
     groups: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
     for record in records:
         groups[(record["scene"], record["policy"])].append(record)
@@ -58,7 +66,7 @@ def summarise(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
             "failed": len(members) - len(ok),
             "steps": sorted({record.get("steps_run") for record in ok}),
         }
-        for _, key, _ in COLUMNS:
+        for key in keys:
             values = [v for v in (record_value(record, key) for record in ok) if v is not None]
             if values:
                 array = np.array(values)
