@@ -77,7 +77,7 @@ class Args:
     neural_episodes: list[str] = field(
         default_factory=lambda: [
             str(RESULTS / "naruto_neural_office0"
-                / "naruto_episode_office0_neural_2000steps_raster_sim.json"),
+                / "naruto_episode_office0_neural_2000steps_mad.json"),
             str(RESULTS / "naruto_neural_office0"
                 / "naruto_episode_office0_neural_2000steps_no_active_sampling.json"),
         ]
