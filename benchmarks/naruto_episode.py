@@ -5,7 +5,7 @@ Runs :class:`~naruto_agent.naruto.NarutoPolicy` for a step budget on a scene and
 * the coverage curve and the final coverage (share of the ground-truth surface seen);
 * the metrics of the env's reference TSDF map of the episode's frames
   (``gym.make(..., reconstruct=True)``, ``env.unwrapped.reconstruction_metrics()``);
-* the metrics of the agent's own map (``env.unwrapped.evaluate(policy.mesh())``);
+* the metrics of the agent's own map (``policy.reconstruction()``: its mesh, and its SDF for MAD);
 * the trajectory length, collisions, the planner's requests and its state counts;
 * where the agent's targets were and where it went: top-down pictures at a few steps with
   the frontier of unexplored space (cyan), the most uncertain seen surfaces (orange), the
@@ -429,9 +429,9 @@ def main(args: Args) -> dict:
     clock = time.perf_counter()
     reference = base.reconstruction_metrics(num_samples=args.eval_samples)
     clock_mesh = time.perf_counter()
-    mesh = policy.mesh()
+    own_map = policy.reconstruction()  # the same map (mesh and SDF) the harness scores
     mesh_s = time.perf_counter() - clock_mesh
-    own = base.evaluate(mesh, num_samples=args.eval_samples, sdf=policy.mapper.sdf)
+    own = base.evaluate(own_map.mesh, num_samples=args.eval_samples, sdf=own_map.sdf)
     evaluation_s = time.perf_counter() - clock - mesh_s
 
     timings = policy.timings
@@ -455,7 +455,7 @@ def main(args: Args) -> dict:
         "coverage_curve": np.round(coverage, 5).tolist(),
         "reference_tsdf_metrics": scalar_metrics(reference),
         "agent_mesh_metrics": scalar_metrics(own),
-        "agent_mesh_faces": int(len(mesh.faces)),
+        "agent_mesh_faces": int(len(own_map.mesh.faces)),
         "path_length_m": float(info.get("path_length_m", 0.0)),
         "collisions": collisions,
         "agent_detected_collisions": policy.machine.collisions,

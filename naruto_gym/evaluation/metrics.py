@@ -253,20 +253,20 @@ def reconstruction_metrics(
     precision = float(np.mean(accuracy < threshold_m))
     recall = float(np.mean(completion < threshold_m))
     fscore = 0.0 if precision + recall == 0.0 else 2.0 * precision * recall / (precision + recall)
-    observable: dict[str, float] = {}
+    optional: dict[str, float] = {}  # the scores that need a mask or an SDF
     mask = None if observable_mask is None else np.asarray(observable_mask(gt_points), dtype=bool)
     if mask is not None:
-        observable["observable_share_pct"] = float(mask.mean() * 100.0)
+        optional["observable_share_pct"] = float(mask.mean() * 100.0)
         if mask.any():
-            observable["observable_completion_ratio_pct"] = float(
+            optional["observable_completion_ratio_pct"] = float(
                 np.mean(completion[mask] < threshold_m) * 100.0
             )
-            observable["observable_completion_cm"] = float(completion[mask].mean() * 100.0)
+            optional["observable_completion_cm"] = float(completion[mask].mean() * 100.0)
     if sdf is not None:
-        observable.update(_mad_fields(sdf, gt_points, mask))
+        optional.update(_mad_fields(sdf, gt_points, mask))
     arrays = _mesh_arrays(reconstruction)
     return ReconstructionMetrics(
-        **observable,
+        **optional,
         accuracy_cm=float(accuracy.mean() * 100.0),
         completion_cm=float(completion.mean() * 100.0),
         completion_ratio_pct=recall * 100.0,
