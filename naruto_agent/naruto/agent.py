@@ -81,7 +81,13 @@ from naruto_agent.naruto.recovery import (
     look_around_targets,
 )
 from naruto_agent.naruto.state_machine import NarutoStateMachine, Plan, State
-from naruto_agent.planning import FreeSpaceComponents, PlannerConfig, SdfVolume, plan_path
+from naruto_agent.planning import (
+    FreeSpaceComponents,
+    PlannerConfig,
+    SdfVolume,
+    plan_path,
+    shortcut_path,
+)
 from naruto_agent.planning.rotation import image_view_test
 from naruto_agent.planning.rrt import reachable_voxels
 from naruto_agent.policies.base import (
@@ -121,6 +127,12 @@ class NarutoConfig:
             targets the skipped turns would centre are in the frames anyway. False:
             published.
         goal_attempts: best goals tried in turn with E-RRT before staying (published: 1).
+        shortcut_paths: follow the E-RRT path with every stretch that a straight free
+            segment covers cut short (:func:`~naruto_agent.planning.shortcut_path`; the
+            segments keep the planner's clearance). The published agent follows the tree's
+            chain of nodes, which zigzags and, where the tree grew around a room before it
+            found the door, can be many times longer than needed (apartment, seed 1: a
+            442-node path to a goal 2.2 m away). False: published.
         reachable_iterations: extensions of the goal search's fallback tree.
         check_moves_on_map: check every move against the agent's newest map before sending
             it (2 cm samples, agent radius 5 cm); a blocked move is a detected collision.
@@ -139,20 +151,26 @@ class NarutoConfig:
             or through a gap is outside the scan, where the env refuses moves. False: goals
             and frontier anywhere in measured free space.
         unresolved_visit_looks: when the agent reaches a goal and turns to its views, every
-            target the goal search saw from that goal counts this many looks
-            (:meth:`ObservedSpace.add_looks`): frontier it went to see and that is still
-            frontier after the visit loses variance (to half the initial one with 4 and the
-            mappers' look weight 0.25), whether or not the frames' depth could tell it was
-            looked at (a target under a table's edge, outside the image's vertical reach).
-            Without it the agent kept returning to unresolvable targets near it (apartment,
-            seed 0, steps 1800-2600: 23 plans that gained 1.3 % coverage). 0: off.
+            target the goal search saw from that goal counts this many looks: its
+            uncertainty in the planner view is divided by ``1 + look_weight * looks`` (the
+            observed space's look weight, 0.25: to half with 4), whether or not the frames
+            could tell it was looked at. That holds for frontier (a target under a table's
+            edge, outside the image's vertical reach) and for surface voxels whose
+            uncertainty the frames cannot lower (the TSDF mapper counts a view of a voxel
+            when its centre lies within 5 cm of the measured depth, which a voxel beside a
+            thin edge or seen at a grazing angle never does; a neural field's uncertainty
+            can stay high where it extrapolates). Without it the agent kept returning to
+            such targets near it (apartment, seed 0, steps 1800-2600: 23 plans that gained
+            1.3 % coverage; seed 1, steps 2000-2700 with frontier only: 35 plans at its own
+            position for 0.5 %). 0: off.
         initial_look_around: the first plan of an episode is a turn in place that looks all
             around, so the first goal search sees the whole surrounding (the published agent
             searches from its first view).
         seed: seed of the agent's randomness when ``reset`` gets none.
         recovery: stall detection and recovery (:class:`RecoveryConfig`).
         goal_search: the goal search's settings (published, except a distance discount of
-            3 m: of two goals that see about as much, the nearer wins; and explore-first
+            3 m along the way through free space: of two goals that see about as much, the
+            nearer by travel wins; and explore-first
             with a share of 0.75: while at least 30 voxels are at 3/4 of the largest
             uncertainty or more, targets are drawn from those).
         planner: E-RRT settings (the time limit, 2 s, is shorter than the planning module's
@@ -167,6 +185,7 @@ class NarutoConfig:
     max_rotation_step_deg: float = 20.0
     skip_views_in_image: bool = True
     goal_attempts: int = 3
+    shortcut_paths: bool = True
     reachable_iterations: int = 2000
     check_moves_on_map: bool = True
     escape_radius_m: float = 0.3
@@ -181,6 +200,7 @@ class NarutoConfig:
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     goal_search: GoalSearchConfig = field(
         default_factory=lambda: GoalSearchConfig(distance_discount_m=3.0,
+                                                 discount_by_travel=True,
                                                  explore_first_share=0.75)
     )
     planner: PlannerConfig = field(default_factory=lambda: PlannerConfig(time_limit_s=2.0))
@@ -253,6 +273,8 @@ class NarutoPolicy(Policy):
         monitor: progress, failed plans and goals of the episode.
         blocked: points where the env refused a move.
         recoveries: (frame, kind) of every recovery this episode.
+        visit_looks: looks per planner voxel counted by visits (``unresolved_visit_looks``),
+            None before the first.
         timings: seconds spent per phase (``mapping``, ``planner_view``, ``goal_search``,
             ``rrt``, ``control``) this episode.
     """
@@ -291,6 +313,7 @@ class NarutoPolicy(Policy):
         self.recoveries: list[tuple[int, str]] = []
         self._commanded: np.ndarray | None = None
         self._visit: tuple[np.ndarray, np.ndarray] | None = None  # (goal, targets it sees)
+        self.visit_looks: np.ndarray | None = None  # looks per planner voxel from visits
 
     # -- mapping -----------------------------------------------------------------------------
     def bind(self, context: EnvContext) -> None:
@@ -335,7 +358,8 @@ class NarutoPolicy(Policy):
         if not self._view_stale:
             return
         clock = time.perf_counter()
-        sdf, self.uncertainty = self.mapper.planner_view(self.config.planner_voxel_m)
+        sdf, uncertainty = self.mapper.planner_view(self.config.planner_voxel_m)
+        self.uncertainty = self._damp_visited(uncertainty)
         self.sdf = self.blocked.apply(sdf)
         self._components = None
         self._view_stale = False
@@ -364,6 +388,7 @@ class NarutoPolicy(Policy):
         self.recoveries = []
         self._commanded = None
         self._visit = None
+        self.visit_looks = None
         self._integrate(observation)
 
     def _note_refused_move(self, position: np.ndarray, info: Info) -> None:
@@ -498,10 +523,24 @@ class NarutoPolicy(Policy):
         if visit is None or self.config.unresolved_visit_looks <= 0:
             return
         goal, targets = visit
-        if np.linalg.norm(position - goal) > self.config.planner.step_m:
+        if np.linalg.norm(position - goal) > self.config.planner.step_m or self.sdf is None:
             return  # stopped on the way: nothing was refuted
-        self.mapper.observed_space.add_looks(targets, self.config.unresolved_visit_looks)
+        if self.visit_looks is None:
+            self.visit_looks = np.zeros(self.sdf.shape, np.float32)
+        cells = np.round((np.asarray(targets, np.float64).reshape(-1, 3) - self.sdf.origin)
+                         / self.sdf.voxel_size).astype(np.int64)
+        cells = cells[np.all((cells >= 0) & (cells < np.asarray(self.sdf.shape)), axis=1)]
+        np.add.at(self.visit_looks, tuple(cells.T), np.float32(self.config.unresolved_visit_looks))
         self._view_stale = True
+
+    def _damp_visited(self, uncertainty: SdfVolume) -> SdfVolume:
+        """The planner view's uncertainty lowered by the looks of visits (see
+        ``NarutoConfig.unresolved_visit_looks``)."""
+        if self.visit_looks is None or self.visit_looks.shape != uncertainty.shape:
+            return uncertainty
+        weight = self.mapper.observed_space.config.look_weight
+        return SdfVolume(uncertainty.values / (1.0 + weight * self.visit_looks),
+                         uncertainty.origin, uncertainty.voxel_size)
 
     def _plan(self, position: np.ndarray, rotation: np.ndarray) -> Plan | None:
         """Goal search + E-RRT from ``position`` on the newest planner view."""
@@ -531,12 +570,15 @@ class NarutoPolicy(Policy):
         goal_mask = self._goal_mask(start)
 
         clock = time.perf_counter()
+        travel = (self._components.travel_distances(start)
+                  if self.config.goal_search.discount_by_travel else None)
         search = uncertainty_aware_goal_search(
             sdf, uncertainty, start, self._rng,
             replace(self.config.goal_search, top_k=self.config.goal_attempts),
             goal_mask=goal_mask,
             planner_config=replace(self.config.planner, device=str(self.device)),
             reachable_iterations=self.config.reachable_iterations,
+            travel=travel,
         )
         self.timings["goal_search"] += time.perf_counter() - clock
         record.update(
@@ -556,7 +598,7 @@ class NarutoPolicy(Policy):
                                   device=str(self.device))
                 result = plan_path(sdf, start, goal, planner, self._components)
                 if result.success:
-                    path = np.vstack([prefix[:-1], result.path])
+                    path = np.vstack([prefix[:-1], self._shorten(sdf, result.path)])
                     record.update(outcome="planned", goal=goal.tolist(), rank=rank,
                                   score=float(search.goal_scores[rank]),
                                   path_nodes=int(len(path)), rrt_ms=result.time_ms)
@@ -571,6 +613,14 @@ class NarutoPolicy(Policy):
         finally:
             self.timings["rrt"] += time.perf_counter() - clock
 
+
+    def _shorten(self, sdf: SdfVolume, path: np.ndarray) -> np.ndarray:
+        """The planned path shortcut (``shortcut_paths``), nodes a step apart again."""
+        if not self.config.shortcut_paths:
+            return path
+        planner = self.config.planner
+        return densify(shortcut_path(sdf, path, self._clearance, planner.collision_sample_m),
+                       planner.step_m)
 
     def _goal_mask(self, start: np.ndarray) -> np.ndarray | None:
         """Candidate goals: free space connected to ``start``, measured free (when
@@ -662,7 +712,7 @@ class NarutoPolicy(Policy):
             for goal in points[order]:
                 result = plan_path(sdf, position, goal, planner, self._components)
                 if result.success:
-                    path = densify(result.path, planner.step_m)
+                    path = densify(self._shorten(sdf, result.path), planner.step_m)
                     return Plan(path, self._look_around(goal), goal.copy(),
                                 {"recovery": "wander"})
             return None

@@ -77,6 +77,12 @@ class GoalSearchConfig:
             wherever it is; a length L multiplies the score by exp(-d / L), d the straight
             distance from the agent, so that of two goals seeing about as much the nearer
             wins (the agent stops crossing the map back and forth).
+        discount_by_travel: with a distance discount, d is the length of the way to the
+            goal through free space (a travel-distance volume the caller passes, see
+            :meth:`~naruto_agent.planning.FreeSpaceComponents.travel_distances`) instead
+            of the straight distance: a goal beyond a wall, 2 m away but 15 m by the door,
+            no longer counts as near. Goals the volume does not reach keep the straight
+            distance.
         explore_first_share: None (published) draws the targets from the most uncertain
             voxels whatever their values. A share s searches first with targets drawn only
             from voxels at least s times as uncertain as the most uncertain one (unexplored
@@ -102,6 +108,7 @@ class GoalSearchConfig:
     top_k: int = 3
     batch_goals: int = 64
     distance_discount_m: float | None = None
+    discount_by_travel: bool = False
     explore_first_share: float | None = None
     explore_first_min_voxels: int = 30
 
@@ -308,6 +315,7 @@ def search_goals(
     goal_mask: np.ndarray | None = None,
     target_mask: np.ndarray | None = None,
     origin: np.ndarray | None = None,
+    travel: np.ndarray | None = None,
 ) -> GoalSearchResult:
     """One goal search (no fallback): the safe goals that see the most target uncertainty.
 
@@ -321,6 +329,8 @@ def search_goals(
         target_mask: optional (nx, ny, nz) bool of voxels allowed as targets.
         origin: (3,) the agent's position, for ``config.distance_discount_m`` (ignored
             without it).
+        travel: optional (nx, ny, nz) travel distance from the agent to each voxel, for
+            ``config.discount_by_travel``.
 
     Returns:
         A :class:`GoalSearchResult`; ``found`` is False when no safe goal sees a target.
@@ -380,8 +390,11 @@ def search_goals(
     bound = in_range.astype(np.float64) @ target_uncertainty
     discount = np.ones(len(goals))
     if config.distance_discount_m is not None and origin is not None:
-        travel = np.linalg.norm(goals - np.asarray(origin, np.float64).reshape(1, 3), axis=1)
-        discount = np.exp(-travel / config.distance_discount_m)
+        way = np.linalg.norm(goals - np.asarray(origin, np.float64).reshape(1, 3), axis=1)
+        if config.discount_by_travel and travel is not None:
+            by_travel = _sample_nearest(sdf, travel, goals)
+            way = np.where(np.isfinite(by_travel), by_travel, way)
+        discount = np.exp(-way / config.distance_discount_m)
     bound *= discount  # still an upper bound: the discount depends on the goal only
     order = np.lexsort((np.arange(len(goals)), -bound))  # bound descending, index ascending
     best: list[tuple[float, int, np.ndarray]] = []  # (score, goal index, visibility row)
@@ -405,6 +418,15 @@ def search_goals(
     return result(bool(best), best)
 
 
+def _sample_nearest(sdf: SdfVolume, volume: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(N,) values of a volume on ``sdf``'s grid at the voxels nearest to ``points``."""
+    if volume.shape != sdf.shape:
+        raise ValueError(f"travel volume shape {volume.shape} differs from the SDF's {sdf.shape}")
+    voxel = np.clip(np.rint(sdf.world_to_voxel(points)).astype(np.int64), 0,
+                    np.asarray(sdf.shape) - 1)
+    return volume[voxel[:, 0], voxel[:, 1], voxel[:, 2]]
+
+
 def uncertainty_aware_goal_search(
     sdf: SdfVolume,
     uncertainty: SdfVolume,
@@ -414,6 +436,7 @@ def uncertainty_aware_goal_search(
     goal_mask: np.ndarray | None = None,
     planner_config: PlannerConfig | None = None,
     reachable_iterations: int = 2000,
+    travel: np.ndarray | None = None,
 ) -> GoalSearchResult:
     """NARUTO's goal search with its fallback.
 
@@ -432,6 +455,8 @@ def uncertainty_aware_goal_search(
         goal_mask: optional (nx, ny, nz) bool restricting the candidate goals (first search).
         planner_config: step, clearance and limits of the fallback tree.
         reachable_iterations: extensions of the fallback tree.
+        travel: optional travel distance from ``start`` per voxel
+            (``config.discount_by_travel``).
     """
     config = config or GoalSearchConfig()
     if config.explore_first_share is not None:
@@ -440,11 +465,12 @@ def uncertainty_aware_goal_search(
         first &= values > 0.0
         if int(first.sum()) >= config.explore_first_min_voxels:
             found = search_goals(sdf, uncertainty, rng, config, goal_mask=goal_mask,
-                                 target_mask=first, origin=start)
+                                 target_mask=first, origin=start, travel=travel)
             if found.found:
                 found.diagnostics["explore_first"] = 1.0
                 return found
-    found = search_goals(sdf, uncertainty, rng, config, goal_mask=goal_mask, origin=start)
+    found = search_goals(sdf, uncertainty, rng, config, goal_mask=goal_mask, origin=start,
+                         travel=travel)
     if found.found:
         return found
     began = time.perf_counter()
@@ -455,7 +481,7 @@ def uncertainty_aware_goal_search(
     tree_ms = (time.perf_counter() - began) * 1e3
     mask = reachable if goal_mask is None else reachable & goal_mask
     retry = search_goals(sdf, uncertainty, rng, config, goal_mask=mask, target_mask=reachable,
-                         origin=start)
+                         origin=start, travel=travel)
     retry.used_reachable_mask = True
     retry.diagnostics["reachable_voxels"] = float(reachable.sum())
     retry.diagnostics["reachable_ms"] = tree_ms

@@ -5,7 +5,7 @@
 * :func:`free_steps_along_segment`: NARUTO's segment collision check (2 cm samples, 5 cm
   agent radius), counted from the start side.
 * :func:`plan_path` with :class:`PlannerConfig`: RRT and E-RRT ("direct line" and "fast tree"
-  switchable), and :func:`reachable_voxels`.
+  switchable), and :func:`reachable_voxels`; :func:`shortcut_path` shortens a planned path.
 * :func:`plan_rotations`, :func:`slerp_rotations`, :func:`order_views_greedily`: in-place
   turns towards target views in steps of at most ``max_rotation_deg``.
 """
@@ -25,6 +25,7 @@ from naruto_agent.planning.rotation import (
 )
 from naruto_agent.planning.rrt import PlannerConfig, PlanResult, plan_path, reachable_voxels
 from naruto_agent.planning.sdf_volume import SdfVolume
+from naruto_agent.planning.shortcut import shortcut_path
 
 __all__ = [
     "FreeSpaceComponents",
@@ -40,5 +41,6 @@ __all__ = [
     "plan_rotations",
     "reachable_voxels",
     "segment_is_free",
+    "shortcut_path",
     "slerp_rotations",
 ]

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 import naruto_gym  # noqa: F401  (registers the env)
-from naruto_agent.mapping.observed_space import ObservedSpace
 from naruto_agent.naruto import TRANSITIONS, NarutoPolicy, State, build_config
 from naruto_agent.policies import EnvContext, make_policy, pose_action
 from naruto_gym.geometry.transforms import rotation_angle_between
@@ -145,29 +144,34 @@ def test_settings_and_errors():
 
 
 @pytest.mark.parametrize("looks", [4.0, 0.0])
-def test_a_reached_goal_counts_looks_at_every_target_it_was_chosen_for(monkeypatch, looks):
+def test_a_reached_goal_counts_looks_at_every_target_it_was_chosen_for(looks):
     """When the agent starts a new plan at the goal of the last one, the targets the goal
-    search saw from that goal get ``unresolved_visit_looks`` looks (none when it is 0)."""
-    calls = []
-    original = ObservedSpace.add_looks
-
-    def spy(self, points, count):
-        calls.append((np.array(points), count))
-        original(self, points, count)
-
-    monkeypatch.setattr(ObservedSpace, "add_looks", spy)
+    search saw from that goal get ``unresolved_visit_looks`` looks (none when it is 0), and
+    the planner view's uncertainty there falls to ``1 / (1 + look_weight * looks)``."""
     run = run_episode(100, unresolved_visit_looks=looks)
+    policy = run.policy
     if looks == 0:
-        assert calls == []
+        assert policy.visit_looks is None
         return
-    assert calls and all(count == looks for _, count in calls)
-    # A call comes at a planning request made at the last plan's goal (its look-around
-    # excepted): the visited targets lie within the goal search's range of that goal.
-    planned = [plan for plan in run.policy.plans if plan.get("outcome") == "planned"]
+    looked = np.argwhere(policy.visit_looks > 0)
+    assert len(looked) and np.all(np.mod(policy.visit_looks[tuple(looked.T)], looks) == 0)
+    # The looks come at planning requests made at the last plan's goal: the visited
+    # targets lie within the goal search's range of a planned goal.
+    planned = [plan for plan in policy.plans if plan.get("outcome") == "planned"]
     goals = np.array([plan["goal"] for plan in planned])
-    for points, _ in calls:
-        reach = np.linalg.norm(points[:, None, :] - goals[None, :, :], axis=2)
-        assert np.any(np.all(reach < 2.0, axis=0))
+    points = policy.sdf.origin + looked * policy.sdf.voxel_size
+    reach = np.linalg.norm(points[:, None, :] - goals[None, :, :], axis=2)
+    assert np.all(np.any(reach < 2.0 + policy.sdf.voxel_size, axis=1))
+    # The damping applies to whatever the mapper's view holds there, surface or frontier.
+    _, raw = policy.mapper.planner_view(policy.config.planner_voxel_m)
+    weight = policy.mapper.observed_space.config.look_weight
+    damped = policy._damp_visited(raw)
+    index = tuple(looked.T)
+    np.testing.assert_allclose(
+        damped.values[index],
+        raw.values[index] / (1.0 + weight * policy.visit_looks[index]), rtol=1e-6)
+    untouched = policy.visit_looks == 0
+    np.testing.assert_array_equal(damped.values[untouched], raw.values[untouched])
 
 
 @pytest.mark.slow

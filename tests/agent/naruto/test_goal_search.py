@@ -14,7 +14,7 @@ from naruto_agent.naruto import (
     uncertainty_aware_goal_search,
     visibility,
 )
-from naruto_agent.planning import SdfVolume
+from naruto_agent.planning import FreeSpaceComponents, SdfVolume
 
 # A 6 x 4 x 3 m box, split at x = 3 by a 0.2 m thick wall from floor to ceiling.
 ROOM = np.array([[0.0, 0.0, 0.0], [6.0, 4.0, 3.0]])
@@ -222,3 +222,35 @@ def test_explore_first_prefers_the_most_uncertain_tier_then_falls_back(sdf):
     assert fallback.found and fallback.goal[0] < 2.9 and "explore_first" not in fallback.diagnostics
     with pytest.raises(ValueError, match="explore_first_share"):
         GoalSearchConfig(explore_first_share=1.5)
+
+
+def test_discount_by_travel_prefers_goals_near_by_the_way_there():
+    """Two equal clusters: one across the partition (near in a straight line, far through
+    the door), one farther in the agent's own room. The straight-distance discount picks
+    the first, the travel-distance discount the second."""
+    door_y = (3.2, 4.0)
+
+    def with_door(points: np.ndarray) -> np.ndarray:
+        points = np.asarray(points, dtype=np.float64)
+        to_box = np.minimum(points - ROOM[0], ROOM[1] - points).min(axis=1)
+        to_wall = np.maximum(WALL_X[0] - points[:, 0], points[:, 0] - WALL_X[1])
+        to_wall = np.maximum(to_wall, points[:, 1] - door_y[0])  # the door: y above 3.2
+        return np.minimum(to_box, to_wall)
+
+    sdf = SdfVolume.from_function(with_door, ROOM, voxel_size=0.1)
+    across = [((3.12, y, z), 2.0) for y in (0.4, 0.6, 0.8) for z in (1.0, 1.5, 2.0)]
+    own_room = [((0.02, y, z), 2.0) for y in (3.2, 3.4, 3.6) for z in (1.0, 1.5, 2.0)]
+    uncertainty = uncertainty_at(sdf, across + own_room)
+    start = np.array([2.5, 0.6, 1.5])
+    travel = FreeSpaceComponents.from_sdf(sdf, 0.05).travel_distances(start)
+    straight = GoalSearchConfig(distance_discount_m=3.0)
+    by_travel = GoalSearchConfig(distance_discount_m=3.0, discount_by_travel=True)
+    rng = np.random.default_rng(0)
+    assert search_goals(sdf, uncertainty, rng, straight, origin=start,
+                        travel=travel).goal[0] > WALL_X[1]
+    chosen = search_goals(sdf, uncertainty, rng, by_travel, origin=start, travel=travel)
+    assert chosen.goal[0] < WALL_X[0]
+    # Without a travel volume the setting falls back to the straight distance.
+    assert search_goals(sdf, uncertainty, rng, by_travel, origin=start).goal[0] > WALL_X[1]
+    with pytest.raises(ValueError, match="travel volume shape"):
+        search_goals(sdf, uncertainty, rng, by_travel, origin=start, travel=travel[1:])

@@ -13,6 +13,8 @@ from naruto_agent.planning import (
     guaranteed_margin_m,
     plan_path,
     reachable_voxels,
+    segment_is_free,
+    shortcut_path,
 )
 from naruto_agent.planning.rrt import _Tree
 from tests.agent.planning.planning_scenes import (
@@ -196,3 +198,47 @@ def test_cuda_search_gives_the_same_path(room_sdf):
     cpu = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=5, device="cpu"))
     gpu = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=5, device="cuda"))
     np.testing.assert_allclose(cpu.path, gpu.path)
+
+
+def test_travel_distances_go_around_walls(room_sdf, closed_wall_sdf):
+    """Travel distances through free space: the straight distance in the open, the detour
+    through the doorway past the internal wall, none into the closed box or from outside."""
+    components = FreeSpaceComponents.from_sdf(room_sdf, RADIUS)
+    travel = components.travel_distances(START)
+    straight = float(np.linalg.norm(GOAL - START))
+    at_goal = float(travel[tuple(np.rint(room_sdf.world_to_voxel(GOAL)).astype(int))])
+    assert straight + 0.2 < at_goal < np.inf
+    # In open space a lattice path is at most about 8 % (and one voxel) longer.
+    near = START + np.array([0.0, 0.6, 0.3])
+    voxel = np.rint(room_sdf.world_to_voxel(near)).astype(int)
+    exact = float(np.linalg.norm(room_sdf.origin + voxel * room_sdf.voxel_size - START))
+    assert exact - 1e-9 <= travel[tuple(voxel)] <= 1.09 * exact + room_sdf.voxel_size
+    # The inside of the hollow box is free but closed: unreachable.
+    inside_box = np.rint(room_sdf.world_to_voxel(HOLLOW_BOX_CENTRE)).astype(int)
+    assert components.labels[tuple(inside_box)] > 0 and np.isinf(travel[tuple(inside_box)])
+    # Reached voxels are free; a start outside the grid reaches nothing.
+    assert np.all(components.labels[np.isfinite(travel)] > 0)
+    assert np.isinf(components.travel_distances(np.array([50.0, 0.0, 0.0]))).all()
+    # Without the doorway the other side is out of reach.
+    closed = FreeSpaceComponents.from_sdf(closed_wall_sdf, RADIUS)
+    other = np.rint(closed_wall_sdf.world_to_voxel(GOAL)).astype(int)
+    assert np.isinf(closed.travel_distances(START)[tuple(other)])
+
+
+def test_shortcut_path_is_shorter_free_and_keeps_its_ends(room_sdf):
+    """A zigzag RRT path through the doorway, shortcut: the same ends, no longer, every
+    segment free at the planner's clearance; a free straight path stays as it is."""
+    result = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=3, direct_line=False))
+    assert result.success
+    short = shortcut_path(room_sdf, result.path, RADIUS)
+    length = lambda path: float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())  # noqa: E731
+    assert np.array_equal(short[0], result.path[0]) and np.array_equal(short[-1], result.path[-1])
+    assert len(short) < len(result.path) and length(short) < length(result.path)
+    assert all(segment_is_free(room_sdf, a, b, 0.02, RADIUS)
+               for a, b in zip(short[:-1], short[1:], strict=True))
+    # Kept nodes come from the path, in order.
+    rows = [int(np.flatnonzero(np.all(result.path == node, axis=1))[0]) for node in short]
+    assert rows == sorted(rows)
+    line = np.linspace(START, START + [0.0, 1.0, 0.0], 11)
+    np.testing.assert_array_equal(shortcut_path(room_sdf, line, RADIUS), line[[0, -1]])
+    np.testing.assert_array_equal(shortcut_path(room_sdf, line[:2], RADIUS), line[:2])
