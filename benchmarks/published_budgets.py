@@ -6,7 +6,10 @@ neural NARUTO episodes of ``benchmarks/naruto_episode.py``, and writes one Markd
 per scene: every policy's mean +- std over seeds (coverage, completion ratio of the whole and of
 the observable surface, accuracy, completion, MAD of the reference TSDF map, the policy's own
 map where it has one, path, collisions, failed episodes, time per step by phase), the
-published references beside them, and which policy has the best completion ratio. It runs
+published references beside them, which policy has the best completion ratio, and the
+coverage curves at ten checkpoints with the check of the issue "The NARUTO agent that wins"
+(NARUTO at least as high as frontier at every checkpoint after step 500, in the mean over
+seeds and per seed). It runs
 no episode; the commands that make the records are in the README ("At the published
 budgets").
 
@@ -44,6 +47,8 @@ COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("collisions", "collisions", 1),
 )
 PHASES = ("policy", "env", "mapping")
+CHECKPOINTS = 10  # coverage checkpoints per episode, evenly spaced
+COMPARE_AFTER = 500  # the checkpoint check starts after this step
 
 # Published figures (NARUTO, CVPR 2024, and later systems on its protocol), per scene label:
 # (row name, completion ratio %, accuracy cm, completion cm, MAD cm), as printed there.
@@ -167,6 +172,80 @@ def neural_rows(paths: list[str], replays: list[str], scene: str) -> list[list[s
     return rows
 
 
+def coverage_at_checkpoints(
+    records: list[dict[str, Any]], checkpoints: int = CHECKPOINTS
+) -> tuple[list[int], dict[str, dict[int, list[float]]]]:
+    """Checkpoint steps and, per policy, per seed, the coverage (%) at each (episodes that
+    finished, with a coverage curve)."""
+    done = [r for r in records if r.get("status") == "ok" and r.get("coverage_curve")]
+    if not done:
+        return [], {}
+    steps = min(len(r["coverage_curve"]) - 1 for r in done)
+    marks = [round(steps * (k + 1) / checkpoints) for k in range(checkpoints)]
+    curves: dict[str, dict[int, list[float]]] = {}
+    for record in sorted(done, key=lambda r: (r["policy"], r["seed"])):
+        curve = record["coverage_curve"]
+        curves.setdefault(record["policy"], {})[int(record["seed"])] = [
+            100.0 * curve[mark] for mark in marks]
+    return marks, curves
+
+
+def checkpoint_verdict(
+    marks: list[int], curves: dict[str, dict[int, list[float]]], policy: str = "naruto",
+    rival: str = "frontier", after: int = COMPARE_AFTER,
+) -> dict[str, Any] | None:
+    """Is ``policy``'s coverage at least ``rival``'s at every checkpoint after ``after``?
+    In the mean over the seeds both ran, and per seed. None when one of them is missing."""
+    if policy not in curves or rival not in curves:
+        return None
+    seeds = sorted(set(curves[policy]) & set(curves[rival]))
+    if not seeds:
+        return None
+    index = [k for k, mark in enumerate(marks) if mark > after]
+
+    def margins(ours: list[list[float]], theirs: list[list[float]]) -> list[float]:
+        return [sum(o[k] for o in ours) / len(ours) - sum(t[k] for t in theirs) / len(theirs)
+                for k in index]
+
+    mean = margins([curves[policy][s] for s in seeds], [curves[rival][s] for s in seeds])
+    per_seed = {s: margins([curves[policy][s]], [curves[rival][s]]) for s in seeds}
+
+    def summary(values: list[float]) -> dict[str, Any]:
+        worst = min(range(len(values)), key=values.__getitem__)
+        return {"at_least_as_high": sum(v >= 0.0 for v in values), "checkpoints": len(values),
+                "lowest_margin_pct": values[worst], "lowest_at_step": marks[index[worst]]}
+
+    return {"policy": policy, "rival": rival, "after_step": after, "seeds": seeds,
+            "mean": summary(mean), "per_seed": {s: summary(v) for s, v in per_seed.items()}}
+
+
+def checkpoint_lines(records: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
+    """The coverage-at-checkpoints table and the NARUTO-against-frontier verdict."""
+    marks, curves = coverage_at_checkpoints(records)
+    if not marks:
+        return [], {}
+    lines = ["", "Coverage (%) at checkpoints, mean over seeds:", "",
+             "| policy | " + " | ".join(str(mark) for mark in marks) + " |",
+             "|" + "---|" * (len(marks) + 1)]
+    for policy, seeds in curves.items():
+        means = [sum(curve[k] for curve in seeds.values()) / len(seeds) for k in range(len(marks))]
+        lines.append(f"| {policy} | " + " | ".join(f"{m:.1f}" for m in means) + " |")
+    verdict = checkpoint_verdict(marks, curves)
+    if verdict is not None:
+        mean = verdict["mean"]
+
+        def said(part: dict[str, Any]) -> str:
+            return (f"{part['at_least_as_high']} of {part['checkpoints']} (lowest margin "
+                    f"{part['lowest_margin_pct']:+.2f} points at step {part['lowest_at_step']})")
+
+        per_seed = "; ".join(f"seed {seed}: {said(part)}"
+                             for seed, part in verdict["per_seed"].items())
+        lines += ["", f"{verdict['policy']} at least as high as {verdict['rival']} at the "
+                  f"checkpoints after step {verdict['after_step']}: in the mean over seeds "
+                  f"{said(mean)}; {per_seed}."]
+    return lines, {"checkpoints": marks, "coverage_pct": curves, "verdict": verdict}
+
+
 def scene_report(
     run_dir: Path, neural: list[str], replays: tuple[str, ...] | list[str] = ()
 ) -> tuple[str, dict[str, Any]]:
@@ -206,7 +285,10 @@ def scene_report(
             verdict[key] = {"policy": best[0], "mean": best[1]}
             lines.append("")
             lines.append(f"Best completion ratio of the {title}: **{best[0]}** ({best[1]:.2f} %).")
-    return "\n".join(lines) + "\n", {"scene": scene, "rows": rows, "best": verdict}
+    curve_lines, curves = checkpoint_lines(records)
+    lines += curve_lines
+    return "\n".join(lines) + "\n", {"scene": scene, "rows": rows, "best": verdict,
+                                      "coverage_checkpoints": curves}
 
 
 def main(argv: list[str] | None = None) -> int:

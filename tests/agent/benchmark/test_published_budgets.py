@@ -59,3 +59,34 @@ def test_report_has_every_policy_the_published_rows_and_the_best_policy(tmp_path
     assert "1.44" in lines["published NARUTO (5 MP3D scenes, 5000 steps)"]
     with pytest.raises(FileNotFoundError, match="naruto-benchmark"):
         module.scene_report(tmp_path / "empty", neural=[])
+
+
+def test_checkpoint_verdict_compares_the_mean_and_every_seed(tmp_path):
+    """Coverage at ten checkpoints; NARUTO against frontier after step 500, in the mean over
+    seeds and per seed, with the lowest margin and where it falls."""
+    module = _script()
+    steps = 1000
+    ramp = [min(1.0, step / 600) for step in range(steps + 1)]
+    records = []
+    for seed in range(2):
+        # NARUTO: the ramp, except seed 1, which trails by 2 points at step 800.
+        naruto = [value - (0.02 if seed == 1 and step == 800 else 0.0)
+                  for step, value in enumerate(ramp)]
+        records.append({**_record("naruto", seed, 97.0), "coverage_curve": naruto})
+        records.append({**_record("frontier", seed, 96.0),
+                        "coverage_curve": [0.99 * value for value in ramp]})
+    records.append({**_record("frontier", 2, 0.0), "status": "failed", "coverage_curve": None})
+    marks, curves = module.coverage_at_checkpoints(records)
+    assert marks == list(range(100, 1001, 100)) and set(curves) == {"naruto", "frontier"}
+    assert curves["frontier"][0][9] == pytest.approx(99.0)
+    verdict = module.checkpoint_verdict(marks, curves)
+    assert verdict["seeds"] == [0, 1] and verdict["mean"]["checkpoints"] == 5  # 600 ... 1000
+    assert verdict["mean"]["at_least_as_high"] == 5  # the mean still leads at 800
+    seed1 = verdict["per_seed"][1]
+    assert seed1["at_least_as_high"] == 4 and seed1["lowest_at_step"] == 800
+    assert seed1["lowest_margin_pct"] == pytest.approx(-1.0)
+    assert module.checkpoint_verdict(marks, {"naruto": curves["naruto"]}) is None
+    lines, summary = module.checkpoint_lines(records)
+    assert any("in the mean over seeds 5 of 5" in line and "seed 1: 4 of 5" in line
+               for line in lines)
+    assert summary["verdict"]["mean"]["at_least_as_high"] == 5
