@@ -29,6 +29,11 @@ Choices of this implementation beyond the published description (all switchable)
   connectivity check would reject the others after the search).
 * When the best goal cannot be reached, the next best (``goal_attempts``, 3) are tried
   before giving up (the published system gives up at once and stays).
+* The E-RRT path is shortcut (``shortcut_paths``): the tree's zigzag chain of nodes, which
+  can run many times the needed length, becomes the straight free segments it allows.
+* Of two goals that see about as much, the nearer by the way through free space wins
+  (``goal_search.distance_discount_m`` 3 m with ``discount_by_travel``), not the nearer in a
+  straight line through a wall.
 * When the newest map puts the agent itself inside the clearance of a surface (the map
   sharpened since the path was planned), the path starts with a short straight move to the
   nearest free voxel within ``escape_radius_m``; otherwise the planner could never start.
