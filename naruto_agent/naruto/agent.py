@@ -157,6 +157,13 @@ class NarutoConfig:
             on an open scan (no ceiling, a missing wall) the space rays reach over a wall top
             or through a gap is outside the scan, where the env refuses moves. False: goals
             and frontier anywhere in measured free space.
+        scan_top_margin_m: ... and at least this far below the measured surfaces' top (0.3
+            m): from the height of a room's open wall tops the space beyond the walls is in
+            view below, and the env's scanned-space rule refuses such points (with 0.5 m goal
+            levels a goal at 3.0 m came up in a 3 m room without a ceiling). In a closed
+            room the top is the ceiling, which the goals' 8 cm clearance keeps them from
+            anyway (the highest positions of the published-budget episodes lay 0.39-0.68
+            m below the scenes' top).
         unresolved_visit_looks: when the agent reaches a goal and turns to its views, every
             target the goal search saw from that goal counts this many looks: its
             uncertainty in the planner view is divided by ``1 + look_weight * looks`` (the
@@ -204,6 +211,7 @@ class NarutoConfig:
     panorama_every: int = 5
     goals_in_observed_space: bool = True
     stay_in_scanned_space: bool = True
+    scan_top_margin_m: float = 0.3
     unresolved_visit_looks: float = 4.0
     initial_look_around: bool = True
     seed: int = 0
@@ -229,9 +237,9 @@ class NarutoConfig:
             raise ValueError(f"max_rotation_step_deg must be in (0, 180], got "
                              f"{self.max_rotation_step_deg}")
         if (self.escape_radius_m < 0 or self.arrival_tolerance_m < 0
-                or self.unresolved_visit_looks < 0):
-            raise ValueError("escape_radius_m, arrival_tolerance_m and unresolved_visit_looks "
-                             "must be >= 0")
+                or self.unresolved_visit_looks < 0 or self.scan_top_margin_m < 0):
+            raise ValueError("escape_radius_m, arrival_tolerance_m, unresolved_visit_looks and "
+                             "scan_top_margin_m must be >= 0")
         self.planner.validate()
 
 
@@ -661,7 +669,7 @@ class NarutoPolicy(Policy):
         """(N,) bool: points over measured surface and below the measured surfaces' top."""
         observed = self.mapper.observed_space
         return observed.sample(observed.supported(), points) & (
-            points[:, 2] <= observed.scan_top_z())
+            points[:, 2] <= observed.scan_top_z() - self.config.scan_top_margin_m)
 
     # -- recovery ----------------------------------------------------------------------------
     def _recover(self, position: np.ndarray, record: dict[str, Any]) -> Plan | None:
