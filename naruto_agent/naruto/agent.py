@@ -652,7 +652,7 @@ class NarutoPolicy(Policy):
             free = observed.sample(observed.grid.free, sdf.grid_points()).reshape(sdf.shape)
             mask = free if mask is None else mask & free
         if self.config.stay_in_scanned_space:
-            inside = self._inside_scan(sdf.grid_points()).reshape(sdf.shape)
+            inside = self._inside_scan(sdf.grid_points(), start).reshape(sdf.shape)
             mask = inside if mask is None else mask & inside
         failed = self.monitor.recent_failed_goals()
         if len(failed):
@@ -665,11 +665,13 @@ class NarutoPolicy(Policy):
             mask = ~near if mask is None else mask & ~near
         return mask
 
-    def _inside_scan(self, points: np.ndarray) -> np.ndarray:
-        """(N,) bool: points over measured surface and below the measured surfaces' top."""
+    def _inside_scan(self, points: np.ndarray, position: np.ndarray) -> np.ndarray:
+        """(N,) bool: points over measured surface and ``scan_top_margin_m`` below the
+        measured surfaces' top, or no higher than the agent stands (where the env let it be:
+        over a scan that is mostly floor the measured top can lie below the agent)."""
         observed = self.mapper.observed_space
-        return observed.sample(observed.supported(), points) & (
-            points[:, 2] <= observed.scan_top_z() - self.config.scan_top_margin_m)
+        top = max(observed.scan_top_z() - self.config.scan_top_margin_m, float(position[2]))
+        return observed.sample(observed.supported(), points) & (points[:, 2] <= top)
 
     # -- recovery ----------------------------------------------------------------------------
     def _recover(self, position: np.ndarray, record: dict[str, Any]) -> Plan | None:
@@ -717,7 +719,7 @@ class NarutoPolicy(Policy):
             points = points[np.linalg.norm(points - position, axis=1)
                             <= self.config.recovery.wander_max_m]
             if self.config.stay_in_scanned_space:
-                points = points[self._inside_scan(points)]
+                points = points[self._inside_scan(points, position)]
             if len(points) == 0:
                 return None
             history = np.asarray(self.monitor.trajectory[-300:])

@@ -239,3 +239,28 @@ def test_escape_from_inside_a_blocked_ball_takes_a_line_the_move_check_accepts()
     assert path is not None and np.allclose(path[0], agent)
     assert policy.sdf.sample(path[-1][None])[0] > policy.config.planner.clearance_m
     assert all(policy._move_is_free(a, b) for a, b in zip(path[:-1], path[1:], strict=True))
+
+
+def test_goals_may_stay_as_high_as_the_agent_stands_over_a_low_scan() -> None:
+    """Goals lie ``scan_top_margin_m`` below the measured top, but never lower than the
+    agent stands: over a scan that is mostly floor the top can lie below the agent, and
+    without this it had no goal at all and never moved."""
+    env = gym.make("NarutoRecon-v0", scene="replica_like_room:no_ceiling", image_scale=0.1,
+                   coverage_samples=2000, max_episode_steps=20)
+    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy.bind(EnvContext.from_env(env.unwrapped, step_budget=20))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    for _ in range(10):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+    observed = policy.mapper.observed_space
+    position = np.asarray(observation["pose"], np.float64)[:3, 3]
+    top = observed.scan_top_z() - policy.config.scan_top_margin_m
+    column = np.array([[position[0], position[1], z] for z in np.arange(0.2, 6.0, 0.1)])
+    supported = observed.sample(observed.supported(), column)
+    low = policy._inside_scan(column, np.array([*position[:2], 0.0]))
+    assert np.array_equal(low, supported & (column[:, 2] <= top))
+    high = policy._inside_scan(column, np.array([*position[:2], top + 1.0]))
+    assert np.array_equal(high, supported & (column[:, 2] <= top + 1.0))
+    assert (high & ~low).any()  # the agent's own height admits more
+    env.close()
