@@ -546,8 +546,8 @@ class NarutoPolicy(Policy):
             return  # stopped on the way: nothing was refuted
         if self.visit_looks is None:
             self.visit_looks = np.zeros(self.sdf.shape, np.float32)
-        cells = np.round((np.asarray(targets, np.float64).reshape(-1, 3) - self.sdf.origin)
-                         / self.sdf.voxel_size).astype(np.int64)
+        cells = np.rint(self.sdf.world_to_voxel(np.asarray(targets, np.float64).reshape(-1, 3))
+                        ).astype(np.int64)
         cells = cells[np.all((cells >= 0) & (cells < np.asarray(self.sdf.shape)), axis=1)]
         np.add.at(self.visit_looks, tuple(cells.T), np.float32(self.config.unresolved_visit_looks))
         self._view_stale = True
@@ -631,7 +631,6 @@ class NarutoPolicy(Policy):
             return None
         finally:
             self.timings["rrt"] += time.perf_counter() - clock
-
 
     def _shorten(self, sdf: SdfVolume, path: np.ndarray) -> np.ndarray:
         """The planned path shortcut (``shortcut_paths``), nodes a step apart again."""

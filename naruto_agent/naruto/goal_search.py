@@ -349,9 +349,7 @@ def search_goals(
         if goal_mask.shape != sdf.shape:
             raise ValueError(f"goal_mask shape {goal_mask.shape} differs from the volume's "
                              f"{sdf.shape}")
-        voxel = np.clip(np.rint(sdf.world_to_voxel(candidates)).astype(np.int64), 0,
-                        np.asarray(sdf.shape) - 1)
-        keep &= goal_mask[voxel[:, 0], voxel[:, 1], voxel[:, 2]]
+        keep &= _sample_nearest(sdf, goal_mask, candidates)
     goals = candidates[keep]
     diagnostics: dict[str, float] = {
         "candidates": float(len(candidates)),
@@ -392,6 +390,9 @@ def search_goals(
     if config.distance_discount_m is not None and origin is not None:
         way = np.linalg.norm(goals - np.asarray(origin, np.float64).reshape(1, 3), axis=1)
         if config.discount_by_travel and travel is not None:
+            if travel.shape != sdf.shape:
+                raise ValueError(f"travel volume shape {travel.shape} differs from the SDF's "
+                                 f"{sdf.shape}")
             by_travel = _sample_nearest(sdf, travel, goals)
             way = np.where(np.isfinite(by_travel), by_travel, way)
         discount = np.exp(-way / config.distance_discount_m)
@@ -420,8 +421,6 @@ def search_goals(
 
 def _sample_nearest(sdf: SdfVolume, volume: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(N,) values of a volume on ``sdf``'s grid at the voxels nearest to ``points``."""
-    if volume.shape != sdf.shape:
-        raise ValueError(f"travel volume shape {volume.shape} differs from the SDF's {sdf.shape}")
     voxel = np.clip(np.rint(sdf.world_to_voxel(points)).astype(np.int64), 0,
                     np.asarray(sdf.shape) - 1)
     return volume[voxel[:, 0], voxel[:, 1], voxel[:, 2]]

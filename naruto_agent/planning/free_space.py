@@ -53,16 +53,20 @@ class FreeSpaceComponents:
         return cls(labels.astype(np.int32), int(count), sdf.origin.copy(), sdf.voxel_size,
                    float(clearance_m))
 
-    def labels_near(self, point: np.ndarray) -> set[int]:
-        """Component ids of the free corners of the cell holding ``point`` (empty if none)."""
+    def free_corners(self, point: np.ndarray) -> np.ndarray:
+        """(K, 3) voxel indices of the free corners of the cell holding ``point`` (K = 0
+        when it lies outside the grid or no corner is free)."""
         index = (np.asarray(point, dtype=np.float64).reshape(3) - self.origin) / self.voxel_size
         upper = np.asarray(self.labels.shape) - 2
         if np.any(index < 0) or np.any(index > upper + 1):
-            return set()
-        cell = np.clip(np.floor(index).astype(np.int64), 0, upper)
-        corners = cell + _CELL_CORNERS
-        found = self.labels[corners[:, 0], corners[:, 1], corners[:, 2]]
-        return {int(label) for label in found if label > 0}
+            return np.zeros((0, 3), np.int64)
+        corners = np.clip(np.floor(index).astype(np.int64), 0, upper) + _CELL_CORNERS
+        return corners[self.labels[corners[:, 0], corners[:, 1], corners[:, 2]] > 0]
+
+    def labels_near(self, point: np.ndarray) -> set[int]:
+        """Component ids of the free corners of the cell holding ``point`` (empty if none)."""
+        corners = self.free_corners(point)
+        return {int(label) for label in self.labels[corners[:, 0], corners[:, 1], corners[:, 2]]}
 
     def connected(self, start: np.ndarray, goal: np.ndarray) -> bool:
         """False only when no free path (per the trilinear SDF) can join start and goal."""
@@ -79,15 +83,8 @@ class FreeSpaceComponents:
         which the straight distance between two rooms does not show.
         """
         start = np.asarray(start, dtype=np.float64).reshape(3)
-        index = (start - self.origin) / self.voxel_size
-        upper = np.asarray(self.labels.shape) - 2
         distances = np.full(self.labels.shape, np.inf)
-        if np.any(index < 0) or np.any(index > upper + 1):
-            return distances
-        cell = np.clip(np.floor(index).astype(np.int64), 0, upper)
-        corners = cell + _CELL_CORNERS
-        free = self.labels[corners[:, 0], corners[:, 1], corners[:, 2]] > 0
-        corners = corners[free]
+        corners = self.free_corners(start)
         if len(corners) == 0:
             return distances
         offsets = np.linalg.norm(corners * self.voxel_size + self.origin - start, axis=1)
