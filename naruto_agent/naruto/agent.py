@@ -140,6 +140,15 @@ class NarutoConfig:
             chain of nodes, which zigzags and, where the tree grew around a room before it
             found the door, can be many times longer than needed (apartment, seed 1: a
             442-node path to a goal 2.2 m away). False: published.
+        shortcut_margin_m: extra clearance a shortcut segment keeps on top of the
+            planner's (the tree's own edges keep the planner's). The trilinear SDF of the
+            0.1 m planner grid overestimates the distance to convex corners and thin edges
+            by up to a few centimetres, and a long straight segment passes close to many
+            of them: with the shortcuts the env refused 30 moves per 5000-step apartment
+            episode, against 11 before. 0 (default): the planner's clearance. 0.05 m
+            (apartment, 2500 steps, seeds 0-2): 9 / 10 / 17 refused moves (seed 1 without
+            it: 26), but coverage at step 2500 of 97.4 / 95.7 / 97.2 % against 97.5 / 97.7 /
+            98.2 %: the safer shortcuts are fewer and the ways longer.
         reachable_iterations: extensions of the goal search's fallback tree.
         check_moves_on_map: check every move against the agent's newest map before sending
             it (2 cm samples, agent radius 5 cm); a blocked move is a detected collision.
@@ -203,6 +212,7 @@ class NarutoConfig:
     skip_views_in_image: bool = True
     goal_attempts: int = 3
     shortcut_paths: bool = True
+    shortcut_margin_m: float = 0.0
     reachable_iterations: int = 2000
     check_moves_on_map: bool = True
     escape_radius_m: float = 0.3
@@ -237,9 +247,10 @@ class NarutoConfig:
             raise ValueError(f"max_rotation_step_deg must be in (0, 180], got "
                              f"{self.max_rotation_step_deg}")
         if (self.escape_radius_m < 0 or self.arrival_tolerance_m < 0
-                or self.unresolved_visit_looks < 0 or self.scan_top_margin_m < 0):
-            raise ValueError("escape_radius_m, arrival_tolerance_m, unresolved_visit_looks and "
-                             "scan_top_margin_m must be >= 0")
+                or self.unresolved_visit_looks < 0 or self.scan_top_margin_m < 0
+                or self.shortcut_margin_m < 0):
+            raise ValueError("escape_radius_m, arrival_tolerance_m, unresolved_visit_looks, "
+                             "scan_top_margin_m and shortcut_margin_m must be >= 0")
         self.planner.validate()
 
 
@@ -637,7 +648,8 @@ class NarutoPolicy(Policy):
         if not self.config.shortcut_paths:
             return path
         planner = self.config.planner
-        return densify(shortcut_path(sdf, path, self._clearance, planner.collision_sample_m),
+        clearance = self._clearance + self.config.shortcut_margin_m
+        return densify(shortcut_path(sdf, path, clearance, planner.collision_sample_m),
                        planner.step_m)
 
     def _goal_mask(self, start: np.ndarray) -> np.ndarray | None:

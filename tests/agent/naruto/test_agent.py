@@ -134,6 +134,8 @@ def test_settings_and_errors():
         NarutoPolicy(mapper="octomap")
     with pytest.raises(ValueError, match="unknown NARUTO settings"):
         NarutoPolicy(speed=3)
+    with pytest.raises(ValueError, match="shortcut_margin_m"):
+        NarutoPolicy(shortcut_margin_m=-0.01)
     with pytest.raises(ValueError, match="unknown goal_search settings"):
         NarutoPolicy(goal_search={"radius": 1})
     with pytest.raises(RuntimeError, match="reset"):
