@@ -18,6 +18,7 @@ import open3d as o3d
 import open3d.core as o3c
 import trimesh
 
+from naruto_gym.evaluation.tsdf_kernels import behind_surface_bounds
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 
@@ -299,6 +300,55 @@ class TsdfFusionMapper:
         tsdf = self._grid.attribute("tsdf").cpu().numpy().reshape(shape)
         weight = self._grid.attribute("weight").cpu().numpy().reshape(shape)
         return table, low, tsdf, weight
+
+    def behind_surface_bounds(self, centres: np.ndarray, half_extent_m: float) -> np.ndarray:
+        """(N,) upper bounds of the signed distance at ``centres`` from the voxels behind a
+        measured surface nearby: the least ``s(p) + |p - c|`` over the observed voxels ``p``
+        with negative SDF within ``half_extent_m`` of the centre ``c`` along every axis (+inf
+        where there is none).
+
+        A signed distance field is 1-Lipschitz, so ``s(c) <= s(p) + |p - c|``; the fused
+        field is not where it meets unobserved space. A wall seen from one side fuses into a
+        band of negative values a few voxels thick with "unknown" (read as +truncation)
+        behind it, and samples of :meth:`sdf` on a grid coarser than the band (a planner's
+        10 cm) often fall on either side of it: the wall vanishes. The bound restores it.
+        """
+        centres = np.ascontiguousarray(np.asarray(centres, dtype=np.float64).reshape(-1, 3))
+        if self.is_empty or len(centres) == 0:
+            return np.full(len(centres), np.inf)
+        if self._sdf_index is None:
+            self._sdf_index = self._block_table()
+        table, low, tsdf, weights = self._sdf_index
+        return behind_surface_bounds(centres, float(half_extent_m), table, low, tsdf, weights,
+                                     self.block_resolution, self.voxel_size_m,
+                                     self.truncation_m, self.min_weight)
+
+    def grid_cells_near_blocks(
+        self, origin: np.ndarray, spacing: float, shape: tuple[int, int, int],
+        blocks: np.ndarray, half_extent_m: float,
+    ) -> np.ndarray:
+        """(nx, ny, nz) bool over the grid ``origin + spacing * index``: the points whose box
+        of ``half_extent_m`` (the voxels :meth:`behind_surface_bounds` reads) or whose
+        interpolation corners (:meth:`grid_near_blocks`) reach into one of ``blocks``."""
+        near = self.grid_near_blocks(origin, spacing, shape, blocks)
+        blocks = np.asarray(blocks, dtype=np.int64).reshape(-1, 3)
+        if len(blocks) == 0:
+            return near
+        origin = np.asarray(origin, dtype=np.float64).reshape(3)
+        low, high = [], []
+        for axis in range(3):
+            coordinate = origin[axis] + spacing * np.arange(shape[axis], dtype=np.float64)
+            first = np.ceil((coordinate - half_extent_m) / self.voxel_size_m).astype(np.int64)
+            last = np.floor((coordinate + half_extent_m) / self.voxel_size_m).astype(np.int64)
+            # Blocks of the box's first and last voxels; both rise along the axis.
+            low.append(np.searchsorted(np.floor_divide(last, self.block_resolution),
+                                       blocks[:, axis], side="left"))
+            high.append(np.searchsorted(np.floor_divide(first, self.block_resolution),
+                                        blocks[:, axis], side="right"))
+        for x0, x1, y0, y1, z0, z1 in zip(low[0], high[0], low[1], high[1], low[2], high[2],
+                                          strict=True):
+            near[x0:x1, y0:y1, z0:z1] = True
+        return near
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """Signed distance of the fused map at world points, metres (positive in free space).
