@@ -85,9 +85,12 @@ class Args:
                 / "naruto_episode_office0_neural_2000steps_mad.json"),
             str(RESULTS / "naruto_neural_office0"
                 / "naruto_episode_office0_neural_2000steps_no_active_sampling.json"),
+            str(RESULTS / "naruto_neural_office0"
+                / "naruto_episode_office0_neural_2000steps_final_agent.json"),
         ]
     )
-    """naruto_episode.py records of the neural agent on the Replica sample"""
+    """naruto_episode.py records of the neural agent on the Replica sample (labelled by
+    their ``--tag``)"""
     neural_replays: list[str] = field(
         default_factory=lambda: [
             str(RESULTS / "naruto_neural_office0" / "reference_map_replayed_raster_sim.json"),
@@ -152,6 +155,8 @@ def neural_rows(paths: list[str], replays: list[str], scene: str) -> list[list[s
                  f"{camera['width']}): reference map / own mesh")
         if "active_sampling" in settings:
             label += ", without active ray sampling"
+        if record["args"].get("tag"):
+            label += f" [{record['args']['tag']}]"
         phases = record.get("phases_ms_per_step", {})
         rows.append([
             label, "1", "0",

@@ -145,8 +145,9 @@ class NarutoConfig:
             0.1 m planner grid overestimates the distance to convex corners and thin edges
             by up to a few centimetres, and a long straight segment passes close to many
             of them: with the shortcuts the env refused 30 moves per 5000-step apartment
-            episode, against 11 before. 0 (default): the planner's clearance. 0.05 m
-            (apartment, 2500 steps, seeds 0-2): 9 / 10 / 17 refused moves (seed 1 without
+            episode, against 11 before (13.7 once the TSDF planner view was bounded from
+            behind surfaces). 0 (default): the planner's clearance. 0.05 m (apartment, 2500
+            steps, seeds 0-2, before that bound): 9 / 10 / 17 refused moves (seed 1 without
             it: 26), but coverage at step 2500 of 97.4 / 95.7 / 97.2 % against 97.5 / 97.7 /
             98.2 %: the safer shortcuts are fewer and the ways longer.
         reachable_iterations: extensions of the goal search's fallback tree.
