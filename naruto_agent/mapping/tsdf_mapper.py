@@ -73,7 +73,7 @@ class TsdfMapperConfig:
         planner_behind_surface_bound: the planner SDF at a voxel is at most ``s(p) + |p - c|``
             for every fused voxel ``p`` with negative SDF in its cell
             (:meth:`~naruto_gym.evaluation.TsdfFusionMapper.behind_surface_bounds`). A wall
-            seen from one side fuses into a band of negative values 4-6 cm thick with unknown
+            seen from one side fuses into a band of negative values 2-6 cm thick with unknown
             space behind it, which the planner's 10 cm samples straddle more often than not:
             the wall vanished from the planner's map, and on ``two_rooms`` with holes (seed 2)
             the agent tried 13 moves through the partition wall next to it. False: the SDF
