@@ -44,8 +44,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import ndimage
 
+from naruto_agent.mapping.support_kernels import empty_sectors_below
 from naruto_agent.planning.sdf_volume import SdfVolume
 from naruto_agent.policies.occupancy import OccupancyGrid
+from naruto_gym.motion.scanned_space import ScannedSpaceConfig, support_directions
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
@@ -231,6 +233,26 @@ class ObservedSpace:
             lower = total[:, :, np.maximum(np.arange(total.shape[2] - 1) - depth, 0)]
             self._supported = upper - lower > 0
         return self._supported
+
+    def sectors_seen_below(self, points: np.ndarray, max_length_m: float = 5.0) -> np.ndarray:
+        """(N,) bool: every azimuth sector of the env's downward support cone
+        (:func:`naruto_gym.motion.scanned_space.support_directions`: 8 sectors of a cone of 60
+        degrees around straight down) meets an occupied voxel of this grid from the point.
+
+        The env's scanned-space rule asks that of the scan itself; asked of what the agent has
+        measured, it tells a point inside a room (floor and walls below all around) from one in
+        a wall's opening or over the edge of a floor hole, which the coarser
+        :meth:`supported` accepts when measured surface lies within ``support_reach_m``.
+        """
+        points = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3))
+        if len(points) == 0:
+            return np.zeros(0, bool)
+        directions, sectors = support_directions(ScannedSpaceConfig())
+        empty = empty_sectors_below(points, directions.astype(np.float64), sectors,
+                                    int(sectors.max()) + 1, self.grid.occupied,
+                                    np.asarray(self.grid.origin, np.float64),
+                                    self.config.voxel_size_m, float(max_length_m))
+        return empty == 0
 
     def scan_top_z(self) -> float:
         """Height (world z of voxel tops) under which ``top_quantile`` of the occupied

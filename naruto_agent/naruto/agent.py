@@ -174,6 +174,13 @@ class NarutoConfig:
             room the top is the ceiling, which the goals' 8 cm clearance keeps them from
             anyway (the highest positions of the published-budget episodes lay 0.39-0.68
             m below the scenes' top).
+        sector_support_after_escape: once the env has refused a move for leaving the scanned
+            space (the scan is open), candidate goals must also have measured surface below
+            them in every sector of the env's support cone
+            (:meth:`ObservedSpace.sectors_seen_below`), not only within 0.3 m sideways: a
+            point in a wall's opening or over a floor hole's edge passes the coarse test and
+            the env refuses it. Closed scenes never give an escape refusal, so nothing changes
+            there. False: the coarse test only.
         unresolved_visit_looks: when the agent reaches a goal and turns to its views, every
             target the goal search saw from that goal counts this many looks: its
             uncertainty in the planner view is divided by ``1 + look_weight * looks`` (the
@@ -223,6 +230,7 @@ class NarutoConfig:
     goals_in_observed_space: bool = True
     stay_in_scanned_space: bool = True
     scan_top_margin_m: float = 0.3
+    sector_support_after_escape: bool = True
     unresolved_visit_looks: float = 4.0
     initial_look_around: bool = True
     seed: int = 0
@@ -345,6 +353,7 @@ class NarutoPolicy(Policy):
         self._commanded: np.ndarray | None = None
         self._visit: tuple[np.ndarray, np.ndarray] | None = None  # (goal, targets it sees)
         self.visit_looks: np.ndarray | None = None  # looks per planner voxel from visits
+        self._scan_open = False  # the env refused a move for leaving the scanned space
 
     # -- mapping -----------------------------------------------------------------------------
     def bind(self, context: EnvContext) -> None:
@@ -420,6 +429,7 @@ class NarutoPolicy(Policy):
         self._commanded = None
         self._visit = None
         self.visit_looks = None
+        self._scan_open = False  # the env refused a move for leaving the scan
         self._integrate(observation)
 
     def _note_refused_move(self, position: np.ndarray, info: Info) -> None:
@@ -430,6 +440,8 @@ class NarutoPolicy(Policy):
             return
         radius = self.config.recovery.escape_blocked_radius_m
         direction = self._commanded - position
+        if info.get("collision_reason") == "escape":
+            self._scan_open = True
         if info.get("collision_reason") == "escape" and radius > 0:
             # The scan ends at the refused point: block the space beyond it, in a ball that
             # touches the refused point and leaves the agent's side alone.
@@ -683,7 +695,11 @@ class NarutoPolicy(Policy):
         over a scan that is mostly floor the measured top can lie below the agent)."""
         observed = self.mapper.observed_space
         top = max(observed.scan_top_z() - self.config.scan_top_margin_m, float(position[2]))
-        return observed.sample(observed.supported(), points) & (points[:, 2] <= top)
+        inside = observed.sample(observed.supported(), points) & (points[:, 2] <= top)
+        if self._scan_open and self.config.sector_support_after_escape:
+            candidates = np.flatnonzero(inside)
+            inside[candidates] = observed.sectors_seen_below(points[candidates])
+        return inside
 
     # -- recovery ----------------------------------------------------------------------------
     def _recover(self, position: np.ndarray, record: dict[str, Any]) -> Plan | None:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import naruto_gym  # noqa: F401  (registers the env)
+from naruto_agent.mapping.observed_space import ObservedSpace
 from naruto_agent.naruto import NarutoPolicy
 from naruto_agent.naruto.recovery import (
     BlockedSpace,
@@ -264,3 +265,38 @@ def test_goals_may_stay_as_high_as_the_agent_stands_over_a_low_scan() -> None:
     assert np.array_equal(high, supported & (column[:, 2] <= top + 1.0))
     assert (high & ~low).any()  # the agent's own height admits more
     env.close()
+
+
+def test_after_an_escape_refusal_goals_need_measured_surface_in_every_sector_below() -> None:
+    """Once the env has refused a move for leaving the scan, the agent's goals must also pass
+    the env's cone test on its own map; a surface refusal (as on every closed scene) leaves
+    the coarse test alone."""
+    for reason, strict in (("escape", True), ("surface", False)):
+        policy, observation, _, position, _ = _first_move(reason)
+        assert policy._scan_open == strict
+        observed = policy.mapper.observed_space
+        points = policy.sdf.grid_points()
+        top = max(observed.scan_top_z() - policy.config.scan_top_margin_m, position[2])
+        coarse = observed.sample(observed.supported(), points) & (points[:, 2] <= top)
+        inside = policy._inside_scan(points, position)
+        if strict:
+            expected = coarse.copy()
+            expected[coarse] = observed.sectors_seen_below(points[coarse])
+            assert np.array_equal(inside, expected)
+            assert (coarse & ~inside).any() and inside.any()
+        else:
+            assert np.array_equal(inside, coarse)
+
+
+def test_sectors_seen_below_over_a_floor_with_a_hole() -> None:
+    """Every sector of the downward cone meets the floor from above its middle; not past its
+    edge, nor low over a hole; high over the hole the cone's outer rays meet the floor all
+    around (the env's rule, on the agent's grid)."""
+    space = ObservedSpace(np.array([[-3.0, -3.0, -0.5], [3.0, 3.0, 3.0]]))
+    xs = np.arange(-1.95, 2.0, 0.1)
+    floor = np.array([[x, y, 0.0] for x in xs for y in xs if max(abs(x), abs(y)) > 0.5])
+    space.grid.mark_occupied(floor)
+    assert space.sectors_seen_below(np.array([[1.2, 1.2, 1.0], [0.0, 0.0, 1.5]])).all()
+    assert not space.sectors_seen_below(np.array([[2.3, 0.0, 1.0]]))[0]  # past the edge
+    assert not space.sectors_seen_below(np.array([[0.0, 0.0, 0.2]]))[0]  # low over the hole
+    assert len(space.sectors_seen_below(np.zeros((0, 3)))) == 0
