@@ -657,7 +657,8 @@ class NarutoPolicy(Policy):
             self.timings["rrt"] += time.perf_counter() - clock
 
     def _shorten(self, sdf: SdfVolume, path: np.ndarray) -> np.ndarray:
-        """The planned path shortcut (``shortcut_paths``), nodes a step apart again."""
+        """The planned path shortcut (``shortcut_paths``), nodes a step apart again (the
+        tree's own nodes are a step apart already)."""
         if not self.config.shortcut_paths:
             return path
         planner = self.config.planner
@@ -761,7 +762,7 @@ class NarutoPolicy(Policy):
             for goal in points[order]:
                 result = plan_path(sdf, position, goal, planner, self._components)
                 if result.success:
-                    path = densify(self._shorten(sdf, result.path), planner.step_m)
+                    path = self._shorten(sdf, result.path)
                     return Plan(path, self._look_around(goal), goal.copy(),
                                 {"recovery": "wander"})
             return None

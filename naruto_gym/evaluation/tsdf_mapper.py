@@ -229,23 +229,15 @@ class TsdfFusionMapper:
         cell's block is b - 1 or b. Along an axis the base blocks of the grid's points do not
         decrease, so each block marks one box of indices.
         """
-        blocks = np.asarray(blocks, dtype=np.int64).reshape(-1, 3)
-        near = np.zeros(shape, dtype=bool)
-        if len(blocks) == 0:
-            return near
         origin = np.asarray(origin, dtype=np.float64).reshape(3)
-        low, high = [], []
+        spans = []
         for axis in range(3):
             # The same arithmetic as SdfVolume.voxel_to_world and points_near_blocks.
             coordinate = origin[axis] + spacing * np.arange(shape[axis], dtype=np.float64)
             base = np.floor_divide(np.floor(coordinate / self.voxel_size_m).astype(np.int64),
                                    self.block_resolution)
-            low.append(np.searchsorted(base, blocks[:, axis] - 1, side="left"))
-            high.append(np.searchsorted(base, blocks[:, axis], side="right"))
-        for x0, x1, y0, y1, z0, z1 in zip(low[0], high[0], low[1], high[1], low[2], high[2],
-                                          strict=True):
-            near[x0:x1, y0:y1, z0:z1] = True
-        return near
+            spans.append((base, base + 1))
+        return _mark_block_spans(shape, blocks, spans)
 
     # -- outputs -----------------------------------------------------------------------
     @property
@@ -330,25 +322,17 @@ class TsdfFusionMapper:
         """(nx, ny, nz) bool over the grid ``origin + spacing * index``: the points whose box
         of ``half_extent_m`` (the voxels :meth:`behind_surface_bounds` reads) or whose
         interpolation corners (:meth:`grid_near_blocks`) reach into one of ``blocks``."""
-        near = self.grid_near_blocks(origin, spacing, shape, blocks)
-        blocks = np.asarray(blocks, dtype=np.int64).reshape(-1, 3)
-        if len(blocks) == 0:
-            return near
         origin = np.asarray(origin, dtype=np.float64).reshape(3)
-        low, high = [], []
+        spans = []
         for axis in range(3):
             coordinate = origin[axis] + spacing * np.arange(shape[axis], dtype=np.float64)
             first = np.ceil((coordinate - half_extent_m) / self.voxel_size_m).astype(np.int64)
             last = np.floor((coordinate + half_extent_m) / self.voxel_size_m).astype(np.int64)
             # Blocks of the box's first and last voxels; both rise along the axis.
-            low.append(np.searchsorted(np.floor_divide(last, self.block_resolution),
-                                       blocks[:, axis], side="left"))
-            high.append(np.searchsorted(np.floor_divide(first, self.block_resolution),
-                                        blocks[:, axis], side="right"))
-        for x0, x1, y0, y1, z0, z1 in zip(low[0], high[0], low[1], high[1], low[2], high[2],
-                                          strict=True):
-            near[x0:x1, y0:y1, z0:z1] = True
-        return near
+            spans.append((np.floor_divide(first, self.block_resolution),
+                          np.floor_divide(last, self.block_resolution)))
+        return (self.grid_near_blocks(origin, spacing, shape, blocks)
+                | _mark_block_spans(shape, blocks, spans))
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """Signed distance of the fused map at world points, metres (positive in free space).
@@ -397,3 +381,24 @@ class TsdfFusionMapper:
         known = weight_sum > 1e-12
         result[known] = total[known] / weight_sum[known]
         return result
+
+
+def _mark_block_spans(
+    shape: tuple[int, int, int], blocks: np.ndarray,
+    spans: list[tuple[np.ndarray, np.ndarray]],
+) -> np.ndarray:
+    """(nx, ny, nz) bool: the grid points that reach into one of ``blocks`` (K, 3), where
+    along each axis a point reaches the blocks ``spans[axis][0][i] .. spans[axis][1][i]``
+    (both non-decreasing along the axis), so that each block marks one box of indices."""
+    blocks = np.asarray(blocks, dtype=np.int64).reshape(-1, 3)
+    near = np.zeros(shape, dtype=bool)
+    if len(blocks) == 0:
+        return near
+    low = [np.searchsorted(last, blocks[:, axis], side="left")
+           for axis, (_, last) in enumerate(spans)]
+    high = [np.searchsorted(first, blocks[:, axis], side="right")
+            for axis, (first, _) in enumerate(spans)]
+    for x0, x1, y0, y1, z0, z1 in zip(low[0], high[0], low[1], high[1], low[2], high[2],
+                                      strict=True):
+        near[x0:x1, y0:y1, z0:z1] = True
+    return near
