@@ -44,10 +44,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import ndimage
 
-from naruto_agent.mapping.support_kernels import empty_sectors_below
 from naruto_agent.planning.sdf_volume import SdfVolume
 from naruto_agent.policies.occupancy import OccupancyGrid
-from naruto_gym.motion.scanned_space import ScannedSpaceConfig, support_directions
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
@@ -235,33 +233,16 @@ class ObservedSpace:
         return self._supported
 
     def sectors_seen_below(self, points: np.ndarray, max_length_m: float = 5.0) -> np.ndarray:
-        """(N,) bool: every azimuth sector of the env's downward support cone
-        (:func:`naruto_gym.motion.scanned_space.support_directions`: 8 sectors of a cone of 60
-        degrees around straight down) meets an occupied voxel of this grid from the point.
-
-        The env's scanned-space rule asks that of the scan itself; asked of what the agent has
-        measured, it tells a point inside a room (floor and walls below all around) from one in
-        a wall's opening or over the edge of a floor hole, which the coarser
-        :meth:`supported` accepts when measured surface lies within ``support_reach_m``.
-        """
-        points = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3))
-        if len(points) == 0:
-            return np.zeros(0, bool)
-        directions, sectors = support_directions(ScannedSpaceConfig())
-        empty = empty_sectors_below(points, directions.astype(np.float64), sectors,
-                                    int(sectors.max()) + 1, self.grid.occupied,
-                                    np.asarray(self.grid.origin, np.float64),
-                                    self.config.voxel_size_m, float(max_length_m))
-        return empty == 0
+        """(N,) bool: every sector of the env's downward support cone meets measured surface
+        from the point (:meth:`OccupancyGrid.sectors_seen_below`). Stricter than
+        :meth:`supported`, which accepts a point in a wall's opening or over the edge of a
+        floor hole when measured surface lies within ``support_reach_m`` sideways below."""
+        return self.grid.sectors_seen_below(points, max_length_m)
 
     def scan_top_z(self) -> float:
         """Height (world z of voxel tops) under which ``top_quantile`` of the occupied
         voxels lie; +inf before anything was measured occupied."""
-        levels = np.nonzero(self.grid.occupied)[2]
-        if len(levels) == 0:
-            return float("inf")
-        level = np.quantile(levels, self.config.top_quantile, method="higher")
-        return float(self.grid.origin[2] + (level + 1) * self.config.voxel_size_m)
+        return self.grid.occupied_top_z(self.config.top_quantile)
 
     def frontier(self) -> np.ndarray:
         """(nx, ny, nz) bool: free voxels next to unknown ones, in clusters big enough,

@@ -21,6 +21,16 @@ the map shows nothing in the way (past a missing wall, above a room without a ce
 policy learns from each such refusal, as from a bump: a refused climb at the scan's top
 lowers its flight ceiling (``RefusedMoves``), any other refused move blocks the voxels it
 headed into and the edge drawn through nearby refusals; paths and goals avoid blocked voxels.
+Paths, goals and the frontier itself also keep to where the env's own test would pass on the
+policy's map (``scanned_space_support``): measured surface in every sector of the downward
+cone (:meth:`OccupancyGrid.sectors_seen_below`), and ``height_margin_m`` below the measured
+surfaces' top (the height below which ``scan_top_quantile`` of the occupied voxels lie: a
+ceiling, or the wall tops of a scan without one). Frontier past a missing wall or over the open
+top can never be resolved from inside; chased, it pulls the agent to the scan's edge again and
+again. Near the floor the policy may not have measured every sector below it yet; when no
+frontier can be reached through supported voxels it plans once more without the test for the
+path (goals still pass it). Held to the same test on every scan, the policy explores a closed
+scan and its open variants alike.
 
 When no frontier is left the map is complete and the agent keeps looking around where it is.
 """
@@ -63,6 +73,10 @@ class FrontierPolicy(Policy):
         max_focus_pitch_deg: the largest pitch used to look at a frontier cluster.
         replan_every: while moving, check the goal every this many steps.
         lookahead_voxels: how far along the path a shortcut may reach.
+        scanned_space_support: keep the frontier, goals and (where it can) paths where the
+            env's scanned-space test passes on the policy's own map (see above).
+        scan_top_quantile: with ``scanned_space_support``, paths stay ``height_margin_m``
+            below the height under which this share of the occupied voxels lies.
     """
 
     required_observations = ("depth", "pose")
@@ -84,6 +98,8 @@ class FrontierPolicy(Policy):
         max_focus_pitch_deg: float = 60.0,
         replan_every: int = 10,
         lookahead_voxels: int = 10,
+        scanned_space_support: bool = True,
+        scan_top_quantile: float = 0.99,
     ) -> None:
         super().__init__()
         if look_around_headings < 1 or not look_pitches_deg:
@@ -103,6 +119,8 @@ class FrontierPolicy(Policy):
         self.look_pitches_rad = tuple(float(np.deg2rad(p)) for p in look_pitches_deg)
         self.replan_every = replan_every
         self.lookahead_voxels = lookahead_voxels
+        self.scanned_space_support = scanned_space_support
+        self.scan_top_quantile = scan_top_quantile
         self.grid: OccupancyGrid | None = None
         self.state = "look"
         #: Goals reached or given up on this episode (world positions), for tests and plots.
@@ -151,10 +169,18 @@ class FrontierPolicy(Policy):
         self._start_look_around(pose, focus=None)
 
     # -- helpers -------------------------------------------------------------------------
-    def _z_band(self) -> tuple[float, float]:
+    def _z_band(self, position: np.ndarray) -> tuple[float, float]:
+        """Heights paths and goals keep to: ``height_margin_m`` inside the bounds, below the
+        flight ceiling refused climbs have taught, and (``scanned_space_support``)
+        ``height_margin_m`` below the measured surfaces' top, though never below the agent
+        itself (early on, the measured top may be a table)."""
+        assert self.grid is not None
         bounds = self.context.bounds
         low = bounds[0, 2] + self.height_margin_m
         high = min(bounds[1, 2] - self.height_margin_m, self.refused.ceiling_z - self.voxel_size_m)
+        if self.scanned_space_support:
+            top = self.grid.occupied_top_z(self.scan_top_quantile) - self.height_margin_m
+            high = min(high, max(top, float(position[2])))
         if high <= low:  # a very flat scene: use its middle
             middle = (bounds[0, 2] + bounds[1, 2]) / 2.0
             return middle - self.voxel_size_m, middle + self.voxel_size_m
@@ -202,19 +228,25 @@ class FrontierPolicy(Policy):
         cells = cells[near <= self.visited_radius_m]
         self._visited[tuple(cells.T)] = True
 
-    def _frontier_clusters(self) -> tuple[np.ndarray, np.ndarray]:
+    def _frontier_clusters(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(labels, kept) of frontier clusters big enough and not yet visited."""
         assert self.grid is not None and self._visited is not None
         frontier = self.grid.frontier() & ~self._visited
+        if self.scanned_space_support:
+            frontier &= self._inside_scan(frontier, position)
         labels, _ = ndimage.label(frontier, structure=_ALL_NEIGHBOURS)
         sizes = np.bincount(labels.reshape(-1))
         big = sizes >= self.min_cluster_voxels
         big[0] = False
         return labels, big[labels]
 
-    def _traversable(self, position: np.ndarray) -> np.ndarray:
+    def _traversable(
+        self, position: np.ndarray, inflation_voxels: int, inside_scan: bool
+    ) -> np.ndarray:
         assert self.grid is not None
-        traversable = self.grid.traversable(self.inflation_voxels, self._z_band())
+        traversable = self.grid.traversable(inflation_voxels, self._z_band(position))
+        if inside_scan:
+            traversable = self._inside_scan(traversable, position)
         # The agent may always leave its own neighbourhood (it may start close to a wall).
         centre = self.grid.world_to_cell(position[None])[0]
         low = np.maximum(centre - 1, 0)
@@ -224,21 +256,55 @@ class FrontierPolicy(Policy):
         traversable &= ~self._blocked  # but never past an edge the env refused
         return traversable
 
+    def _inside_scan(self, candidates: np.ndarray, position: np.ndarray) -> np.ndarray:
+        """Of the ``candidates`` voxels, those the env's scanned-space test would accept on
+        this policy's map: inside the height band and with measured surface in every sector
+        of the downward cone."""
+        assert self.grid is not None
+        low, high = self._z_band(position)
+        cells = np.argwhere(candidates)
+        z = self.grid.cell_to_world(cells)[:, 2]
+        cells = cells[(z >= low) & (z <= high)]
+        inside = np.zeros_like(candidates)
+        supported = self.grid.sectors_seen_below(self.grid.cell_to_world(cells))
+        inside[tuple(cells[supported].T)] = True
+        return inside
+
     def _plan(self, position: np.ndarray) -> bool:
-        """Choose the nearest reachable frontier cluster; set the path. False: none left."""
+        """Choose the nearest reachable frontier cluster; set the path. False: none left.
+
+        Paths keep to voxels that pass the env's test on this map (``scanned_space_support``).
+        When no cluster can be reached that way, the agent may be boxed in by its own
+        inflation (it went low under furniture, and later frames closed the way it came in)
+        or by floor it has not measured below it: it then plans once more without inflation,
+        and then once more without the test (goals still pass it)."""
         assert self.grid is not None
         self.plans += 1
         self._steps_since_plan = 0
-        labels, kept = self._frontier_clusters()
+        labels, kept = self._frontier_clusters(position)
         if not kept.any():
             return False
-        traversable = self._traversable(position)
+        held = self.scanned_space_support
+        attempts = [(self.inflation_voxels, held), (0, held), (self.inflation_voxels, False)]
+        for inflation, inside_scan in dict.fromkeys(attempts):
+            if self._plan_through(position, labels, kept, inflation, inside_scan):
+                return True
+        return False
+
+    def _plan_through(
+        self, position: np.ndarray, labels: np.ndarray, kept: np.ndarray, inflation: int,
+        inside_scan: bool,
+    ) -> bool:
+        assert self.grid is not None
+        traversable = self._traversable(position, inflation, inside_scan)
         start = self.grid.world_to_cell(position[None])[0]
         start = np.clip(start, 0, np.array(self.grid.shape) - 1)
         plan = self.grid.plan_from(start, traversable)
         reachable = np.isfinite(plan.costs) & traversable
         distance, nearest = ndimage.distance_transform_edt(~kept, return_indices=True)
         candidates = reachable & (distance <= self.goal_radius_voxels)
+        if self.scanned_space_support and not inside_scan:
+            candidates = self._inside_scan(candidates, position)
         # Do not count the start as a goal: it was just looked around from.
         candidates[tuple(start)] = False
         index = np.flatnonzero(candidates)
@@ -261,10 +327,10 @@ class FrontierPolicy(Policy):
         self.state = "move"
         return True
 
-    def _goal_still_frontier(self) -> bool:
+    def _goal_still_frontier(self, position: np.ndarray) -> bool:
         if self._goal_cell is None:
             return False
-        _, kept = self._frontier_clusters()
+        _, kept = self._frontier_clusters(position)
         radius = int(np.ceil(self.goal_radius_voxels))
         low = np.maximum(self._goal_cell - radius, 0)
         high = self._goal_cell + radius + 1
@@ -365,7 +431,7 @@ class FrontierPolicy(Policy):
                 self.state = "plan"
             elif self._steps_since_plan >= self.replan_every:
                 self._steps_since_plan = 0
-                if not self._goal_still_frontier():
+                if not self._goal_still_frontier(position):
                     self.state = "plan"
         elif self.state == "done" and self._steps_since_plan >= 3 * self.replan_every:
             self.state = "plan"  # turning on the spot may have revealed new frontiers

@@ -24,6 +24,8 @@ import numpy as np
 from scipy import ndimage
 from skimage.graph import MCP_Geometric
 
+from naruto_agent.policies.support_kernels import empty_sectors_below
+from naruto_gym.motion.scanned_space import ScannedSpaceConfig, support_directions
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 _FACE_NEIGHBOURS = ndimage.generate_binary_structure(3, 1)
@@ -187,6 +189,36 @@ class OccupancyGrid:
             z = self.origin[2] + (np.arange(self.shape[2]) + 0.5) * self.voxel_size_m
             result &= ((z >= z_band[0]) & (z <= z_band[1]))[None, None, :]
         return result
+
+    def occupied_top_z(self, quantile: float) -> float:
+        """Height (world z of voxel tops) under which ``quantile`` of the occupied voxels
+        lie; +inf before anything was measured occupied. A scan without a ceiling ends at its
+        wall tops; a few stray fragments above barely move the quantile."""
+        levels = np.nonzero(self.occupied)[2]
+        if len(levels) == 0:
+            return float("inf")
+        level = np.quantile(levels, quantile, method="higher")
+        return float(self.origin[2] + (level + 1) * self.voxel_size_m)
+
+    def sectors_seen_below(self, points: np.ndarray, max_length_m: float = 5.0) -> np.ndarray:
+        """(N,) bool: every azimuth sector of the env's downward support cone
+        (:func:`naruto_gym.motion.scanned_space.support_directions`: 8 sectors of a cone of 60
+        degrees around straight down) meets an occupied voxel of this grid from the point.
+
+        The env's scanned-space rule asks that of the scan itself; asked of what a policy has
+        measured, it tells a point inside a room (floor and walls below all around) from one
+        in a wall's opening, past a missing wall or over the edge of a floor hole.
+        """
+        points = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 3))
+        if len(points) == 0:
+            return np.zeros(0, bool)
+        directions, sectors = support_directions(ScannedSpaceConfig())
+        empty = empty_sectors_below(
+            points, directions.astype(np.float64), sectors, int(sectors.max()) + 1,
+            self.occupied, np.asarray(self.origin, np.float64), self.voxel_size_m,
+            float(max_length_m),
+        )
+        return empty == 0
 
     def mark_occupied(self, points: np.ndarray) -> None:
         """Mark the voxels of world points occupied (e.g. where a move bumped into something)."""

@@ -83,7 +83,7 @@ def test_frontier_learns_the_ceiling_and_blocks_what_is_ahead_only():
     policy._last_target = position + [0.0, 0.0, 0.1]
     policy._learn_edge(position, observation["panorama"])
     assert policy.refused.ceiling_z == pytest.approx(2.9)
-    assert policy._z_band()[1] < 2.9
+    assert policy._z_band(position)[1] < 2.9
     assert not policy._blocked.any()
     position = np.array([0.3, 2.5, 1.2])
     policy._last_target = position + [-0.1, 0.0, 0.0]
@@ -92,3 +92,66 @@ def test_frontier_learns_the_ceiling_and_blocks_what_is_ahead_only():
     assert len(blocked) > 0 and np.all(blocked[:, 0] < position[0])
     own = policy.grid.world_to_cell(position[None])[0]
     assert not policy._blocked[tuple(own)]
+
+
+def _free_grid_with_floor(policy: FrontierPolicy, floor_x_max: float) -> np.ndarray:
+    """Make the policy's map all free, with a measured floor (z < 0.1 m) where x is below
+    ``floor_x_max`` and unknown space beyond x = 4.5 m; returns the voxel centres."""
+    grid = policy.grid
+    grid.observed[:] = True
+    grid.log_odds[:] = -1.0
+    centres = grid.cell_to_world(np.argwhere(np.ones(grid.shape, bool))).reshape(*grid.shape, 3)
+    grid.log_odds[(centres[..., 0] < floor_x_max) & (centres[..., 2] < 0.1)] = 3.0
+    grid.observed[centres[..., 0] > 4.5] = False
+    return centres
+
+
+def test_frontier_counts_only_frontier_inside_the_scan():
+    policy = FrontierPolicy(scanned_space_support=False)
+    env = _env("replica_like_room:no_ceiling", policy)
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    centres = _free_grid_with_floor(policy, floor_x_max=3.5)  # the scan's floor ends there
+    inside_pocket = (np.abs(centres[..., 0] - 2.5) < 0.25) & (np.abs(centres[..., 1] - 2.5) < 0.25)
+    inside_pocket &= np.abs(centres[..., 2] - 1.2) < 0.25
+    policy.grid.observed[inside_pocket] = False  # a pocket the agent has not seen, over the floor
+    position = np.array([2.0, 2.0, 1.2])
+    _, kept = policy._frontier_clusters(position)
+    outside = centres[kept][:, 0] > 4.0
+    assert outside.any()  # without the test the frontier past the floor's edge counts
+    policy.scanned_space_support = True
+    _, kept = policy._frontier_clusters(position)
+    assert kept.any() and not (centres[kept][:, 0] > 3.5).any()
+    near_pocket = np.linalg.norm(centres[kept] - [2.5, 2.5, 1.2], axis=1) < 0.6
+    assert near_pocket.all()
+    assert policy._plan(position)
+    goal = policy.grid.cell_to_world(policy._goal_cell[None])[0]
+    assert np.linalg.norm(goal - [2.5, 2.5, 1.2]) < 0.8
+
+
+def test_frontier_plans_without_inflation_when_its_map_boxes_it_in():
+    """Seen in replica_like_room, seed 2: low under furniture, later frames closed the way in
+    by a voxel; with its inflated map the policy found no goal and turned on the spot for
+    the last 120 steps of the episode."""
+    policy = FrontierPolicy(scanned_space_support=False)  # the map below has no floor
+    env = _env("replica_like_room", policy)
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    grid = policy.grid
+    grid.observed[:] = True
+    grid.log_odds[:] = -1.0
+    centre = grid.world_to_cell(np.array([[2.0, 2.0, 1.2]]))[0]
+    i, j, k = centre
+    # A closed box of occupied voxels 3 voxels out, with a one-voxel gap in its +x side.
+    box = np.zeros(grid.shape, bool)
+    box[i - 3 : i + 4, j - 3 : j + 4, k - 3 : k + 4] = True
+    box[i - 2 : i + 3, j - 2 : j + 3, k - 2 : k + 3] = False
+    box[i + 3, j, k] = False
+    grid.log_odds[box] = 3.0
+    grid.observed[i + 8 :, :, :] = False  # unknown space beyond: the frontier
+    position = grid.cell_to_world(centre[None])[0]
+    labels, kept = policy._frontier_clusters(position)
+    assert not policy._plan_through(position, labels, kept, policy.inflation_voxels, False)
+    assert policy._plan(position)
+    path_cells = grid.world_to_cell(policy._path)
+    assert np.any(np.all(path_cells == [i + 3, j, k], axis=1))  # through the gap

@@ -1,4 +1,4 @@
-"""Numba kernel of :meth:`ObservedSpace.sectors_seen_below` (the agent's mirror of the env's
+"""Numba kernel of :meth:`OccupancyGrid.sectors_seen_below` (a policy's mirror of the env's
 scanned-space support test, on its own occupancy grid)."""
 
 from __future__ import annotations
