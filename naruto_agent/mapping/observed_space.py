@@ -218,18 +218,8 @@ class ObservedSpace:
             if self.config.support_below_m is None:
                 self._supported = np.ones(self.grid.shape, bool)
                 return self._supported
-            voxel = self.config.voxel_size_m
-            occupied = self.grid.occupied
-            reach = int(round(self.config.support_reach_m / voxel))
-            if reach:
-                occupied = ndimage.maximum_filter(occupied, size=(2 * reach + 1,) * 2 + (1,))
-            depth = max(1, math.ceil(self.config.support_below_m / voxel - 1e-9))
-            # below[z] = occupied voxels in z - depth .. z - 1 of the (widened) column.
-            total = np.cumsum(occupied, axis=2, dtype=np.int32)
-            total = np.concatenate([np.zeros(total.shape[:2] + (1,), np.int32), total], axis=2)
-            upper = total[:, :, :-1]
-            lower = total[:, :, np.maximum(np.arange(total.shape[2] - 1) - depth, 0)]
-            self._supported = upper - lower > 0
+            self._supported = self.grid.supported_below(self.config.support_below_m,
+                                                         self.config.support_reach_m)
         return self._supported
 
     def sectors_seen_below(self, points: np.ndarray, max_length_m: float = 5.0) -> np.ndarray:

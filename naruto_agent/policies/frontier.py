@@ -23,14 +23,16 @@ lowers its flight ceiling (``RefusedMoves``), any other refused move blocks the 
 headed into and the edge drawn through nearby refusals; paths and goals avoid blocked voxels.
 Paths, goals and the frontier itself also keep to where the env's own test would pass on the
 policy's map (``scanned_space_support``): measured surface in every sector of the downward
-cone (:meth:`OccupancyGrid.sectors_seen_below`), and ``height_margin_m`` below the measured
-surfaces' top (the height below which ``scan_top_quantile`` of the occupied voxels lie: a
-ceiling, or the wall tops of a scan without one). Frontier past a missing wall or over the open
-top can never be resolved from inside; chased, it pulls the agent to the scan's edge again and
-again. Near the floor the policy may not have measured every sector below it yet; when no
-frontier can be reached through supported voxels it plans once more without the test for the
-path (goals still pass it). Held to the same test on every scan, the policy explores a closed
-scan and its open variants alike.
+cone (:meth:`OccupancyGrid.sectors_seen_below`), and below the measured surfaces' top (the
+height below which ``scan_top_quantile`` of the occupied voxels lie: a ceiling, or the wall
+tops of a scan without one). Frontier past a missing wall or over the open top can never be
+resolved from inside; chased, it pulls the agent to the scan's edge again and again. While
+little is measured (a floor and nothing around it), no frontier passes that test: the frontier
+then counts over measured surface (:meth:`OccupancyGrid.supported_below`). Near the floor the
+policy may not have measured every sector below it yet; when no frontier can be reached
+through voxels that pass the test it plans once more without the test for the path (the goal
+still passes it). Held to the same rules on every scan, the policy explores a closed scan and
+its open variants alike.
 
 When no frontier is left the map is complete and the agent keeps looking around where it is.
 """
@@ -75,8 +77,12 @@ class FrontierPolicy(Policy):
         lookahead_voxels: how far along the path a shortcut may reach.
         scanned_space_support: keep the frontier, goals and (where it can) paths where the
             env's scanned-space test passes on the policy's own map (see above).
-        scan_top_quantile: with ``scanned_space_support``, paths stay ``height_margin_m``
+        scan_top_quantile: with ``scanned_space_support``, paths stay ``scan_top_margin_m``
             below the height under which this share of the occupied voxels lies.
+        scan_top_margin_m: see ``scan_top_quantile``.
+        support_below_m, support_reach_m: with ``scanned_space_support``, while no frontier
+            passes the full test, a frontier voxel counts with measured surface below it, at
+            most this far down and this far sideways.
     """
 
     required_observations = ("depth", "pose")
@@ -100,6 +106,9 @@ class FrontierPolicy(Policy):
         lookahead_voxels: int = 10,
         scanned_space_support: bool = True,
         scan_top_quantile: float = 0.99,
+        scan_top_margin_m: float = 0.0,
+        support_below_m: float = 3.0,
+        support_reach_m: float = 0.3,
     ) -> None:
         super().__init__()
         if look_around_headings < 1 or not look_pitches_deg:
@@ -121,6 +130,9 @@ class FrontierPolicy(Policy):
         self.lookahead_voxels = lookahead_voxels
         self.scanned_space_support = scanned_space_support
         self.scan_top_quantile = scan_top_quantile
+        self.scan_top_margin_m = scan_top_margin_m
+        self.support_below_m = support_below_m
+        self.support_reach_m = support_reach_m
         self.grid: OccupancyGrid | None = None
         self.state = "look"
         #: Goals reached or given up on this episode (world positions), for tests and plots.
@@ -179,7 +191,7 @@ class FrontierPolicy(Policy):
         low = bounds[0, 2] + self.height_margin_m
         high = min(bounds[1, 2] - self.height_margin_m, self.refused.ceiling_z - self.voxel_size_m)
         if self.scanned_space_support:
-            top = self.grid.occupied_top_z(self.scan_top_quantile) - self.height_margin_m
+            top = self.grid.occupied_top_z(self.scan_top_quantile) - self.scan_top_margin_m
             high = min(high, max(top, float(position[2])))
         if high <= low:  # a very flat scene: use its middle
             middle = (bounds[0, 2] + bounds[1, 2]) / 2.0
@@ -229,11 +241,23 @@ class FrontierPolicy(Policy):
         self._visited[tuple(cells.T)] = True
 
     def _frontier_clusters(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(labels, kept) of frontier clusters big enough and not yet visited."""
+        """(labels, kept) of frontier clusters big enough and not yet visited; with
+        ``scanned_space_support``, of frontier inside the scan (see the module docstring)."""
         assert self.grid is not None and self._visited is not None
         frontier = self.grid.frontier() & ~self._visited
-        if self.scanned_space_support:
-            frontier &= self._inside_scan(frontier, position)
+        if not self.scanned_space_support:
+            return self._clusters(frontier)
+        labels, kept = self._clusters(self._inside_scan(frontier, position))
+        if kept.any():
+            return labels, kept
+        # Little measured yet (a floor, nothing around): frontier over measured surface.
+        low, high = self._z_band(position)
+        z = self.grid.origin[2] + (np.arange(self.grid.shape[2]) + 0.5) * self.voxel_size_m
+        frontier &= ((z >= low) & (z <= high))[None, None, :]
+        frontier &= self.grid.supported_below(self.support_below_m, self.support_reach_m)
+        return self._clusters(frontier)
+
+    def _clusters(self, frontier: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         labels, _ = ndimage.label(frontier, structure=_ALL_NEIGHBOURS)
         sizes = np.bincount(labels.reshape(-1))
         big = sizes >= self.min_cluster_voxels

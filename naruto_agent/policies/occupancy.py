@@ -17,6 +17,7 @@ minimum-cost-path search (``skimage.graph.MCP_Geometric``, 26-connected).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -189,6 +190,23 @@ class OccupancyGrid:
             z = self.origin[2] + (np.arange(self.shape[2]) + 0.5) * self.voxel_size_m
             result &= ((z >= z_band[0]) & (z <= z_band[1]))[None, None, :]
         return result
+
+    def supported_below(self, below_m: float, reach_m: float) -> np.ndarray:
+        """(nx, ny, nz) bool: voxels with an occupied voxel below them, at most ``below_m``
+        down and ``reach_m`` sideways (a coarse version of the env's cone test: a floor seen
+        only around a table still supports the space above the table)."""
+        voxel = self.voxel_size_m
+        occupied = self.occupied
+        reach = int(round(reach_m / voxel))
+        if reach:
+            occupied = ndimage.maximum_filter(occupied, size=(2 * reach + 1,) * 2 + (1,))
+        depth = max(1, math.ceil(below_m / voxel - 1e-9))
+        # below[z] = occupied voxels in z - depth .. z - 1 of the (widened) column.
+        total = np.cumsum(occupied, axis=2, dtype=np.int32)
+        total = np.concatenate([np.zeros(total.shape[:2] + (1,), np.int32), total], axis=2)
+        upper = total[:, :, :-1]
+        lower = total[:, :, np.maximum(np.arange(total.shape[2] - 1) - depth, 0)]
+        return upper - lower > 0
 
     def occupied_top_z(self, quantile: float) -> float:
         """Height (world z of voxel tops) under which ``quantile`` of the occupied voxels

@@ -155,3 +155,29 @@ def test_frontier_plans_without_inflation_when_its_map_boxes_it_in():
     assert policy._plan(position)
     path_cells = grid.world_to_cell(policy._path)
     assert np.any(np.all(path_cells == [i + 3, j, k], axis=1))  # through the gap
+
+
+def test_frontier_over_a_bare_floor_still_has_somewhere_to_go():
+    """Seen on habitat-sim's open sample room (seed 0): only the floor measured, so no
+    frontier voxel had measured surface in every sector below it, and the policy turned on
+    the spot for 280 steps. It then takes the frontier over measured surface."""
+    policy = FrontierPolicy()
+    env = _env("replica_like_room:no_ceiling", policy)
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    grid = policy.grid
+    grid.observed[:] = False
+    grid.log_odds[:] = 0.0
+    centres = grid.cell_to_world(np.argwhere(np.ones(grid.shape, bool))).reshape(*grid.shape, 3)
+    across = np.linalg.norm(centres[..., :2] - [2.0, 2.0], axis=-1)
+    floor = (across < 0.6) & (centres[..., 2] < 0.1)  # the floor seen below the agent
+    above = (across < 1.0) & (centres[..., 2] >= 0.1) & (centres[..., 2] < 1.5)
+    grid.observed[floor | above] = True
+    grid.log_odds[floor] = 3.0
+    grid.log_odds[above] = -1.0
+    position = np.array([2.0, 2.0, 0.8])
+    strict = policy._inside_scan(grid.frontier(), position)
+    assert not strict.any()  # the unknown floor around fails the full test
+    _, kept = policy._frontier_clusters(position)
+    assert kept.any()
+    assert policy._plan(position)
