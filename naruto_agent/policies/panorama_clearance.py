@@ -75,6 +75,32 @@ def horizontal_profile(
     return horizontal.min(axis=0)
 
 
+def floor_edge_profile(panorama: np.ndarray, max_polar_deg: float = 60.0) -> np.ndarray:
+    """Horizontal distance per panorama column (azimuth) to where the scan below ends.
+
+    Walking a column's pixels from straight down towards the horizon (down to
+    ``max_polar_deg`` from straight down, the env's support cone), the first pixel that hits
+    nothing marks the edge of the scanned floor in that direction (past a missing wall, the
+    rim of a floor hole); the result is the horizontal distance of the last hit before it
+    (0 when straight down already misses), inf when every pixel of the cone hits. Inside a
+    closed scan every pixel below hits, so the profile is inf everywhere.
+    """
+    panorama = np.asarray(panorama, np.float64)
+    height, width = panorama.shape
+    elevation = np.pi / 2.0 - np.pi * (np.arange(height) + 0.5) / height
+    rows = np.flatnonzero(elevation <= -np.pi / 2.0 + np.deg2rad(max_polar_deg))[::-1]
+    below = panorama[rows]  # straight down first
+    horizontal = below * np.cos(elevation[rows])[:, None]
+    miss = below <= 0.0
+    first_miss = np.where(miss.any(axis=0), miss.argmax(axis=0), -1)
+    edge = np.full(width, np.inf)
+    missing = first_miss >= 0
+    columns = np.flatnonzero(missing)
+    before = first_miss[missing] - 1
+    edge[columns] = np.where(before >= 0, horizontal[np.maximum(before, 0), columns], 0.0)
+    return edge
+
+
 def profile_clearance(profile: np.ndarray, yaw: float, half_width_rad: float) -> float:
     """Smallest profile distance within ``half_width_rad`` of azimuth ``yaw``."""
     width = len(profile)

@@ -11,8 +11,10 @@
   which also leads through doorways into the next rooms), the camera sweeping between the
   wall beside it and the room ahead and across, and up and down. Walls are read from the
   depth panorama around the agent's height; on an open scan the edge of the scanned floor
-  (past a missing wall) shows nothing there, so a move the env refuses as an escape leaves a
-  virtual wall that the follower follows from then on. Only the bounds, the observations and
+  (past a missing wall, the rim of a floor hole) shows nothing there, so the follower also
+  reads where the panorama's downward rays stop hitting (``floor_edge_profile``) as a wall,
+  and a move the env still refuses as an escape leaves a virtual wall that the follower
+  follows from then on. Only the bounds, the observations and
   the step info are used, never the mesh.
 """
 
@@ -26,6 +28,7 @@ from scipy.spatial.transform import Rotation
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
 from naruto_agent.policies.panorama_clearance import (
     RefusedMoves,
+    floor_edge_profile,
     horizontal_profile,
     profile_clearance,
 )
@@ -238,7 +241,10 @@ class PassivePolicy(Policy):
         collided = bool(info.get("collided", False)) if info else False
         if collided and info.get("collision_reason") == "escape" and self._last_target is not None:
             self._refused.record(position, self._last_target)
-        profile = self._refused.overlay(horizontal_profile(observation["panorama"]), position)
+        # Walls around the agent's height, and the scan's floor edge as a wall of its own.
+        panorama = observation["panorama"]
+        profile = np.minimum(horizontal_profile(panorama), floor_edge_profile(panorama))
+        profile = self._refused.overlay(profile, position)
         self._steer(profile, collided)
         bounds = self.context.bounds
         height = bounds[0, 2] + self.scan_height_fraction * (bounds[1, 2] - bounds[0, 2])

@@ -69,9 +69,31 @@ def _rollout(scene: str, name: str, seed: int, steps: int) -> Counter:
 @pytest.mark.slow
 def test_wall_follower_follows_the_edge_of_a_missing_wall():
     """Before it learned from escape refusals it was refused 26 times per 300 steps on
-    average here (benchmarks/open_scans.py, seeds 0-2)."""
+    average here (benchmarks/open_scans.py, seeds 0-2), and 5.3 before it read the floor's
+    edge from the panorama."""
     reasons = _rollout("replica_like_room:no_ceiling+missing_wall", "passive", 0, 300)
-    assert 1 <= reasons["escape"] <= 5
+    assert reasons["escape"] == 0
+
+
+def test_floor_edge_profile_finds_where_the_floor_ends():
+    from naruto_agent.policies.panorama_clearance import floor_edge_profile
+    from naruto_gym.sensors.panorama import EquirectangularCamera
+
+    # A floor 1 m below the agent that ends 0.8 m away towards +x, and goes on elsewhere.
+    camera = EquirectangularCamera(64, 128)
+    rays = camera.ray_directions.reshape(64, 128, 3).astype(np.float64)
+    down = rays[..., 2] < -1e-6
+    distance = np.where(down, 1.0 / np.maximum(-rays[..., 2], 1e-6), 0.0)
+    landing_x = distance * rays[..., 0]
+    panorama = np.where(down & (landing_x < 0.8), distance, 0.0).astype(np.float32)
+    edge = floor_edge_profile(panorama)
+    azimuth = -np.pi + 2.0 * np.pi * (np.arange(128) + 0.5) / 128
+    towards_x = np.abs(azimuth) < np.deg2rad(10.0)
+    assert np.all(edge[towards_x] <= 0.8) and np.all(edge[towards_x] > 0.6)
+    away = np.abs(azimuth) > np.deg2rad(120.0)
+    assert np.all(np.isinf(edge[away]))
+    closed = np.where(down, distance, 0.0).astype(np.float32)
+    assert np.all(np.isinf(floor_edge_profile(closed)))
 
 
 def test_frontier_learns_the_ceiling_and_blocks_what_is_ahead_only():
