@@ -106,6 +106,7 @@ from naruto_agent.policies.base import (
     clip_pose_action,
     pose_action,
 )
+from naruto_agent.policies.panorama_clearance import steep_miss_share
 
 MAPPERS = ("tsdf", "neural")
 
@@ -174,13 +175,26 @@ class NarutoConfig:
             room the top is the ceiling, which the goals' 8 cm clearance keeps them from
             anyway (the highest positions of the published-budget episodes lay 0.39-0.68
             m below the scenes' top).
-        sector_support_after_escape: once the env has refused a move for leaving the scanned
-            space (the scan is open), candidate goals must also have measured surface below
+        sector_support_after_escape: once the scan is known to be open (the env refused a
+            move for leaving the scanned space, or a depth frame saw the sky: see
+            ``open_sky_share``), candidate goals must also have measured surface below
             them in every sector of the env's support cone
             (:meth:`ObservedSpace.sectors_seen_below`), not only within 0.3 m sideways: a
             point in a wall's opening or over a floor hole's edge passes the coarse test and
-            the env refuses it. Closed scenes never give an escape refusal, so nothing changes
-            there. False: the coarse test only.
+            the env refuses it. Moves are checked too: a move from a point that passes the
+            test towards one ``edge_probe_m`` beyond its end (horizontally) that fails it is
+            refused on the agent's map, as the env would refuse it, and the space past it
+            blocked as after an escape refusal. Closed scenes give neither sign, so nothing
+            changes there. False: the coarse test only.
+        open_sky_share: the scan counts as open once this share of a depth frame's pixels
+            that look at least 35 degrees up or down hit nothing within the sensor's range
+            (:func:`~naruto_agent.policies.panorama_clearance.steep_miss_share`): indoors such
+            a ray meets a ceiling or a floor within a few metres, so misses mean a scan
+            without a ceiling or with a hole in its floor. Open scans showed it within 3
+            steps; the shipped scenes and the Replica sample never did. None: only an escape
+            refusal tells.
+        edge_probe_m: see ``sector_support_after_escape``: the agent's 0.1 m grid blurs the
+            scan's edge by up to a voxel, and the env keeps the agent's clearance from it.
         unresolved_visit_looks: when the agent reaches a goal and turns to its views, every
             target the goal search saw from that goal counts this many looks: its
             uncertainty in the planner view is divided by ``1 + look_weight * looks`` (the
@@ -231,6 +245,8 @@ class NarutoConfig:
     stay_in_scanned_space: bool = True
     scan_top_margin_m: float = 0.3
     sector_support_after_escape: bool = True
+    open_sky_share: float | None = 0.05
+    edge_probe_m: float = 0.15
     unresolved_visit_looks: float = 4.0
     initial_look_around: bool = True
     seed: int = 0
@@ -260,6 +276,11 @@ class NarutoConfig:
                 or self.shortcut_margin_m < 0):
             raise ValueError("escape_radius_m, arrival_tolerance_m, unresolved_visit_looks, "
                              "scan_top_margin_m and shortcut_margin_m must be >= 0")
+        if self.open_sky_share is not None and not 0 < self.open_sky_share <= 1:
+            raise ValueError(f"open_sky_share must be in (0, 1] or None, got "
+                             f"{self.open_sky_share}")
+        if self.edge_probe_m < 0:
+            raise ValueError(f"edge_probe_m must be >= 0, got {self.edge_probe_m}")
         self.planner.validate()
 
 
@@ -353,7 +374,7 @@ class NarutoPolicy(Policy):
         self._commanded: np.ndarray | None = None
         self._visit: tuple[np.ndarray, np.ndarray] | None = None  # (goal, targets it sees)
         self.visit_looks: np.ndarray | None = None  # looks per planner voxel from visits
-        self._scan_open = False  # the env refused a move for leaving the scanned space
+        self._scan_open = False  # an escape refusal or the sky: the scan is open
 
     # -- mapping -----------------------------------------------------------------------------
     def bind(self, context: EnvContext) -> None:
@@ -380,6 +401,9 @@ class NarutoPolicy(Policy):
         changed = self.mapper.integrate(
             observation["rgb"], observation["depth"], pose, self._frame_index,
         )
+        if not self._scan_open and self.config.open_sky_share is not None:
+            miss = steep_miss_share(observation["depth"], pose, self.context.camera)
+            self._scan_open = miss >= self.config.open_sky_share
         panorama = observation.get("panorama")
         if (self.config.use_panorama and panorama is not None
                 and self._frame_index % self.config.panorama_every == 0):
@@ -429,7 +453,7 @@ class NarutoPolicy(Policy):
         self._commanded = None
         self._visit = None
         self.visit_looks = None
-        self._scan_open = False  # the env refused a move for leaving the scan
+        self._scan_open = False  # an escape refusal or the sky: the scan is open
         self._integrate(observation)
 
     def _note_refused_move(self, position: np.ndarray, info: Info) -> None:
@@ -438,17 +462,26 @@ class NarutoPolicy(Policy):
             return
         if np.linalg.norm(self._commanded - position) <= self.config.arrival_tolerance_m:
             return
-        radius = self.config.recovery.escape_blocked_radius_m
-        direction = self._commanded - position
         if info.get("collision_reason") == "escape":
             self._scan_open = True
-        if info.get("collision_reason") == "escape" and radius > 0:
-            # The scan ends at the refused point: block the space beyond it, in a ball that
-            # touches the refused point and leaves the agent's side alone.
-            self.blocked.add(self._commanded + radius * direction / np.linalg.norm(direction),
-                             radius)
+            self._block_past_edge(position, self._commanded)
         else:
-            self.blocked.add(self._commanded)
+            self._block(self._commanded, None)
+
+    def _block_past_edge(self, position: np.ndarray, target: np.ndarray) -> None:
+        """The scan ends at ``target``: block the space beyond it, in a ball that touches
+        the target and leaves the agent's side alone."""
+        radius = self.config.recovery.escape_blocked_radius_m
+        if radius <= 0:
+            self._block(target, None)
+            return
+        direction = target - position
+        self._block(target + radius * direction / np.linalg.norm(direction), radius)
+
+    def _block(self, centre: np.ndarray, radius: float | None) -> None:
+        """Block a ball in the agent's map (the blocked space's own radius when None); the
+        plan's goal failed."""
+        self.blocked.add(centre, radius)
         if self.sdf is not None:
             self.sdf = self.blocked.apply(self.sdf)
             self._components = None
@@ -515,7 +548,28 @@ class NarutoPolicy(Policy):
         if not self.config.check_moves_on_map or (plan is not None and plan.info.get("trusted")):
             return True  # a retreat goes back through space the agent has been in
         self._read_view()
-        return self._keeps_clearance(start, end)
+        if not self._keeps_clearance(start, end):
+            return False
+        if self._scan_open and self.config.sector_support_after_escape:
+            return self._stays_in_scan(start, end)
+        return True
+
+    def _stays_in_scan(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """On an open scan a path may cross a floor hole's edge or a wall's opening where
+        the goal search's test never looked: a move from a point that passes the env's cone
+        test on the agent's map towards one that fails it (probed ``edge_probe_m`` beyond
+        the move's end, horizontally) is refused here, and the space past it blocked so the
+        next plan goes elsewhere."""
+        across = np.array([end[0] - start[0], end[1] - start[1], 0.0])
+        length = float(np.linalg.norm(across))
+        if length < 1e-9:
+            return True
+        probe = end + self.config.edge_probe_m * across / length
+        held = self.mapper.observed_space.sectors_seen_below(np.stack([start, probe]))
+        if held[0] and not held[1]:
+            self._block_past_edge(start, end)
+            return False
+        return True
 
     def _keeps_clearance(self, start: np.ndarray, end: np.ndarray) -> bool:
         """The move check itself, on the current planner view (see :meth:`_move_is_free`)."""

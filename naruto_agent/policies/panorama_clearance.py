@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from naruto_gym.sensors.panorama import EquirectangularCamera
+from naruto_gym.sensors.pinhole import PinholeCamera
 
 
 class PanoramaClearance:
@@ -108,6 +109,26 @@ def profile_clearance(profile: np.ndarray, yaw: float, half_width_rad: float) ->
     difference = np.angle(np.exp(1j * (azimuth - yaw)))
     inside = np.abs(difference) <= half_width_rad
     return float(profile[inside].min()) if inside.any() else float("inf")
+
+
+def steep_miss_share(
+    depth: np.ndarray, pose: np.ndarray, camera: PinholeCamera, min_elevation_deg: float = 35.0,
+    stride: int = 4,
+) -> float:
+    """Share of a depth frame's pixels looking at least ``min_elevation_deg`` up or down
+    (every ``stride``-th pixel) that hit nothing within the sensor's range; 0 when none looks
+    that steeply. Indoors such a ray meets a ceiling or a floor within a few metres, so misses
+    there mean a scan without a ceiling or with a hole in its floor."""
+    depth = np.asarray(depth)[::stride, ::stride]
+    v, u = np.mgrid[0 : camera.height : stride, 0 : camera.width : stride]
+    rays = np.stack(
+        [(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones(u.shape)], axis=-1
+    )
+    up = rays @ np.asarray(pose, np.float64)[:3, :3][2]  # world z of each camera-frame ray
+    steep = np.abs(up) >= np.sin(np.deg2rad(min_elevation_deg)) * np.linalg.norm(rays, axis=-1)
+    if not steep.any():
+        return 0.0
+    return float(np.mean(depth[steep] <= 0.0))
 
 
 def sees_all_around_below(

@@ -300,3 +300,77 @@ def test_sectors_seen_below_over_a_floor_with_a_hole() -> None:
     assert not space.sectors_seen_below(np.array([[2.3, 0.0, 1.0]]))[0]  # past the edge
     assert not space.sectors_seen_below(np.array([[0.0, 0.0, 0.2]]))[0]  # low over the hole
     assert len(space.sectors_seen_below(np.zeros((0, 3)))) == 0
+
+
+def _agent_after(scene: str, steps: int) -> NarutoPolicy:
+    env = gym.make("NarutoRecon-v0", scene=scene, image_scale=0.1, coverage_samples=2000,
+                   max_episode_steps=steps)
+    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy.bind(EnvContext.from_env(env.unwrapped, step_budget=steps))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    for _ in range(steps):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+    env.close()
+    return policy
+
+
+def test_the_sky_in_a_depth_frame_tells_the_scan_is_open() -> None:
+    """Without a ceiling the first look-around's upward pixels hit nothing; a closed room's
+    never miss, so the agent there is as before."""
+    assert _agent_after("replica_like_room:no_ceiling", 12)._scan_open
+    assert not _agent_after("replica_like_room:fragments", 12)._scan_open
+
+
+def test_steep_miss_share_counts_only_steep_pixels() -> None:
+    from naruto_agent.policies.panorama_clearance import steep_miss_share
+    from naruto_gym.geometry.transforms import look_at_rotation, make_pose
+    from naruto_gym.sensors.pinhole import PinholeCamera
+
+    camera = PinholeCamera().scaled(0.1)
+    eye = np.array([1.0, 1.0, 1.0])
+    level = make_pose(look_at_rotation(eye, eye + [1.0, 0.0, 0.0]), eye)
+    up = make_pose(look_at_rotation(eye, eye + [1.0, 0.0, 3.0]), eye)
+    empty = np.zeros((camera.height, camera.width), np.float32)
+    assert steep_miss_share(empty, up, camera) == 1.0
+    assert steep_miss_share(np.ones_like(empty), up, camera) == 0.0
+    # Pitched 20 degrees up, only the top rows look 35 degrees or more up: misses elsewhere
+    # (a doorway far away, beyond the sensor's range) do not count.
+    tilted = make_pose(look_at_rotation(eye, eye + [1.0, 0.0, np.tan(np.deg2rad(20.0))]), eye)
+    top_rows = np.ones_like(empty)
+    top_rows[:4] = 0.0
+    assert 0.0 < steep_miss_share(top_rows, tilted, camera, stride=1) < 1.0
+    bottom_rows = np.ones_like(empty)
+    bottom_rows[-20:] = 0.0
+    assert steep_miss_share(bottom_rows, tilted, camera, stride=1) == 0.0
+    assert steep_miss_share(empty, level, camera) == 0.0  # nothing looks that steeply
+
+
+def test_a_move_towards_the_scans_edge_is_refused_on_the_agents_map() -> None:
+    """Once the scan is known open, a move whose probe lies past the measured floor's edge is
+    refused before the env sees it, and the space past it is blocked; a move inside passes."""
+    policy, *_ = _first_move("surface")
+    observed = policy.mapper.observed_space
+    observed.grid.log_odds[:] = 0.0
+    observed.grid.observed[:] = False
+    xs = np.arange(0.05, 2.0, 0.1)
+    observed.grid.mark_occupied(np.array([[x, y, 0.05] for x in xs for y in xs]))
+    policy._scan_open = True
+    blocked = len(policy.blocked.points)
+    assert policy._stays_in_scan(np.array([1.0, 1.0, 1.0]), np.array([1.1, 1.0, 1.0]))
+    assert len(policy.blocked.points) == blocked
+    start, end = np.array([1.8, 1.0, 1.0]), np.array([1.9, 1.0, 1.0])
+    assert not policy._stays_in_scan(start, end)
+    assert len(policy.blocked.points) == blocked + 1
+    assert policy.blocked.points[-1][0] > end[0]  # beyond the move's end, not behind it
+    # From a point the test already fails, the agent may move (it has to get back in).
+    assert policy._stays_in_scan(np.array([2.5, 1.0, 1.0]), np.array([2.6, 1.0, 1.0]))
+
+
+def test_config_rejects_bad_open_scan_settings() -> None:
+    from naruto_agent.naruto import NarutoConfig
+
+    with pytest.raises(ValueError, match="open_sky_share"):
+        NarutoConfig(open_sky_share=0.0)
+    with pytest.raises(ValueError, match="edge_probe_m"):
+        NarutoConfig(edge_probe_m=-0.1)
