@@ -21,18 +21,21 @@ the map shows nothing in the way (past a missing wall, above a room without a ce
 policy learns from each such refusal, as from a bump: a refused climb at the scan's top
 lowers its flight ceiling (``RefusedMoves``), any other refused move blocks the voxels it
 headed into and the edge drawn through nearby refusals; paths and goals avoid blocked voxels.
-Paths, goals and the frontier itself also keep to where the env's own test would pass on the
-policy's map (``scanned_space_support``): measured surface in every sector of the downward
-cone (:meth:`OccupancyGrid.sectors_seen_below`), and below the measured surfaces' top (the
-height below which ``scan_top_quantile`` of the occupied voxels lie: a ceiling, or the wall
-tops of a scan without one). Frontier past a missing wall or over the open top can never be
-resolved from inside; chased, it pulls the agent to the scan's edge again and again. While
-little is measured (a floor and nothing around it), no frontier passes that test: the frontier
-then counts over measured surface (:meth:`OccupancyGrid.supported_below`). Near the floor the
-policy may not have measured every sector below it yet; when no frontier can be reached
-through voxels that pass the test it plans once more without the test for the path (the goal
-still passes it). Held to the same rules on every scan, the policy explores a closed scan and
-its open variants alike.
+Once the scan is known to be open, from the first escape refusal or from a depth frame that
+sees the sky (steep pixels that hit nothing, ``open_sky_share``: indoors such a ray meets a
+ceiling or a floor within the sensor's range), paths, goals and the frontier itself keep to
+where the env's own test would pass on the policy's map (``scanned_space_support``): measured
+surface in every sector of the downward cone (:meth:`OccupancyGrid.sectors_seen_below`), and
+below the measured surfaces' top (the height below which ``scan_top_quantile`` of the
+occupied voxels lie: the wall tops of a scan without a ceiling). Frontier past a missing wall
+or over the open top can never be resolved from inside; chased, it pulls the agent to the
+scan's edge again and again. While little is measured (a floor and nothing around it), no
+frontier passes that test: the frontier then counts over measured surface
+(:meth:`OccupancyGrid.supported_below`). Near the floor the policy may not have measured every
+sector below it yet; when no frontier can be reached through voxels that pass the test it
+plans once more without the test for the path (the goal still passes it). On a closed scan
+(no sky, no escape refusal) none of this applies: held to the test there, the policy lost up
+to a point of coverage on the Replica sample (frontier near a cluttered ceiling).
 
 When no frontier is left the map is complete and the agent keeps looking around where it is.
 """
@@ -46,7 +49,7 @@ from scipy import ndimage
 
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
 from naruto_agent.policies.occupancy import OccupancyGrid
-from naruto_agent.policies.panorama_clearance import RefusedMoves
+from naruto_agent.policies.panorama_clearance import RefusedMoves, steep_miss_share
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, rotation_angle_between
 
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
@@ -75,8 +78,12 @@ class FrontierPolicy(Policy):
         max_focus_pitch_deg: the largest pitch used to look at a frontier cluster.
         replan_every: while moving, check the goal every this many steps.
         lookahead_voxels: how far along the path a shortcut may reach.
-        scanned_space_support: keep the frontier, goals and (where it can) paths where the
-            env's scanned-space test passes on the policy's own map (see above).
+        scanned_space_support: once the scan is known open, keep the frontier, goals and
+            (where it can) paths where the env's scanned-space test passes on the policy's
+            own map (see above).
+        open_sky_share: the scan counts as open once this share of a depth frame's pixels
+            that look at least 35 degrees up or down hit nothing (None: only an escape
+            refusal tells).
         scan_top_quantile: with ``scanned_space_support``, paths stay ``scan_top_margin_m``
             below the height under which this share of the occupied voxels lies.
         scan_top_margin_m: see ``scan_top_quantile``.
@@ -105,6 +112,7 @@ class FrontierPolicy(Policy):
         replan_every: int = 10,
         lookahead_voxels: int = 10,
         scanned_space_support: bool = True,
+        open_sky_share: float | None = 0.05,
         scan_top_quantile: float = 0.99,
         scan_top_margin_m: float = 0.0,
         support_below_m: float = 3.0,
@@ -129,6 +137,8 @@ class FrontierPolicy(Policy):
         self.replan_every = replan_every
         self.lookahead_voxels = lookahead_voxels
         self.scanned_space_support = scanned_space_support
+        self.open_sky_share = open_sky_share
+        self.scan_open = False  # an escape refusal or the sky: the scan is open
         self.scan_top_quantile = scan_top_quantile
         self.scan_top_margin_m = scan_top_margin_m
         self.support_below_m = support_below_m
@@ -176,21 +186,33 @@ class FrontierPolicy(Policy):
         self._pitch_index = 0
         self.refused.reset()
         self._last_target = None
+        self.scan_open = False
         pose = np.asarray(observation["pose"], np.float64)
-        self.grid.integrate(observation["depth"], pose, context.camera)
+        self._integrate(observation["depth"], pose)
         self._start_look_around(pose, focus=None)
 
     # -- helpers -------------------------------------------------------------------------
+    def _integrate(self, depth: np.ndarray, pose: np.ndarray) -> None:
+        assert self.grid is not None
+        self.grid.integrate(depth, pose, self.context.camera)
+        if not self.scan_open and self.open_sky_share is not None:
+            miss = steep_miss_share(depth, pose, self.context.camera)
+            self.scan_open = miss >= self.open_sky_share
+
+    @property
+    def _held_to_scan(self) -> bool:
+        return self.scanned_space_support and self.scan_open
+
     def _z_band(self, position: np.ndarray) -> tuple[float, float]:
         """Heights paths and goals keep to: ``height_margin_m`` inside the bounds, below the
-        flight ceiling refused climbs have taught, and (``scanned_space_support``)
-        ``height_margin_m`` below the measured surfaces' top, though never below the agent
+        flight ceiling refused climbs have taught, and on an open scan
+        ``scan_top_margin_m`` below the measured surfaces' top, though never below the agent
         itself (early on, the measured top may be a table)."""
         assert self.grid is not None
         bounds = self.context.bounds
         low = bounds[0, 2] + self.height_margin_m
         high = min(bounds[1, 2] - self.height_margin_m, self.refused.ceiling_z - self.voxel_size_m)
-        if self.scanned_space_support:
+        if self._held_to_scan:
             top = self.grid.occupied_top_z(self.scan_top_quantile) - self.scan_top_margin_m
             high = min(high, max(top, float(position[2])))
         if high <= low:  # a very flat scene: use its middle
@@ -245,7 +267,7 @@ class FrontierPolicy(Policy):
         ``scanned_space_support``, of frontier inside the scan (see the module docstring)."""
         assert self.grid is not None and self._visited is not None
         frontier = self.grid.frontier() & ~self._visited
-        if not self.scanned_space_support:
+        if not self._held_to_scan:
             return self._clusters(frontier)
         labels, kept = self._clusters(self._inside_scan(frontier, position))
         if kept.any():
@@ -297,7 +319,7 @@ class FrontierPolicy(Policy):
     def _plan(self, position: np.ndarray) -> bool:
         """Choose the nearest reachable frontier cluster; set the path. False: none left.
 
-        Paths keep to voxels that pass the env's test on this map (``scanned_space_support``).
+        On an open scan paths keep to voxels that pass the env's test on this map.
         When no cluster can be reached that way, the agent may be boxed in by its own
         inflation (it went low under furniture, and later frames closed the way it came in)
         or by floor it has not measured below it: it then plans once more without inflation,
@@ -308,7 +330,7 @@ class FrontierPolicy(Policy):
         labels, kept = self._frontier_clusters(position)
         if not kept.any():
             return False
-        held = self.scanned_space_support
+        held = self._held_to_scan
         attempts = [(self.inflation_voxels, held), (0, held), (self.inflation_voxels, False)]
         for inflation, inside_scan in dict.fromkeys(attempts):
             if self._plan_through(position, labels, kept, inflation, inside_scan):
@@ -327,7 +349,7 @@ class FrontierPolicy(Policy):
         reachable = np.isfinite(plan.costs) & traversable
         distance, nearest = ndimage.distance_transform_edt(~kept, return_indices=True)
         candidates = reachable & (distance <= self.goal_radius_voxels)
-        if self.scanned_space_support and not inside_scan:
+        if self._held_to_scan and not inside_scan:
             candidates = self._inside_scan(candidates, position)
         # Do not count the start as a goal: it was just looked around from.
         candidates[tuple(start)] = False
@@ -429,7 +451,7 @@ class FrontierPolicy(Policy):
             raise RuntimeError("call reset() before act()")
         pose = np.asarray(observation["pose"], np.float64)
         position = pose[:3, 3]
-        self.grid.integrate(observation["depth"], pose, self.context.camera)
+        self._integrate(observation["depth"], pose)
         self._steps_since_plan += 1
         collided = bool(info.get("collided", False)) if info else False
 
@@ -439,6 +461,7 @@ class FrontierPolicy(Policy):
             )
             self._stuck = 0 if moved else self._stuck + 1
             if collided and info.get("collision_reason") == "escape":
+                self.scan_open = True
                 self._learn_edge(position, observation.get("panorama"))
             elif collided and len(self._path) > 1:
                 # A bump: the map missed an obstacle there; remember it and plan again.

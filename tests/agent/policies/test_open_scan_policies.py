@@ -142,6 +142,7 @@ def test_frontier_counts_only_frontier_inside_the_scan():
     outside = centres[kept][:, 0] > 4.0
     assert outside.any()  # without the test the frontier past the floor's edge counts
     policy.scanned_space_support = True
+    policy.scan_open = True
     _, kept = policy._frontier_clusters(position)
     assert kept.any() and not (centres[kept][:, 0] > 3.5).any()
     near_pocket = np.linalg.norm(centres[kept] - [2.5, 2.5, 1.2], axis=1) < 0.6
@@ -198,8 +199,24 @@ def test_frontier_over_a_bare_floor_still_has_somewhere_to_go():
     grid.log_odds[floor] = 3.0
     grid.log_odds[above] = -1.0
     position = np.array([2.0, 2.0, 0.8])
+    policy.scan_open = True
     strict = policy._inside_scan(grid.frontier(), position)
     assert not strict.any()  # the unknown floor around fails the full test
     _, kept = policy._frontier_clusters(position)
     assert kept.any()
     assert policy._plan(position)
+
+
+def test_frontier_holds_to_the_scan_only_once_it_sees_that_the_scan_is_open():
+    """The sky (steep pixels that hit nothing) opens the scan within the first look-around;
+    a closed room never shows it, and there the policy plans as the classic one."""
+    for scene, expected in (("replica_like_room:no_ceiling", True),
+                            ("replica_like_room:fragments", False)):
+        policy = FrontierPolicy()
+        env = _env(scene, policy)
+        observation, info = env.reset(seed=0)
+        policy.reset(observation, info, seed=0)
+        for _ in range(12):
+            observation, _, _, _, info = env.step(policy.act(observation, info))
+        assert policy.scan_open == expected
+        env.close()
