@@ -33,7 +33,9 @@ scan's edge again and again. While little is measured (a floor and nothing aroun
 frontier passes that test: the frontier then counts over measured surface
 (:meth:`OccupancyGrid.supported_below`). Near the floor the policy may not have measured every
 sector below it yet; when no frontier can be reached through voxels that pass the test it
-plans once more without the test for the path (the goal still passes it). On a closed scan
+plans once more without the test for the path (the goal still passes it), and a move along
+such a path towards the scan's edge on its map (``edge_probe_m``) is not sent but learnt from
+as an escape refusal. On a closed scan
 (no sky, no escape refusal) none of this applies: held to the test there, the policy lost up
 to a point of coverage on the Replica sample (frontier near a cluttered ceiling).
 
@@ -84,6 +86,9 @@ class FrontierPolicy(Policy):
         open_sky_share: the scan counts as open once this share of a depth frame's pixels
             that look at least 35 degrees up or down hit nothing (None: only an escape
             refusal tells).
+        edge_probe_m: on an open scan a move towards a point this far beyond its end
+            (horizontally) that fails the env's test on the policy's map is not sent: the
+            policy learns the edge there as from an escape refusal and plans again.
         scan_top_quantile: with ``scanned_space_support``, paths stay ``scan_top_margin_m``
             below the height under which this share of the occupied voxels lies.
         scan_top_margin_m: see ``scan_top_quantile``.
@@ -113,6 +118,7 @@ class FrontierPolicy(Policy):
         lookahead_voxels: int = 10,
         scanned_space_support: bool = True,
         open_sky_share: float | None = 0.05,
+        edge_probe_m: float = 0.15,
         scan_top_quantile: float = 0.99,
         scan_top_margin_m: float = 0.0,
         support_below_m: float = 3.0,
@@ -138,6 +144,7 @@ class FrontierPolicy(Policy):
         self.lookahead_voxels = lookahead_voxels
         self.scanned_space_support = scanned_space_support
         self.open_sky_share = open_sky_share
+        self.edge_probe_m = edge_probe_m
         self.scan_open = False  # an escape refusal or the sky: the scan is open
         self.scan_top_quantile = scan_top_quantile
         self.scan_top_margin_m = scan_top_margin_m
@@ -444,7 +451,27 @@ class FrontierPolicy(Policy):
         if length > self.context.max_translation_m:
             target = position + step * (self.context.max_translation_m / length)
         self._last_target = np.asarray(target, np.float64).copy()
+        if self._held_to_scan and self._leaves_scan(position, self._last_target):
+            # Refused on the policy's own map, as the env would: learn the edge, plan again.
+            self._learn_edge(position, None)
+            if self._goal_cell is not None:
+                self._mark_visited(self.grid.cell_to_world(self._goal_cell[None])[0])
+            self.state = "plan"
+            return None
         return pose_action(make_pose(rotation, target))
+
+    def _leaves_scan(self, position: np.ndarray, target: np.ndarray) -> bool:
+        """A move from a point that passes the env's cone test on this map towards one
+        ``edge_probe_m`` beyond its end (horizontally) that fails it: the 0.1 m map blurs the
+        scan's edge by up to a voxel, and the env keeps the agent's clearance from it."""
+        assert self.grid is not None
+        across = np.array([target[0] - position[0], target[1] - position[1], 0.0])
+        length = float(np.linalg.norm(across))
+        if length < 1e-9:
+            return False
+        probe = target + self.edge_probe_m * across / length
+        held = self.grid.sectors_seen_below(np.stack([position, probe]))
+        return bool(held[0] and not held[1])
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         if self.grid is None:
@@ -498,6 +525,8 @@ class FrontierPolicy(Policy):
                 action = self._move_action(pose)
                 if action is not None:
                     return clip_pose_action(action, self.context.action_space)
+                if self.state == "plan":
+                    continue  # the move would have left the scan
                 # Arrived: look around here, towards the cluster first.
                 self._mark_visited(position)
                 self._start_look_around(pose, self._goal_focus)

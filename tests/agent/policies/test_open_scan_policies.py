@@ -220,3 +220,19 @@ def test_frontier_holds_to_the_scan_only_once_it_sees_that_the_scan_is_open():
             observation, _, _, _, info = env.step(policy.act(observation, info))
         assert policy.scan_open == expected
         env.close()
+
+
+def test_frontier_does_not_send_a_move_towards_the_scans_edge():
+    """On an open scan, a move whose probe lies past the measured floor's edge is learnt from
+    as an escape refusal instead of being sent; a move inside the floor passes."""
+    policy = FrontierPolicy()
+    env = _env("replica_like_room:no_ceiling", policy)
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    _free_grid_with_floor(policy, floor_x_max=3.5)
+    policy.scan_open = True
+    assert not policy._leaves_scan(np.array([2.0, 2.0, 1.0]), np.array([2.1, 2.0, 1.0]))
+    start, end = np.array([3.35, 2.0, 1.0]), np.array([3.45, 2.0, 1.0])
+    assert policy._leaves_scan(start, end)
+    # From where the test already fails, the agent may move (it has to get back in).
+    assert not policy._leaves_scan(np.array([4.0, 2.0, 1.0]), np.array([4.1, 2.0, 1.0]))
