@@ -560,13 +560,8 @@ class NarutoPolicy(Policy):
         test on the agent's map towards one that fails it (probed ``edge_probe_m`` beyond
         the move's end, horizontally) is refused here, and the space past it blocked so the
         next plan goes elsewhere."""
-        across = np.array([end[0] - start[0], end[1] - start[1], 0.0])
-        length = float(np.linalg.norm(across))
-        if length < 1e-9:
-            return True
-        probe = end + self.config.edge_probe_m * across / length
-        held = self.mapper.observed_space.sectors_seen_below(np.stack([start, probe]))
-        if held[0] and not held[1]:
+        grid = self.mapper.observed_space.grid
+        if grid.move_leaves_support(start, end, self.config.edge_probe_m):
             self._block_past_edge(start, end)
             return False
         return True

@@ -280,9 +280,7 @@ class FrontierPolicy(Policy):
         if kept.any():
             return labels, kept
         # Little measured yet (a floor, nothing around): frontier over measured surface.
-        low, high = self._z_band(position)
-        z = self.grid.origin[2] + (np.arange(self.grid.shape[2]) + 0.5) * self.voxel_size_m
-        frontier &= ((z >= low) & (z <= high))[None, None, :]
+        frontier &= self.grid.levels_within(self._z_band(position))[None, None, :]
         frontier &= self.grid.supported_below(self.support_below_m, self.support_reach_m)
         return self._clusters(frontier)
 
@@ -314,10 +312,8 @@ class FrontierPolicy(Policy):
         this policy's map: inside the height band and with measured surface in every sector
         of the downward cone."""
         assert self.grid is not None
-        low, high = self._z_band(position)
         cells = np.argwhere(candidates)
-        z = self.grid.cell_to_world(cells)[:, 2]
-        cells = cells[(z >= low) & (z <= high)]
+        cells = cells[self.grid.levels_within(self._z_band(position))[cells[:, 2]]]
         inside = np.zeros_like(candidates)
         supported = self.grid.sectors_seen_below(self.grid.cell_to_world(cells))
         inside[tuple(cells[supported].T)] = True
@@ -451,7 +447,9 @@ class FrontierPolicy(Policy):
         if length > self.context.max_translation_m:
             target = position + step * (self.context.max_translation_m / length)
         self._last_target = np.asarray(target, np.float64).copy()
-        if self._held_to_scan and self._leaves_scan(position, self._last_target):
+        if self._held_to_scan and self.grid.move_leaves_support(
+            position, self._last_target, self.edge_probe_m
+        ):
             # Refused on the policy's own map, as the env would: learn the edge, plan again.
             self._learn_edge(position, None)
             if self._goal_cell is not None:
@@ -459,19 +457,6 @@ class FrontierPolicy(Policy):
             self.state = "plan"
             return None
         return pose_action(make_pose(rotation, target))
-
-    def _leaves_scan(self, position: np.ndarray, target: np.ndarray) -> bool:
-        """A move from a point that passes the env's cone test on this map towards one
-        ``edge_probe_m`` beyond its end (horizontally) that fails it: the 0.1 m map blurs the
-        scan's edge by up to a voxel, and the env keeps the agent's clearance from it."""
-        assert self.grid is not None
-        across = np.array([target[0] - position[0], target[1] - position[1], 0.0])
-        length = float(np.linalg.norm(across))
-        if length < 1e-9:
-            return False
-        probe = target + self.edge_probe_m * across / length
-        held = self.grid.sectors_seen_below(np.stack([position, probe]))
-        return bool(held[0] and not held[1])
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         if self.grid is None:

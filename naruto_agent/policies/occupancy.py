@@ -187,9 +187,13 @@ class OccupancyGrid:
             )
         result = self.free & ~blocked
         if z_band is not None:
-            z = self.origin[2] + (np.arange(self.shape[2]) + 0.5) * self.voxel_size_m
-            result &= ((z >= z_band[0]) & (z <= z_band[1]))[None, None, :]
+            result &= self.levels_within(z_band)[None, None, :]
         return result
+
+    def levels_within(self, z_band: tuple[float, float]) -> np.ndarray:
+        """(nz,) bool: the voxel levels whose centres lie within ``z_band`` (min, max) metres."""
+        z = self.origin[2] + (np.arange(self.shape[2]) + 0.5) * self.voxel_size_m
+        return (z >= z_band[0]) & (z <= z_band[1])
 
     def supported_below(self, below_m: float, reach_m: float) -> np.ndarray:
         """(nx, ny, nz) bool: voxels with an occupied voxel below them, at most ``below_m``
@@ -237,6 +241,20 @@ class OccupancyGrid:
             float(max_length_m),
         )
         return empty == 0
+
+    def move_leaves_support(self, start: np.ndarray, end: np.ndarray, probe_m: float) -> bool:
+        """A move from a point that passes :meth:`sectors_seen_below` towards one ``probe_m``
+        beyond its end (horizontally) that fails it: the move heads over the edge of the
+        measured floor. The probe lies past the end because a 0.1 m grid blurs that edge by up
+        to a voxel, and the env keeps the agent's clearance from it."""
+        start, end = np.asarray(start, np.float64), np.asarray(end, np.float64)
+        across = np.array([end[0] - start[0], end[1] - start[1], 0.0])
+        length = float(np.linalg.norm(across))
+        if length < 1e-9:
+            return False
+        probe = end + probe_m * across / length
+        held = self.sectors_seen_below(np.stack([start, probe]))
+        return bool(held[0] and not held[1])
 
     def mark_occupied(self, points: np.ndarray) -> None:
         """Mark the voxels of world points occupied (e.g. where a move bumped into something)."""

@@ -7,6 +7,8 @@ policy. Scripted and reactive policies use it to check the way ahead before they
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from naruto_gym.sensors.panorama import EquirectangularCamera
@@ -111,6 +113,20 @@ def profile_clearance(profile: np.ndarray, yaw: float, half_width_rad: float) ->
     return float(profile[inside].min()) if inside.any() else float("inf")
 
 
+@functools.lru_cache(maxsize=8)
+def _subsampled_rays(camera: PinholeCamera, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """(h, w, 3) camera-frame rays (z = 1) of every ``stride``-th pixel, and their lengths;
+    the same for every frame of a camera, so kept (read-only)."""
+    v, u = np.mgrid[0 : camera.height : stride, 0 : camera.width : stride]
+    rays = np.stack(
+        [(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones(u.shape)], axis=-1
+    )
+    norms = np.linalg.norm(rays, axis=-1)
+    rays.flags.writeable = False
+    norms.flags.writeable = False
+    return rays, norms
+
+
 def steep_miss_share(
     depth: np.ndarray, pose: np.ndarray, camera: PinholeCamera, min_elevation_deg: float = 35.0,
     stride: int = 4,
@@ -120,12 +136,9 @@ def steep_miss_share(
     that steeply. Indoors such a ray meets a ceiling or a floor within a few metres, so misses
     there mean a scan without a ceiling or with a hole in its floor."""
     depth = np.asarray(depth)[::stride, ::stride]
-    v, u = np.mgrid[0 : camera.height : stride, 0 : camera.width : stride]
-    rays = np.stack(
-        [(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones(u.shape)], axis=-1
-    )
+    rays, norms = _subsampled_rays(camera, stride)
     up = rays @ np.asarray(pose, np.float64)[:3, :3][2]  # world z of each camera-frame ray
-    steep = np.abs(up) >= np.sin(np.deg2rad(min_elevation_deg)) * np.linalg.norm(rays, axis=-1)
+    steep = np.abs(up) >= np.sin(np.deg2rad(min_elevation_deg)) * norms
     if not steep.any():
         return 0.0
     return float(np.mean(depth[steep] <= 0.0))
