@@ -27,9 +27,10 @@ ceiling or a floor within the sensor's range), paths, goals and the frontier its
 where the env's own test would pass on the policy's map (``scanned_space_support``): measured
 surface in every sector of the downward cone (:meth:`OccupancyGrid.sectors_seen_below`), and
 below the measured surfaces' top (the height below which ``scan_top_quantile`` of the
-occupied voxels lie: the wall tops of a scan without a ceiling). Frontier past a missing wall
-or over the open top can never be resolved from inside; chased, it pulls the agent to the
-scan's edge again and again. While little is measured (a floor and nothing around it), no
+occupied voxels lie: the wall tops of a scan without a ceiling), and only unknown space below
+that top makes frontier (above it lies the open sky). Frontier past a missing wall or over the
+open top can never be resolved from inside; chased, it pulls the agent to the scan's edge
+again and again. While little is measured (a floor and nothing around it), no
 frontier passes that test: the frontier then counts over measured surface
 (:meth:`OccupancyGrid.supported_below`). Near the floor the policy may not have measured every
 sector below it yet; when no frontier can be reached through voxels that pass the test it
@@ -273,9 +274,12 @@ class FrontierPolicy(Policy):
         """(labels, kept) of frontier clusters big enough and not yet visited; with
         ``scanned_space_support``, of frontier inside the scan (see the module docstring)."""
         assert self.grid is not None and self._visited is not None
-        frontier = self.grid.frontier() & ~self._visited
         if not self._held_to_scan:
-            return self._clusters(frontier)
+            return self._clusters(self.grid.frontier() & ~self._visited)
+        # Unknown above the measured top (though never below the agent: early on the top may
+        # be the floor) is the open sky: no view resolves it.
+        top = max(self.grid.occupied_top_z(self.scan_top_quantile), float(position[2]))
+        frontier = self.grid.frontier(unknown_below_z=top) & ~self._visited
         labels, kept = self._clusters(self._inside_scan(frontier, position))
         if kept.any():
             return labels, kept
@@ -475,9 +479,11 @@ class FrontierPolicy(Policy):
             if collided and info.get("collision_reason") == "escape":
                 self.scan_open = True
                 self._learn_edge(position, observation.get("panorama"))
-            elif collided and len(self._path) > 1:
-                # A bump: the map missed an obstacle there; remember it and plan again.
-                ahead = self._path[min(1, len(self._path) - 1)] - position
+            elif collided and self._last_target is not None:
+                # A bump: the map missed an obstacle in the refused move's way; remember it
+                # and plan again (the env may have moved the agent part of the way, so the
+                # same path would bump again).
+                ahead = self._last_target - position
                 norm = np.linalg.norm(ahead)
                 if norm > 1e-6:
                     bump = position + ahead / norm * (
@@ -487,6 +493,8 @@ class FrontierPolicy(Policy):
             if self._stuck >= 3 or (collided and self._stuck >= 1):
                 self._mark_visited(self.grid.cell_to_world(self._goal_cell[None])[0])
                 self._stuck = 0
+                self.state = "plan"
+            elif collided:
                 self.state = "plan"
             elif self._steps_since_plan >= self.replan_every:
                 self._steps_since_plan = 0

@@ -170,9 +170,14 @@ class OccupancyGrid:
     def unknown(self) -> np.ndarray:
         return ~self.observed
 
-    def frontier(self) -> np.ndarray:
-        """Free voxels with at least one unknown face neighbour."""
-        unknown_near = ndimage.binary_dilation(self.unknown, _FACE_NEIGHBOURS)
+    def frontier(self, unknown_below_z: float | None = None) -> np.ndarray:
+        """Free voxels with at least one unknown face neighbour; with ``unknown_below_z``,
+        only unknown voxels whose centres lie below that height count (above the top of an
+        open scan, the unknown is sky that no view can resolve)."""
+        unknown = self.unknown
+        if unknown_below_z is not None:
+            unknown = unknown & self.levels_within((-np.inf, unknown_below_z))[None, None, :]
+        unknown_near = ndimage.binary_dilation(unknown, _FACE_NEIGHBOURS)
         return self.free & unknown_near
 
     def traversable(

@@ -84,3 +84,31 @@ def test_frontier_covers_more_than_random_in_a_short_episode():
     frontier = sum(_coverage(FrontierPolicy(), steps, seed) for seed in (0, 1))
     random = sum(_coverage(RandomPolicy(), steps, seed) for seed in (0, 1))
     assert frontier > random + 0.05, (frontier, random)
+
+
+def test_frontier_plans_again_after_a_bump_even_when_the_env_moved_it_part_way():
+    """A refused move may still move the agent up to the obstacle; the same path then bumped
+    again on the next step (``replica_like_room``, seed 1, steps 32 and 33)."""
+    policy = FrontierPolicy()
+    env = gym.make("NarutoRecon-v0", scene="replica_like_room", image_scale=0.1,
+                   coverage_samples=500, max_episode_steps=100)
+    policy.bind(EnvContext.from_env(env, step_budget=100))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    for _ in range(100):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+        if policy.state == "move" and policy._last_target is not None:
+            break
+    assert policy.state == "move"
+    position = observation["pose"][:3, 3]
+    target = position + np.array([0.08, 0.06, 0.0])  # the move the env stopped short of
+    policy._last_target = target.copy()
+    plans = policy.plans
+    bumped = dict(info, collided=True, collision_reason="surface")
+    policy._last_position = position - 0.01  # it did move this step
+    policy.act(observation, bumped)
+    assert policy.plans == plans + 1
+    direction = (target - position) / np.linalg.norm(target - position)
+    bump = position + direction * (policy.context.agent_radius_m + 0.05)
+    assert policy.grid.occupied[tuple(policy.grid.world_to_cell(bump[None])[0])]
+    env.close()

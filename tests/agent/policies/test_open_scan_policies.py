@@ -152,6 +152,36 @@ def test_frontier_counts_only_frontier_inside_the_scan():
     assert np.linalg.norm(goal - [2.5, 2.5, 1.2]) < 0.8
 
 
+def test_frontier_under_an_open_top_does_not_count_the_sky():
+    """Seen on ``replica_like_room:no_ceiling+missing_wall``, seed 0: the policy climbed to
+    2.65 m for free space next to the unknown above the wall tops, which no view resolves
+    (nothing is there to measure), and gained no coverage for 70 steps."""
+    policy = FrontierPolicy()
+    env = _env("replica_like_room:no_ceiling", policy)
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    centres = _free_grid_with_floor(policy, floor_x_max=10.0)
+    grid = policy.grid
+    grid.observed[:] = True  # all measured, but for the sky and the pocket below
+    walls = (centres[..., 0] < 0.15) & (centres[..., 2] < 2.5)  # measured up to 2.5 m
+    grid.log_odds[walls] = 3.0
+    top = grid.occupied_top_z(policy.scan_top_quantile)
+    assert 1.5 < top <= 2.5
+    grid.observed[centres[..., 2] > top] = False  # the open sky above the wall tops
+    pocket = (np.abs(centres[..., 0] - 2.5) < 0.25) & (np.abs(centres[..., 1] - 2.5) < 0.25)
+    pocket &= np.abs(centres[..., 2] - 1.2) < 0.25
+    grid.observed[pocket] = False  # a pocket below the top that the agent has not seen
+    position = np.array([2.0, 2.0, 1.2])
+    policy.scan_open = True
+    _, kept = policy._frontier_clusters(position)
+    assert kept.any()
+    assert np.linalg.norm(centres[kept] - [2.5, 2.5, 1.2], axis=1).max() < 0.6  # the pocket only
+    policy.scan_open = False  # a closed scan: the unknown above is a ceiling still to see
+    _, kept = policy._frontier_clusters(position)
+    assert (centres[kept][:, 2] > top - 0.1).any()
+    assert (grid.frontier(unknown_below_z=top) <= grid.frontier()).all()
+
+
 def test_frontier_plans_without_inflation_when_its_map_boxes_it_in():
     """Seen in replica_like_room, seed 2: low under furniture, later frames closed the way in
     by a voxel; with its inflated map the policy found no goal and turned on the spot for
