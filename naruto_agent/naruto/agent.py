@@ -457,16 +457,34 @@ class NarutoPolicy(Policy):
         self._integrate(observation)
 
     def _note_refused_move(self, position: np.ndarray, info: Info) -> None:
-        """A refused move blocks its target in the agent's map; the plan's goal failed."""
+        """A refused move blocks its target in the agent's map (an escape refusal: the space
+        past the scan's edge; a refused climb at an open top: everything above the agent);
+        the plan's goal failed."""
         if self._commanded is None or not info.get("collided", False):
             return
         if np.linalg.norm(self._commanded - position) <= self.config.arrival_tolerance_m:
             return
         if info.get("collision_reason") == "escape":
             self._scan_open = True
-            self._block_past_edge(position, self._commanded)
+            if self._refused_climb(position, self._commanded):
+                self.blocked.lower_ceiling(position[2])
+                self._blocked_space_changed()
+            else:
+                self._block_past_edge(position, self._commanded)
         else:
             self._block(self._commanded, None)
+
+    def _refused_climb(self, position: np.ndarray, target: np.ndarray) -> bool:
+        """An escape refusal at the scan's open top rather than at its side: the move climbs
+        steeply, or climbs at all from a point over measured surface all around below (so
+        the floor's edge cannot be why)."""
+        move = target - position
+        horizontal = float(np.linalg.norm(move[:2]))
+        if move[2] > horizontal:
+            return True
+        observed = self.mapper.observed_space
+        return bool(move[2] > 0.2 * np.linalg.norm(move)
+                    and observed.sectors_seen_below(position[None])[0])
 
     def _block_past_edge(self, position: np.ndarray, target: np.ndarray) -> None:
         """The scan ends at ``target``: block the space beyond it, in a ball that touches
@@ -482,6 +500,10 @@ class NarutoPolicy(Policy):
         """Block a ball in the agent's map (the blocked space's own radius when None); the
         plan's goal failed."""
         self.blocked.add(centre, radius)
+        self._blocked_space_changed()
+
+    def _blocked_space_changed(self) -> None:
+        """Apply the blocked space to the agent's map; the plan's goal failed."""
         if self.sdf is not None:
             self.sdf = self.blocked.apply(self.sdf)
             self._components = None

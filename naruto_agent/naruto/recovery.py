@@ -41,7 +41,11 @@ class RecoveryConfig:
         max_failed_plans: planning requests in a row without a plan that trigger a recovery.
         failed_goal_radius_m: candidate goals this close to a goal that failed are skipped.
         failed_goal_memory_frames: ... for this many frames.
-        blocked_radius_m: a refused move blocks the agent's map this far around its target.
+        blocked_radius_m: a refused move blocks the agent's map this far around its target
+            (0.1 m: the surface the move met lies somewhere between the agent and the
+            target, and 5 cm, the agent's radius, left the next path so close to it that
+            the env refused that one too: on the apartment, seed 0, three bumps in 12 steps
+            against one cabinet side, each path passing just above the last blocked ball).
         escape_blocked_radius_m: when the env refused the move for leaving the scanned
             space (``collision_reason`` "escape", open scans only), the refused point lies
             in an opening (a window, a floor hole, a wall's missing edge) that the scan ends
@@ -60,7 +64,7 @@ class RecoveryConfig:
     max_failed_plans: int = 3
     failed_goal_radius_m: float = 0.3
     failed_goal_memory_frames: int = 300
-    blocked_radius_m: float = 0.05
+    blocked_radius_m: float = 0.1
     escape_blocked_radius_m: float = 0.5
     look_around_views: int = 8
     look_around_pitch_deg: float = 25.0
@@ -211,6 +215,13 @@ class BlockedSpace:
         self.radius_m = float(radius_m)
         self.points: list[np.ndarray] = []
         self.radii: list[float] = []
+        #: Space above this height is blocked (the top of an open scan, learned from a
+        #: refused climb); +inf: no ceiling.
+        self.ceiling_z = float("inf")
+
+    def lower_ceiling(self, z: float) -> None:
+        """Block everything above height ``z`` (voxel centres higher than it)."""
+        self.ceiling_z = min(self.ceiling_z, float(z))
 
     def add(self, point: np.ndarray, radius_m: float | None = None) -> None:
         """Block ``point``, ``radius_m`` around it (default: the space's ``radius_m``)."""
@@ -218,11 +229,16 @@ class BlockedSpace:
         self.radii.append(self.radius_m if radius_m is None else float(radius_m))
 
     def apply(self, sdf: SdfVolume) -> SdfVolume:
-        """The SDF with every voxel within a point's radius + half a voxel of it set to at
-        most minus one voxel (an obstacle the planner keeps its clearance from)."""
-        if not self.points:
+        """The SDF with every voxel within a point's radius + half a voxel of it, and every
+        voxel above the ceiling, set to at most minus one voxel (an obstacle the planner
+        keeps its clearance from)."""
+        if not self.points and not np.isfinite(self.ceiling_z):
             return sdf
         values = sdf.values.copy()
+        if np.isfinite(self.ceiling_z):
+            heights = sdf.origin[2] + np.arange(sdf.shape[2]) * sdf.voxel_size
+            above = heights > self.ceiling_z
+            values[:, :, above] = np.minimum(values[:, :, above], -sdf.voxel_size)
         for point, radius in zip(self.points, self.radii, strict=True):
             reach = radius + 0.5 * sdf.voxel_size
             span = math.ceil(reach / sdf.voxel_size)

@@ -112,8 +112,9 @@ def test_blocked_points_read_as_obstacles() -> None:
     assert np.all(sdf.values == 0.5)  # the input is left alone
 
 
-def _first_move(reason: str):
-    """An agent on two_rooms, its first move, and the agent after the env refused it."""
+def _first_move(reason: str, offset: np.ndarray | None = None):
+    """An agent on two_rooms, its first move (or, with ``offset``, a move by that much from
+    where it stands), and the agent after the env refused it."""
     env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1,
                    max_episode_steps=1000)
     policy = NarutoPolicy(mapper="tsdf", device="cpu")
@@ -126,6 +127,9 @@ def _first_move(reason: str):
         if np.linalg.norm(action[:3] - position) > 1e-3:
             break
     target = action[:3].astype(np.float64)
+    if offset is not None:
+        target = position + offset
+        policy._commanded = target.copy()
     # Tell the agent the env refused that move.
     policy.act(observation, {**info, "collided": True, "collision_reason": reason})
     env.close()
@@ -145,7 +149,7 @@ def test_a_refused_move_blocks_its_target_and_is_not_repeated() -> None:
 
 
 def test_an_escape_refusal_blocks_the_space_beyond_the_refused_point() -> None:
-    policy, observation, info, position, target = _first_move("escape")
+    policy, observation, info, position, target = _first_move("escape", np.array([0.1, 0, 0]))
     radius = policy.config.recovery.escape_blocked_radius_m
     direction = (target - position) / np.linalg.norm(target - position)
     assert np.allclose(policy.blocked.points[0], target + radius * direction, atol=1e-5)
@@ -158,6 +162,24 @@ def test_an_escape_refusal_blocks_the_space_beyond_the_refused_point() -> None:
     for _ in range(40):
         action = policy.act(observation, info)
         assert np.linalg.norm(action[:3] - target) > 0.02
+
+
+def test_a_refused_climb_sets_a_ceiling_above_the_agent() -> None:
+    """Seen on ``two_rooms:no_ceiling``, seed 0: refused climbing at the open top, the agent
+    blocked a ball beside the refused point and climbed again 6 steps later, elsewhere."""
+    policy, observation, info, position, target = _first_move("escape", np.array([0, 0, 0.1]))
+    assert policy.blocked.ceiling_z == pytest.approx(position[2])
+    assert len(policy.blocked.points) == 0
+    above = position + np.array([[0.5, 0.0, 0.15], [-0.5, 0.3, 0.3], [0.0, 0.0, 0.2]])
+    assert np.all(policy.sdf.sample(above) < 0)
+    assert policy.sdf.sample((position - [0, 0, 0.3])[None])[0] > 0  # below stays free
+    for _ in range(40):
+        action = policy.act(observation, info)
+        assert action[2] <= position[2] + 0.02
+    # A steep sideways climb from over measured floor is the top too; a level move is not.
+    assert policy._refused_climb(position, position + [0.1, 0.0, 0.05]) == bool(
+        policy.mapper.observed_space.sectors_seen_below(position[None])[0])
+    assert not policy._refused_climb(position, position + [0.1, 0.0, 0.0])
 
 
 def _scenes() -> list:
