@@ -52,7 +52,9 @@ Choices of this implementation beyond the published description (all switchable)
 * The depth panorama, when the env gives one, adds the free space all around the agent to
   that measure (``use_panorama``).
 * Never stuck (:mod:`naruto_agent.naruto.recovery`): a refused move (``collided`` /
-  ``collision_reason`` in the step info) blocks its target in the agent's own map, goals that
+  ``collision_reason`` in the step info) blocks its target in the agent's own map (a move
+  refused for leaving an open scan: the space past the edge, or, for a climb at the open
+  top, everything above the agent), goals that
   failed are not tried again for a while, and when plans keep failing or the agent neither
   moves nor measures anything new it looks around, moves to reachable space away from where
   it has been, or retreats along its own trajectory.
