@@ -49,6 +49,8 @@ class Args:
     """camera resolution factor of the default 680 x 1200 camera (0.1: 68 x 120)"""
     size: int = 64
     """square side the frames are resized to"""
+    top_down_map: bool = False
+    """add the egocentric top-down map of what the episode has seen and what is occupied"""
     episode_steps: int = 200
     """episode budget"""
     coverage_samples: int = 5000
@@ -160,7 +162,8 @@ def main(args: Args) -> dict[str, Any]:
     torch.set_num_threads(args.torch_threads)
     camera = PinholeCamera().scaled(args.image_scale)
     venv = make_sb3_vec_env(
-        args.num_envs, size=args.size, scene=args.scene, camera=camera,
+        args.num_envs, size=args.size, top_down_map=args.top_down_map, scene=args.scene,
+        camera=camera,
         max_episode_steps=args.episode_steps, coverage_samples=args.coverage_samples,
     )
     venv.seed(args.seed)

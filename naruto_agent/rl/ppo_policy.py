@@ -12,6 +12,7 @@ rotation). Evaluate with the camera it was trained with (``--image-scale`` of th
 from __future__ import annotations
 
 from naruto_agent.policies.adapters import SB3Policy
+from naruto_agent.policies.base import Info, Observation
 from naruto_gym.rl.observations import LearningObservation
 
 
@@ -23,11 +24,19 @@ class PPOExplorer(SB3Policy):
         size: the frame side the model saw.
         deterministic: act with the mode of the action distribution (False samples, which
             keeps a policy from looping where its mode would).
+        top_down_map: the model was trained with the egocentric top-down map
+            (``train_ppo.py --top-down-map``); the policy builds it from the observations.
     """
 
-    def __init__(self, model_path: str, size: int = 64, deterministic: bool = False) -> None:
+    def __init__(self, model_path: str, size: int = 64, deterministic: bool = False,
+                 top_down_map: bool = False) -> None:
         from stable_baselines3 import PPO
 
         model = PPO.load(model_path, device="cpu")
+        self.learning_observation = LearningObservation(size, top_down_map=top_down_map)
         super().__init__(model, deterministic=deterministic,
-                         observation_transform=LearningObservation(size))
+                         observation_transform=self.learning_observation)
+
+    def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
+        super().reset(observation, info, seed)
+        self.learning_observation.start_episode(self.context.camera, self.context.bounds)

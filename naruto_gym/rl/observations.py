@@ -321,31 +321,48 @@ class DropKeys(ObservationTransform):
 
 class LearningObservation:
     """Callable mapping one raw env observation to the learning observation of
-    :func:`naruto_gym.wrappers.for_learning` without the top-down map (resize, depth,
-    flat pose, panorama dropped): what a model trained on that chain is given at evaluation,
-    e.g. as ``SB3Policy(model, observation_transform=LearningObservation(64))``.
+    :func:`naruto_gym.wrappers.for_learning` (optional egocentric map, resize, depth, flat
+    pose, panorama dropped): what a model trained on that chain is given at evaluation, e.g.
+    as ``SB3Policy(model, observation_transform=LearningObservation(64))``.
+
+    With ``top_down_map`` the map accumulates over an episode: call :meth:`start_episode`
+    with the camera and the scene bounds at every reset (``PPOExplorer`` does).
 
     Args:
         size: square frame side.
         depth: ``"uint8"`` or ``"float"``.
         max_depth_m: sensor range the depth was normalised by.
+        top_down_map: add the egocentric top-down map (:class:`MapTransform`'s defaults).
     """
 
     def __init__(self, size: int = 64, depth: DepthFormat = "uint8",
-                 max_depth_m: float = 10.0) -> None:
+                 max_depth_m: float = 10.0, top_down_map: bool = False) -> None:
         self.size = size
         self.depth = depth
         self.max_depth_m = max_depth_m
+        self.map = MapTransform() if top_down_map else None
+        self._episode_started = False
         self._transforms: list[ObservationTransform] | None = None
 
+    def start_episode(self, camera: Any, bounds: np.ndarray) -> None:
+        """A new episode in a scene with these (2, 3) bounds, seen by ``camera``: the map
+        starts empty."""
+        if self.map is not None:
+            self.map.bind(camera, 1)
+            self.map.reset_envs([np.asarray(bounds)], np.array([0]))
+        self._episode_started = True
+
     def __call__(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        if self.map is not None and not self._episode_started:
+            raise RuntimeError("call start_episode() at every reset when top_down_map is on")
         if self._transforms is None:
             space = spaces.Dict({key: _box_like(value) for key, value in observation.items()})
             space = spaces.Dict({**space.spaces, "depth": spaces.Box(
                 0.0, self.max_depth_m, np.shape(observation["depth"]), np.float32)})
-            self._transforms = [ResizeTransform(self.size),
-                                DepthTransform(self.max_depth_m, self.depth), PoseTransform(),
-                                DropKeys(("panorama",))]
+            transforms: list[ObservationTransform] = [] if self.map is None else [self.map]
+            self._transforms = transforms + [
+                ResizeTransform(self.size), DepthTransform(self.max_depth_m, self.depth),
+                PoseTransform(), DropKeys(("panorama",))]
             for transform in self._transforms:
                 space = transform.space(space)
         batch = {key: np.asarray(value)[None] for key, value in observation.items()}

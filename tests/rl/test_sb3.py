@@ -77,3 +77,41 @@ def test_saved_model_acts_as_a_harness_policy(tmp_path):
     policy.reset(observation, info, seed=0)
     for _ in range(3):  # raw observations (panorama on, 34 x 60 frames) are transformed
         observation, *_, info = env.step(int(policy.act(observation, info)))
+
+
+def test_a_model_trained_with_the_map_acts_with_the_map_it_builds(tmp_path):
+    """``PPOExplorer(top_down_map=True)`` gives the model the egocentric map the training
+    chain gave it: the same map as the single-env wrappers build from the same frames."""
+    import gymnasium as gym
+
+    from naruto_agent.policies import EnvContext
+    from naruto_agent.rl.ppo_policy import PPOExplorer
+    from naruto_gym.rl.observations import LearningObservation
+    from naruto_gym.wrappers import for_learning
+
+    camera = PinholeCamera().scaled(0.05)
+    venv = make_sb3_vec_env(2, size=32, top_down_map=True, camera=camera,
+                            coverage_samples=2000, max_episode_steps=5)
+    PPO("MultiInputPolicy", venv, n_steps=8, batch_size=16,
+        policy_kwargs={"features_extractor_class": NarutoFeaturesExtractor,
+                       "features_extractor_kwargs": {"features_dim": 32}}).save(tmp_path / "m")
+    settings = {"action_mode": "discrete", "camera": camera, "coverage_samples": 2000,
+                "max_episode_steps": 6}
+    env = gym.make("NarutoRecon-v0", **settings)
+    wrapped = for_learning(gym.make("NarutoRecon-v0", **settings), size=32, top_down_map=True)
+    policy = PPOExplorer(str(tmp_path / "m.zip"), size=32, top_down_map=True)
+    policy.bind(EnvContext.from_env(env))
+    observation, info = env.reset(seed=0)
+    expected, _ = wrapped.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    seen = []
+    for _ in range(4):
+        given = policy.learning_observation(observation)
+        assert np.array_equal(given["map"], expected["map"])
+        seen.append(int((given["map"][..., 0] > 0).sum()))
+        action = int(policy.act(observation, info))
+        observation, *_, info = env.step(action)
+        expected, *_ = wrapped.step(action)
+    assert seen[-1] > 0
+    with pytest.raises(RuntimeError, match="start_episode"):
+        LearningObservation(32, top_down_map=True)(observation)
