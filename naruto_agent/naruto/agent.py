@@ -108,7 +108,7 @@ from naruto_agent.policies.base import (
     clip_pose_action,
     pose_action,
 )
-from naruto_agent.policies.panorama_clearance import steep_miss_share
+from naruto_agent.policies.panorama_clearance import refused_at_top, steep_miss_share
 
 MAPPERS = ("tsdf", "neural")
 
@@ -477,16 +477,11 @@ class NarutoPolicy(Policy):
             self._block(self._commanded, None)
 
     def _refused_climb(self, position: np.ndarray, target: np.ndarray) -> bool:
-        """An escape refusal at the scan's open top rather than at its side: the move climbs
-        steeply, or climbs at all from a point over measured surface all around below (so
-        the floor's edge cannot be why)."""
-        move = target - position
-        horizontal = float(np.linalg.norm(move[:2]))
-        if move[2] > horizontal:
-            return True
-        observed = self.mapper.observed_space
-        return bool(move[2] > 0.2 * np.linalg.norm(move)
-                    and observed.sectors_seen_below(position[None])[0])
+        """An escape refusal at the scan's open top rather than at its side
+        (:func:`refused_at_top`, with "all around below" judged by the env's cone test on the
+        agent's own grid)."""
+        supported = self.mapper.observed_space.sectors_seen_below(position[None])[0]
+        return refused_at_top(position, target, bool(supported))
 
     def _block_past_edge(self, position: np.ndarray, target: np.ndarray) -> None:
         """The scan ends at ``target``: block the space beyond it, in a ball that touches

@@ -160,6 +160,17 @@ def sees_all_around_below(
     return bool(all(hits[:, sector == k].mean() >= min_share for k in range(sectors)))
 
 
+def refused_at_top(position: np.ndarray, target: np.ndarray, supported_below: bool) -> bool:
+    """A move from ``position`` towards ``target`` refused as an escape met the scan's open
+    top rather than its side: it climbs steeper than 45 degrees, or climbs at all (more than
+    a fifth of its length) from where scanned surface is known to lie all around below
+    (``supported_below``), so the floor's edge cannot be the reason."""
+    move = np.asarray(target, np.float64) - np.asarray(position, np.float64)
+    horizontal = float(np.linalg.norm(move[:2]))
+    return bool(move[2] > horizontal
+                or (move[2] > 0.2 * float(np.linalg.norm(move)) and supported_below))
+
+
 class RefusedMoves:
     """Where the scan ends, learned from moves the env refused as escapes.
 
@@ -233,7 +244,7 @@ class RefusedMoves:
             return np.zeros((0, 3))
         horizontal = float(np.linalg.norm(move[:2]))
         supported = panorama is not None and sees_all_around_below(panorama)
-        if move[2] > horizontal or (move[2] > 0.2 * length and supported):  # the scan's top
+        if refused_at_top(position, target, supported):
             self.ceiling_z = min(self.ceiling_z, float(position[2]))
             return np.zeros((0, 3))
         if -move[2] > horizontal:  # mostly downwards: a patch under the agent
