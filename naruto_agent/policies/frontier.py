@@ -36,7 +36,10 @@ frontier passes that test: the frontier then counts over measured surface
 sector below it yet; when no frontier can be reached through voxels that pass the test it
 plans once more without the test for the path (the goal still passes it), and a move along
 such a path towards the scan's edge on its map (``edge_probe_m``) is not sent but learnt from
-as an escape refusal. On a closed scan
+as an escape refusal. Such a refusal within ``edge_arrival_m`` of the goal (along the path)
+counts as arriving: the look-around from there sees the goal's cluster nearly as well, while
+giving the goal up would skip that look and send the agent to another goal (on open scans
+most of these refusals came in the last few steps before a goal). On a closed scan
 (no sky, no escape refusal) none of this applies: held to the test there, the policy lost up
 to a point of coverage on the Replica sample (frontier near a cluttered ceiling).
 
@@ -90,6 +93,8 @@ class FrontierPolicy(Policy):
         edge_probe_m: on an open scan a move towards a point this far beyond its end
             (horizontally) that fails the env's test on the policy's map is not sent: the
             policy learns the edge there as from an escape refusal and plans again.
+        edge_arrival_m: such a move within this path length of the goal counts as arriving
+            there (look around where the agent stands) instead of giving the goal up.
         scan_top_quantile: with ``scanned_space_support``, paths stay ``scan_top_margin_m``
             below the height under which this share of the occupied voxels lies.
         scan_top_margin_m: see ``scan_top_quantile``.
@@ -120,6 +125,7 @@ class FrontierPolicy(Policy):
         scanned_space_support: bool = True,
         open_sky_share: float | None = 0.05,
         edge_probe_m: float = 0.15,
+        edge_arrival_m: float = 0.5,
         scan_top_quantile: float = 0.99,
         scan_top_margin_m: float = 0.0,
         support_below_m: float = 3.0,
@@ -146,6 +152,7 @@ class FrontierPolicy(Policy):
         self.scanned_space_support = scanned_space_support
         self.open_sky_share = open_sky_share
         self.edge_probe_m = edge_probe_m
+        self.edge_arrival_m = edge_arrival_m
         self.scan_open = False  # an escape refusal or the sky: the scan is open
         self.scan_top_quantile = scan_top_quantile
         self.scan_top_margin_m = scan_top_margin_m
@@ -454,8 +461,14 @@ class FrontierPolicy(Policy):
         if self._held_to_scan and self.grid.move_leaves_support(
             position, self._last_target, self.edge_probe_m
         ):
-            # Refused on the policy's own map, as the env would: learn the edge, plan again.
+            # Refused on the policy's own map, as the env would: learn the edge; close to the
+            # goal, arrive here (the caller looks around), else give the goal up and plan.
             self._learn_edge(position, None)
+            waypoints = np.concatenate([position[None], self._path])
+            remaining = float(np.linalg.norm(np.diff(waypoints, axis=0), axis=1).sum())
+            if remaining <= self.edge_arrival_m:
+                self._path = position[None].copy()
+                return None
             if self._goal_cell is not None:
                 self._mark_visited(self.grid.cell_to_world(self._goal_cell[None])[0])
             self.state = "plan"

@@ -11,6 +11,7 @@ import pytest
 import naruto_gym  # noqa: F401
 from naruto_agent.policies import EnvContext, FrontierPolicy, make_policy
 from naruto_agent.policies.panorama_clearance import RefusedMoves, sees_all_around_below
+from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 
 
 def test_refused_climb_sets_a_ceiling_and_sideways_moves_draw_the_edge():
@@ -270,3 +271,32 @@ def test_frontier_does_not_send_a_move_towards_the_scans_edge():
     assert leaves(start, end)
     # From where the test already fails, the agent may move (it has to get back in).
     assert not leaves(np.array([4.0, 2.0, 1.0]), np.array([4.1, 2.0, 1.0]))
+
+
+def test_frontier_arrives_instead_of_giving_up_when_its_map_refuses_the_last_steps():
+    """A move the policy's own map refuses (towards the measured floor's edge) within
+    ``edge_arrival_m`` of the goal ends the trip there: the agent looks around where it stands
+    and keeps the goal's look; farther from the goal it gives the goal up and plans again."""
+    policy = FrontierPolicy()
+    env = _env("replica_like_room:no_ceiling", policy)
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    _free_grid_with_floor(policy, floor_x_max=3.5)
+    policy.scan_open = True
+    grid = policy.grid
+    policy._traversable_cache = np.ones(grid.shape, bool)
+    position = np.array([3.3, 2.0, 1.0])
+    pose = make_pose(look_at_rotation(position, position + [1.0, 0.0, 0.0]), position)
+    for goal_x, arrives in ((3.4, True), (4.0, False)):
+        xs = np.arange(3.0, goal_x + 1e-9, 0.1)
+        policy._path = np.stack([xs, np.full_like(xs, 2.0), np.full_like(xs, 1.0)], axis=1)
+        policy._goal_cell = grid.world_to_cell(policy._path[-1:])[0]
+        policy.visited_goals = []
+        policy.state = "move"
+        assert policy._move_action(pose) is None
+        if arrives:
+            assert policy.state == "move" and len(policy._path) == 1
+            assert not policy.visited_goals  # act() marks where it stands and looks around
+        else:
+            assert policy.state == "plan"
+            assert len(policy.visited_goals) == 1 and policy.visited_goals[0][0] > 3.9
