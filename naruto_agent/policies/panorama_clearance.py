@@ -83,10 +83,12 @@ def floor_edge_profile(panorama: np.ndarray, max_polar_deg: float = 60.0) -> np.
 
     Walking a column's pixels from straight down towards the horizon (down to
     ``max_polar_deg`` from straight down, the env's support cone), the first pixel that hits
-    nothing marks the edge of the scanned floor in that direction (past a missing wall, the
-    rim of a floor hole); the result is the horizontal distance of the last hit before it
-    (0 when straight down already misses), inf when every pixel of the cone hits. Inside a
-    closed scan every pixel below hits, so the profile is inf everywhere.
+    nothing after the first that hits marks the edge of the scanned floor in that direction
+    (past a missing wall, the rim of a floor hole); the result is the horizontal distance of
+    the last hit before it, inf when no pixel after the first hit misses, 0 when no pixel of
+    the column hits. Misses straight below the agent (it stands over a floor hole, or past
+    the scan's edge) do not count: the way back onto the floor stays open. Inside a closed
+    scan every pixel below hits, so the profile is inf everywhere.
     """
     panorama = np.asarray(panorama, np.float64)
     height, width = panorama.shape
@@ -95,12 +97,14 @@ def floor_edge_profile(panorama: np.ndarray, max_polar_deg: float = 60.0) -> np.
     below = panorama[rows]  # straight down first
     horizontal = below * np.cos(elevation[rows])[:, None]
     miss = below <= 0.0
-    first_miss = np.where(miss.any(axis=0), miss.argmax(axis=0), -1)
+    hits = ~miss
+    first_hit = np.where(hits.any(axis=0), hits.argmax(axis=0), len(rows))
+    after_floor = miss & (np.arange(len(rows))[:, None] > first_hit[None, :])
+    first_miss = np.where(after_floor.any(axis=0), after_floor.argmax(axis=0), -1)
     edge = np.full(width, np.inf)
-    missing = first_miss >= 0
-    columns = np.flatnonzero(missing)
-    before = first_miss[missing] - 1
-    edge[columns] = np.where(before >= 0, horizontal[np.maximum(before, 0), columns], 0.0)
+    columns = np.flatnonzero(first_miss >= 0)
+    edge[columns] = horizontal[first_miss[columns] - 1, columns]
+    edge[first_hit >= len(rows)] = 0.0
     return edge
 
 
@@ -111,6 +115,50 @@ def profile_clearance(profile: np.ndarray, yaw: float, half_width_rad: float) ->
     difference = np.angle(np.exp(1j * (azimuth - yaw)))
     inside = np.abs(difference) <= half_width_rad
     return float(profile[inside].min()) if inside.any() else float("inf")
+
+
+@functools.lru_cache(maxsize=8)
+def _panorama_rays(height: int, width: int) -> np.ndarray:
+    """(H * W, 3) world directions of a panorama's pixels (read-only, kept per shape)."""
+    rays = EquirectangularCamera(height, width).ray_directions.astype(np.float64)
+    rays.flags.writeable = False
+    return rays
+
+
+def first_contact(panorama: np.ndarray, move: np.ndarray, radius_m: float) -> np.ndarray | None:
+    """The surface point the panorama shows in a move's way, or None when the way is clear.
+
+    A sphere of ``radius_m`` around the panorama's centre moves by ``move`` (world metres);
+    every hit pixel is a surface point, and one that the sphere's path comes closer to than
+    ``radius_m`` blocks the move. As in the env's own sweep, an agent already closer than that
+    to a surface may move as long as it gets no closer than it is.
+
+    Args:
+        panorama: (H, W) radial distances from the agent, 0 where nothing was hit.
+        move: (3,) displacement of the move.
+        radius_m: the clearance the move must keep.
+
+    Returns:
+        (3,) the blocking point relative to the agent (the first along the move), or None.
+    """
+    move = np.asarray(move, np.float64)
+    length = float(np.linalg.norm(move))
+    distance = np.asarray(panorama, np.float64).reshape(-1)
+    hit = distance > 0.0
+    if length < 1e-9 or not hit.any():
+        return None
+    threshold = min(radius_m, float(distance[hit].min()) - 1e-3)
+    near = hit & (distance < length + radius_m)
+    if threshold <= 0.0 or not near.any():
+        return None
+    points = _panorama_rays(*panorama.shape)[near] * distance[near, None]
+    direction = move / length
+    along = np.clip(points @ direction, 0.0, length)
+    gap = np.linalg.norm(points - along[:, None] * direction, axis=1)
+    touching = gap < threshold
+    if not touching.any():
+        return None
+    return points[int(np.argmin(np.where(touching, along, np.inf)))]
 
 
 @functools.lru_cache(maxsize=8)

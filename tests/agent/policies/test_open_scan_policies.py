@@ -95,6 +95,14 @@ def test_floor_edge_profile_finds_where_the_floor_ends():
     assert np.all(np.isinf(edge[away]))
     closed = np.where(down, distance, 0.0).astype(np.float32)
     assert np.all(np.isinf(floor_edge_profile(closed)))
+    # Over a floor hole (0.3 m around the agent): the way out onto the floor stays open, and
+    # the floor's far edge still counts; a column that hits nothing is closed.
+    landing_r = distance * np.hypot(rays[..., 0], rays[..., 1])
+    holed = np.where(down & (landing_r > 0.3) & (landing_x < 0.8), distance, 0.0)
+    edge = floor_edge_profile(holed.astype(np.float32))
+    assert np.all(edge[towards_x] <= 0.8) and np.all(edge[towards_x] > 0.6)
+    assert np.all(np.isinf(edge[away]))
+    assert np.all(floor_edge_profile(np.zeros((64, 128), np.float32)) == 0.0)
 
 
 def test_frontier_learns_the_ceiling_and_blocks_what_is_ahead_only():
@@ -300,3 +308,32 @@ def test_frontier_arrives_instead_of_giving_up_when_its_map_refuses_the_last_ste
         else:
             assert policy.state == "plan"
             assert len(policy.visited_goals) == 1 and policy.visited_goals[0][0] > 3.9
+
+
+def _wall_panorama(wall_y: float, shape: tuple[int, int] = (64, 128)) -> np.ndarray:
+    """A panorama from the origin of a plane wall at y = ``wall_y`` (< 0), nothing else."""
+    from naruto_gym.sensors.panorama import EquirectangularCamera
+
+    rays = EquirectangularCamera(*shape).ray_directions.astype(np.float64)
+    towards = rays[:, 1] < -1e-6
+    distance = np.zeros(len(rays))
+    distance[towards] = wall_y / rays[towards, 1]
+    distance[distance > 10.0] = 0.0
+    return distance.reshape(shape).astype(np.float32)
+
+
+def test_first_contact_reads_the_way_ahead_from_the_panorama():
+    """A sphere 7 cm from a wall: a move that takes it within its radius of the wall is
+    blocked at the wall; moving along the wall or away from it is not, and (as the env's
+    sweep) an agent already closer than its radius may move as long as it gets no closer."""
+    from naruto_agent.policies.panorama_clearance import first_contact
+
+    panorama = _wall_panorama(-0.07)
+    contact = first_contact(panorama, np.array([0.06, -0.05, 0.07]), 0.06)
+    assert contact is not None and contact[1] == pytest.approx(-0.07, abs=1e-4)
+    assert contact[0] > 0.0  # ahead along the move, not the closest point sideways
+    assert first_contact(panorama, np.array([0.1, 0.0, 0.0]), 0.06) is None
+    assert first_contact(panorama, np.array([0.0, 0.1, 0.0]), 0.06) is None
+    assert first_contact(panorama, np.array([0.1, 0.0, 0.0]), 0.08) is None  # within already
+    assert first_contact(panorama, np.array([0.0, -0.01, 0.0]), 0.08) is not None
+    assert first_contact(np.zeros((64, 128), np.float32), np.array([0.1, 0, 0]), 0.06) is None
