@@ -50,7 +50,10 @@ Choices of this implementation beyond the published description (all switchable)
   (``unresolved_visit_looks``): what is still unresolved after the visit (frontier under
   furniture) fades instead of calling the agent back.
 * The depth panorama, when the env gives one, adds the free space all around the agent to
-  that measure (``use_panorama``).
+  that measure (``use_panorama``), and every move is checked against it before it is sent
+  (``check_moves_on_panorama``), as a robot checks its range sensor: the 0.1 m map misses
+  surfaces by a few centimetres, the panorama does not. On an open scan the same check
+  reads the env's scanned-space test from the panorama's points below the move's end.
 * Never stuck (:mod:`naruto_agent.naruto.recovery`): a refused move (``collided`` /
   ``collision_reason`` in the step info) blocks its target in the agent's own map (a move
   refused for leaving an open scan: the space past the edge, or, for a climb at the open
@@ -108,7 +111,12 @@ from naruto_agent.policies.base import (
     clip_pose_action,
     pose_action,
 )
-from naruto_agent.policies.panorama_clearance import refused_at_top, steep_miss_share
+from naruto_agent.policies.panorama_clearance import (
+    cone_supported,
+    first_contact,
+    refused_at_top,
+    steep_miss_share,
+)
 
 MAPPERS = ("tsdf", "neural")
 
@@ -156,6 +164,16 @@ class NarutoConfig:
         reachable_iterations: extensions of the goal search's fallback tree.
         check_moves_on_map: check every move against the agent's newest map before sending
             it (2 cm samples, agent radius 5 cm); a blocked move is a detected collision.
+        check_moves_on_panorama: also check every move against the env's depth panorama
+            where the agent stands (when the observation has one), as a robot checks its
+            range sensor before it moves: the 0.1 m map's distance field misses a surface
+            by a few centimetres here and there, and the env refused those moves. A move
+            the panorama shows blocked is not sent; the surface point is blocked in the map
+            (``RecoveryConfig.blocked_radius_m``) so that the next plan goes around it, and
+            the goal stays. On an open scan the move must also keep to the scanned space
+            as the panorama shows it (the env's cone test on the surface points around the
+            agent); one that leaves it is refused as by ``edge_probe_m``.
+        panorama_margin_m: the panorama check keeps the env's agent radius plus this.
         escape_radius_m: how far the agent may look for free space when the map puts it
             inside a surface's clearance (0 switches the escape off).
         arrival_tolerance_m: a moving agent farther than this from its commanded node was
@@ -239,6 +257,8 @@ class NarutoConfig:
     shortcut_margin_m: float = 0.0
     reachable_iterations: int = 2000
     check_moves_on_map: bool = True
+    check_moves_on_panorama: bool = True
+    panorama_margin_m: float = 0.01
     escape_radius_m: float = 0.3
     arrival_tolerance_m: float = 0.01
     use_panorama: bool = True
@@ -377,6 +397,7 @@ class NarutoPolicy(Policy):
         self._visit: tuple[np.ndarray, np.ndarray] | None = None  # (goal, targets it sees)
         self.visit_looks: np.ndarray | None = None  # looks per planner voxel from visits
         self._scan_open = False  # an escape refusal or the sky: the scan is open
+        self._panorama: tuple[np.ndarray, np.ndarray] | None = None  # (panorama, where)
 
     # -- mapping -----------------------------------------------------------------------------
     def bind(self, context: EnvContext) -> None:
@@ -407,6 +428,7 @@ class NarutoPolicy(Policy):
             miss = steep_miss_share(observation["depth"], pose, self.context.camera)
             self._scan_open = miss >= self.config.open_sky_share
         panorama = observation.get("panorama")
+        self._panorama = None if panorama is None else (np.asarray(panorama), pose[:3, 3].copy())
         if (self.config.use_panorama and panorama is not None
                 and self._frame_index % self.config.panorama_every == 0):
             self.mapper.integrate_panorama(panorama, pose[:3, 3])
@@ -456,6 +478,7 @@ class NarutoPolicy(Policy):
         self._visit = None
         self.visit_looks = None
         self._scan_open = False  # an escape refusal or the sky: the scan is open
+        self._panorama = None
         self._integrate(observation)
 
     def _note_refused_move(self, position: np.ndarray, info: Info) -> None:
@@ -499,13 +522,14 @@ class NarutoPolicy(Policy):
         self.blocked.add(centre, radius)
         self._blocked_space_changed()
 
-    def _blocked_space_changed(self) -> None:
-        """Apply the blocked space to the agent's map; the plan's goal failed."""
+    def _blocked_space_changed(self, goal_failed: bool = True) -> None:
+        """Apply the blocked space to the agent's map; the plan's goal failed (unless
+        ``goal_failed`` is False)."""
         if self.sdf is not None:
             self.sdf = self.blocked.apply(self.sdf)
             self._components = None
         plan = self.machine.plan
-        if plan is not None and not plan.info.get("recovery"):
+        if goal_failed and plan is not None and not plan.info.get("recovery"):
             self.monitor.goal_failed(plan.goal)
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
@@ -569,9 +593,50 @@ class NarutoPolicy(Policy):
         self._read_view()
         if not self._keeps_clearance(start, end):
             return False
+        if not self._panorama_shows_way_clear(start, end):
+            return False
         if self._scan_open and self.config.sector_support_after_escape:
-            return self._stays_in_scan(start, end)
+            return self._panorama_keeps_to_scan(start, end) and self._stays_in_scan(start, end)
         return True
+
+    def _panorama_shows_way_clear(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """The move checked against the depth panorama taken where it starts
+        (``check_moves_on_panorama``); a blocked move blocks the surface point in the map."""
+        if not self.config.check_moves_on_panorama or self._panorama is None:
+            return True
+        panorama, centre = self._panorama
+        if np.linalg.norm(start - centre) > 1e-3:
+            return True  # the panorama was taken elsewhere
+        radius = self.context.agent_radius_m + self.config.panorama_margin_m
+        contact = first_contact(panorama, end - start, radius)
+        if contact is None:
+            return True
+        self.blocked.add(start + contact)
+        self._blocked_space_changed(goal_failed=False)
+        return False
+
+    def _panorama_keeps_to_scan(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """On an open scan, the env's cone test read from the panorama where the move starts
+        (``check_moves_on_panorama``, :func:`cone_supported`): a move from a supported point
+        to a point (or a point the agent's radius further on) that is not is refused, and the
+        space past it blocked, as after an escape refusal."""
+        if not self.config.check_moves_on_panorama or self._panorama is None:
+            return True
+        panorama, centre = self._panorama
+        if np.linalg.norm(start - centre) > 1e-3:
+            return True
+        # The end, and a radius further on along the move and horizontally: the env judges
+        # the end by the lattice corners within its clearance.
+        probes = [np.zeros(3), end - centre]
+        radius = self.context.agent_radius_m
+        for way in (end - start, np.array([end[0] - start[0], end[1] - start[1], 0.0])):
+            if np.linalg.norm(way) > 1e-9:
+                probes.append(probes[1] + radius * way / np.linalg.norm(way))
+        supported = cone_supported(panorama, np.array(probes))
+        if not supported[0] or supported[1:].all():
+            return True  # from outside, the agent may move (it has to get back in)
+        self._block_past_edge(start, end)
+        return False
 
     def _stays_in_scan(self, start: np.ndarray, end: np.ndarray) -> bool:
         """On an open scan a path may cross a floor hole's edge or a wall's opening where

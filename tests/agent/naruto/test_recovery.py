@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -396,3 +398,62 @@ def test_config_rejects_bad_open_scan_settings() -> None:
         NarutoConfig(open_sky_share=0.0)
     with pytest.raises(ValueError, match="edge_probe_m"):
         NarutoConfig(edge_probe_m=-0.1)
+
+
+def test_a_move_the_panorama_shows_blocked_is_not_sent_and_its_surface_is_blocked() -> None:
+    """The agent stands 7 cm from a surface that its 0.1 m map does not show in the way: the
+    panorama taken where it stands shows it, so the move towards it is refused before the env
+    sees it, the surface point is blocked in the map, and the goal stays."""
+    from naruto_gym.sensors.panorama import EquirectangularCamera
+
+    values = np.full((30, 30, 30), 0.5)  # the map: free everywhere
+    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1)
+    policy.bind(EnvContext.from_env(env.unwrapped))
+    env.close()
+    policy.sdf = SdfVolume(values, np.zeros(3), 0.1)
+    agent = np.array([1.5, 1.5, 1.0])
+    rays = EquirectangularCamera(64, 128).ray_directions.astype(np.float64)
+    towards = rays[:, 1] < -1e-6
+    distance = np.zeros(len(rays))
+    distance[towards] = np.minimum(-0.07 / rays[towards, 1], 5.0)  # a wall at y = 1.43 m
+    policy._panorama = (distance.reshape(64, 128).astype(np.float32), agent.copy())
+    policy._read_view = lambda: None  # keep the map above
+    assert policy._move_is_free(agent, agent + [0.1, 0.0, 0.0])  # along the wall
+    assert len(policy.blocked.points) == 0
+    assert not policy._move_is_free(agent, agent + [0.06, -0.05, 0.07])
+    assert len(policy.blocked.points) == 1
+    assert policy.blocked.points[0][1] == pytest.approx(1.43, abs=1e-3)
+    assert policy.sdf.sample(policy.blocked.points[0][None])[0] < 0
+    # Taken elsewhere, the panorama says nothing about this move.
+    assert policy._move_is_free(agent + [1.0, 0.02, 0.0], agent + [1.0, -0.03, 0.0])
+    policy.config = replace(policy.config, check_moves_on_panorama=False)
+    assert policy._move_is_free(agent, agent + [0.06, -0.05, 0.07])
+
+
+def test_on_an_open_scan_a_move_the_panorama_shows_leaving_the_scan_is_refused() -> None:
+    """The floor under the agent ends 0.3 m ahead (+x): once the scan is known open, a move
+    to 5 cm before that edge is refused on the panorama and the space past it blocked; a
+    move back inside passes, and on a closed scan the check does not run."""
+    from naruto_gym.sensors.panorama import EquirectangularCamera
+
+    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1)
+    policy.bind(EnvContext.from_env(env.unwrapped))
+    env.close()
+    policy.sdf = SdfVolume(np.full((30, 30, 30), 0.5), np.zeros(3), 0.1)
+    policy._read_view = lambda: None
+    agent = np.array([1.5, 1.5, 1.0])
+    rays = EquirectangularCamera(64, 128).ray_directions.astype(np.float64)
+    down = rays[:, 2] < -1e-6
+    distance = np.where(down, 1.0 / np.maximum(-rays[:, 2], 1e-6), 0.0)
+    panorama = np.where(down & (distance * rays[:, 0] < 0.3), distance, 0.0)
+    policy._panorama = (panorama.reshape(64, 128).astype(np.float32), agent.copy())
+    towards_edge = agent + [0.25, 0.0, 0.0]
+    assert policy._panorama_keeps_to_scan(agent, agent + [-0.1, 0.0, 0.0])
+    assert len(policy.blocked.points) == 0
+    policy._scan_open = False
+    assert policy._move_is_free(agent, towards_edge)  # closed: no cone check
+    policy._scan_open = True
+    assert not policy._panorama_keeps_to_scan(agent, towards_edge)
+    assert len(policy.blocked.points) == 1 and policy.blocked.points[0][0] > towards_edge[0]

@@ -337,3 +337,22 @@ def test_first_contact_reads_the_way_ahead_from_the_panorama():
     assert first_contact(panorama, np.array([0.1, 0.0, 0.0]), 0.08) is None  # within already
     assert first_contact(panorama, np.array([0.0, -0.01, 0.0]), 0.08) is not None
     assert first_contact(np.zeros((64, 128), np.float32), np.array([0.1, 0, 0]), 0.06) is None
+
+
+def test_cone_supported_reads_the_envs_cone_test_from_the_panorama():
+    """A floor 1 m below that ends 0.8 m away towards +x: points well inside are supported,
+    points at or past the edge are not (a sector of their cone sees nothing); a closed floor
+    supports everything, an empty panorama nothing."""
+    from naruto_agent.policies.panorama_clearance import cone_supported
+    from naruto_gym.sensors.panorama import EquirectangularCamera
+
+    rays = EquirectangularCamera(64, 128).ray_directions.astype(np.float64)
+    down = rays[:, 2] < -1e-6
+    distance = np.where(down, 1.0 / np.maximum(-rays[:, 2], 1e-6), 0.0)
+    floor_ends = np.where(down & (distance * rays[:, 0] < 0.8), distance, 0.0)
+    points = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.85, 0.0, 0.0], [0.5, 0.0, -0.9]])
+    supported = cone_supported(floor_ends.reshape(64, 128).astype(np.float32), points)
+    assert supported.tolist() == [True, True, False, True]  # the last: 0.1 m above the floor
+    closed = distance.reshape(64, 128).astype(np.float32)
+    assert cone_supported(closed, points[:3]).all()
+    assert not cone_supported(np.zeros((64, 128), np.float32), points[:1]).any()
