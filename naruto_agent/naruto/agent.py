@@ -112,8 +112,8 @@ from naruto_agent.policies.base import (
     pose_action,
 )
 from naruto_agent.policies.panorama_clearance import (
-    cone_supported,
     first_contact,
+    move_leaves_scan,
     refused_at_top,
     steep_miss_share,
 )
@@ -617,7 +617,7 @@ class NarutoPolicy(Policy):
 
     def _panorama_keeps_to_scan(self, start: np.ndarray, end: np.ndarray) -> bool:
         """On an open scan, the env's cone test read from the panorama where the move starts
-        (``check_moves_on_panorama``, :func:`cone_supported`): a move from a supported point
+        (``check_moves_on_panorama``, :func:`move_leaves_scan`): a move from a supported point
         to a point (or a point the agent's radius further on) that is not is refused, and the
         space past it blocked, as after an escape refusal."""
         if not self.config.check_moves_on_panorama or self._panorama is None:
@@ -625,16 +625,8 @@ class NarutoPolicy(Policy):
         panorama, centre = self._panorama
         if np.linalg.norm(start - centre) > 1e-3:
             return True
-        # The end, and a radius further on along the move and horizontally: the env judges
-        # the end by the lattice corners within its clearance.
-        probes = [np.zeros(3), end - centre]
-        radius = self.context.agent_radius_m
-        for way in (end - start, np.array([end[0] - start[0], end[1] - start[1], 0.0])):
-            if np.linalg.norm(way) > 1e-9:
-                probes.append(probes[1] + radius * way / np.linalg.norm(way))
-        supported = cone_supported(panorama, np.array(probes))
-        if not supported[0] or supported[1:].all():
-            return True  # from outside, the agent may move (it has to get back in)
+        if not move_leaves_scan(panorama, end - start, self.context.agent_radius_m):
+            return True
         self._block_past_edge(start, end)
         return False
 

@@ -207,6 +207,22 @@ def cone_supported(panorama: np.ndarray, points: np.ndarray) -> np.ndarray:
     return supported
 
 
+def move_leaves_scan(panorama: np.ndarray, move: np.ndarray, radius_m: float) -> bool:
+    """Whether a move from the panorama's centre leaves the scanned space as the env judges
+    it (:func:`cone_supported`): the start is supported, and the end, or a point ``radius_m``
+    further on along the move or horizontally, is not (the env judges a point by the lattice
+    corners within its clearance, a few centimetres around it). From an unsupported start
+    any move passes: the agent has to get back in."""
+    move = np.asarray(move, np.float64)
+    probes = [np.zeros(3), move]
+    for way in (move, np.array([move[0], move[1], 0.0])):
+        length = float(np.linalg.norm(way))
+        if length > 1e-9:
+            probes.append(move + radius_m * way / length)
+    supported = cone_supported(panorama, np.array(probes))
+    return bool(supported[0] and not supported[1:].all())
+
+
 @functools.lru_cache(maxsize=1)
 def _support_rays() -> tuple[np.ndarray, np.ndarray]:
     """The env's support rays (directions, sectors), read-only."""
