@@ -599,14 +599,20 @@ class NarutoPolicy(Policy):
             return self._panorama_keeps_to_scan(start, end) and self._stays_in_scan(start, end)
         return True
 
+    def _panorama_from(self, start: np.ndarray) -> np.ndarray | None:
+        """The newest panorama when it was taken at ``start`` and the panorama checks are on
+        (``check_moves_on_panorama``); None otherwise."""
+        if not self.config.check_moves_on_panorama or self._panorama is None:
+            return None
+        panorama, centre = self._panorama
+        return panorama if np.linalg.norm(start - centre) <= 1e-3 else None
+
     def _panorama_shows_way_clear(self, start: np.ndarray, end: np.ndarray) -> bool:
         """The move checked against the depth panorama taken where it starts
         (``check_moves_on_panorama``); a blocked move blocks the surface point in the map."""
-        if not self.config.check_moves_on_panorama or self._panorama is None:
+        panorama = self._panorama_from(start)
+        if panorama is None:
             return True
-        panorama, centre = self._panorama
-        if np.linalg.norm(start - centre) > 1e-3:
-            return True  # the panorama was taken elsewhere
         radius = self.context.agent_radius_m + self.config.panorama_margin_m
         contact = first_contact(panorama, end - start, radius)
         if contact is None:
@@ -620,12 +626,9 @@ class NarutoPolicy(Policy):
         (``check_moves_on_panorama``, :func:`move_leaves_scan`): a move from a supported point
         to a point (or a point the agent's radius further on) that is not is refused, and the
         space past it blocked, as after an escape refusal."""
-        if not self.config.check_moves_on_panorama or self._panorama is None:
-            return True
-        panorama, centre = self._panorama
-        if np.linalg.norm(start - centre) > 1e-3:
-            return True
-        if not move_leaves_scan(panorama, end - start, self.context.agent_radius_m):
+        panorama = self._panorama_from(start)
+        radius = self.context.agent_radius_m
+        if panorama is None or not move_leaves_scan(panorama, end - start, radius):
             return True
         self._block_past_edge(start, end)
         return False

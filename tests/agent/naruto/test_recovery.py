@@ -22,6 +22,7 @@ from naruto_agent.naruto.recovery import (
 from naruto_agent.planning.sdf_volume import SdfVolume
 from naruto_agent.policies import EnvContext
 from naruto_gym.scenes import make_random_scene
+from tests.agent.synthetic_panoramas import floor_panorama, wall_panorama
 
 
 def test_standing_still_without_new_space_is_a_stall() -> None:
@@ -400,25 +401,25 @@ def test_config_rejects_bad_open_scan_settings() -> None:
         NarutoConfig(edge_probe_m=-0.1)
 
 
-def test_a_move_the_panorama_shows_blocked_is_not_sent_and_its_surface_is_blocked() -> None:
-    """The agent stands 7 cm from a surface that its 0.1 m map does not show in the way: the
-    panorama taken where it stands shows it, so the move towards it is refused before the env
-    sees it, the surface point is blocked in the map, and the goal stays."""
-    from naruto_gym.sensors.panorama import EquirectangularCamera
-
-    values = np.full((30, 30, 30), 0.5)  # the map: free everywhere
+def _agent_on_a_free_map(panorama: np.ndarray, agent: np.ndarray) -> NarutoPolicy:
+    """An agent bound to two_rooms whose map is free everywhere (kept: no planner view is
+    read) and whose last panorama, ``panorama``, was taken at ``agent``."""
     policy = NarutoPolicy(mapper="tsdf", device="cpu")
     env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1)
     policy.bind(EnvContext.from_env(env.unwrapped))
     env.close()
-    policy.sdf = SdfVolume(values, np.zeros(3), 0.1)
+    policy.sdf = SdfVolume(np.full((30, 30, 30), 0.5), np.zeros(3), 0.1)
+    policy._read_view = lambda: None
+    policy._panorama = (panorama, agent.copy())
+    return policy
+
+
+def test_a_move_the_panorama_shows_blocked_is_not_sent_and_its_surface_is_blocked() -> None:
+    """The agent stands 7 cm from a surface that its 0.1 m map does not show in the way: the
+    panorama taken where it stands shows it, so the move towards it is refused before the env
+    sees it, the surface point is blocked in the map, and the goal stays."""
     agent = np.array([1.5, 1.5, 1.0])
-    rays = EquirectangularCamera(64, 128).ray_directions.astype(np.float64)
-    towards = rays[:, 1] < -1e-6
-    distance = np.zeros(len(rays))
-    distance[towards] = np.minimum(-0.07 / rays[towards, 1], 5.0)  # a wall at y = 1.43 m
-    policy._panorama = (distance.reshape(64, 128).astype(np.float32), agent.copy())
-    policy._read_view = lambda: None  # keep the map above
+    policy = _agent_on_a_free_map(wall_panorama(-0.07), agent)  # a wall at y = 1.43 m
     assert policy._move_is_free(agent, agent + [0.1, 0.0, 0.0])  # along the wall
     assert len(policy.blocked.points) == 0
     assert not policy._move_is_free(agent, agent + [0.06, -0.05, 0.07])
@@ -435,20 +436,8 @@ def test_on_an_open_scan_a_move_the_panorama_shows_leaving_the_scan_is_refused()
     """The floor under the agent ends 0.3 m ahead (+x): once the scan is known open, a move
     to 5 cm before that edge is refused on the panorama and the space past it blocked; a
     move back inside passes, and on a closed scan the check does not run."""
-    from naruto_gym.sensors.panorama import EquirectangularCamera
-
-    policy = NarutoPolicy(mapper="tsdf", device="cpu")
-    env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1)
-    policy.bind(EnvContext.from_env(env.unwrapped))
-    env.close()
-    policy.sdf = SdfVolume(np.full((30, 30, 30), 0.5), np.zeros(3), 0.1)
-    policy._read_view = lambda: None
     agent = np.array([1.5, 1.5, 1.0])
-    rays = EquirectangularCamera(64, 128).ray_directions.astype(np.float64)
-    down = rays[:, 2] < -1e-6
-    distance = np.where(down, 1.0 / np.maximum(-rays[:, 2], 1e-6), 0.0)
-    panorama = np.where(down & (distance * rays[:, 0] < 0.3), distance, 0.0)
-    policy._panorama = (panorama.reshape(64, 128).astype(np.float32), agent.copy())
+    policy = _agent_on_a_free_map(floor_panorama(edge_x_m=0.3), agent)
     towards_edge = agent + [0.25, 0.0, 0.0]
     assert policy._panorama_keeps_to_scan(agent, agent + [-0.1, 0.0, 0.0])
     assert len(policy.blocked.points) == 0

@@ -12,6 +12,7 @@ import naruto_gym  # noqa: F401
 from naruto_agent.policies import EnvContext, FrontierPolicy, make_policy
 from naruto_agent.policies.panorama_clearance import RefusedMoves, sees_all_around_below
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
+from tests.agent.synthetic_panoramas import floor_panorama, wall_panorama
 
 
 def test_refused_climb_sets_a_ceiling_and_sideways_moves_draw_the_edge():
@@ -78,28 +79,18 @@ def test_wall_follower_follows_the_edge_of_a_missing_wall():
 
 def test_floor_edge_profile_finds_where_the_floor_ends():
     from naruto_agent.policies.panorama_clearance import floor_edge_profile
-    from naruto_gym.sensors.panorama import EquirectangularCamera
 
     # A floor 1 m below the agent that ends 0.8 m away towards +x, and goes on elsewhere.
-    camera = EquirectangularCamera(64, 128)
-    rays = camera.ray_directions.reshape(64, 128, 3).astype(np.float64)
-    down = rays[..., 2] < -1e-6
-    distance = np.where(down, 1.0 / np.maximum(-rays[..., 2], 1e-6), 0.0)
-    landing_x = distance * rays[..., 0]
-    panorama = np.where(down & (landing_x < 0.8), distance, 0.0).astype(np.float32)
-    edge = floor_edge_profile(panorama)
+    edge = floor_edge_profile(floor_panorama(edge_x_m=0.8))
     azimuth = -np.pi + 2.0 * np.pi * (np.arange(128) + 0.5) / 128
     towards_x = np.abs(azimuth) < np.deg2rad(10.0)
     assert np.all(edge[towards_x] <= 0.8) and np.all(edge[towards_x] > 0.6)
     away = np.abs(azimuth) > np.deg2rad(120.0)
     assert np.all(np.isinf(edge[away]))
-    closed = np.where(down, distance, 0.0).astype(np.float32)
-    assert np.all(np.isinf(floor_edge_profile(closed)))
+    assert np.all(np.isinf(floor_edge_profile(floor_panorama())))
     # Over a floor hole (0.3 m around the agent): the way out onto the floor stays open, and
     # the floor's far edge still counts; a column that hits nothing is closed.
-    landing_r = distance * np.hypot(rays[..., 0], rays[..., 1])
-    holed = np.where(down & (landing_r > 0.3) & (landing_x < 0.8), distance, 0.0)
-    edge = floor_edge_profile(holed.astype(np.float32))
+    edge = floor_edge_profile(floor_panorama(edge_x_m=0.8, hole_radius_m=0.3))
     assert np.all(edge[towards_x] <= 0.8) and np.all(edge[towards_x] > 0.6)
     assert np.all(np.isinf(edge[away]))
     assert np.all(floor_edge_profile(np.zeros((64, 128), np.float32)) == 0.0)
@@ -135,6 +126,18 @@ def _free_grid_with_floor(policy: FrontierPolicy, floor_x_max: float) -> np.ndar
     grid.log_odds[(centres[..., 0] < floor_x_max) & (centres[..., 2] < 0.1)] = 3.0
     grid.observed[centres[..., 0] > 4.5] = False
     return centres
+
+
+def _open_frontier_over_floor(floor_x_max: float) -> FrontierPolicy:
+    """A frontier policy reset on the single room without a ceiling, its map as in
+    :func:`_free_grid_with_floor`, that knows the scan is open."""
+    policy = FrontierPolicy()
+    env = _env("replica_like_room:no_ceiling", policy)
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    _free_grid_with_floor(policy, floor_x_max=floor_x_max)
+    policy.scan_open = True
+    return policy
 
 
 def test_frontier_counts_only_frontier_inside_the_scan():
@@ -264,12 +267,7 @@ def test_frontier_holds_to_the_scan_only_once_it_sees_that_the_scan_is_open():
 def test_frontier_does_not_send_a_move_towards_the_scans_edge():
     """On an open scan, a move whose probe lies past the measured floor's edge is learnt from
     as an escape refusal instead of being sent; a move inside the floor passes."""
-    policy = FrontierPolicy()
-    env = _env("replica_like_room:no_ceiling", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
-    _free_grid_with_floor(policy, floor_x_max=3.5)
-    policy.scan_open = True
+    policy = _open_frontier_over_floor(floor_x_max=3.5)
 
     def leaves(start: np.ndarray, end: np.ndarray) -> bool:
         return policy.grid.move_leaves_support(start, end, policy.edge_probe_m)
@@ -285,12 +283,7 @@ def test_frontier_arrives_instead_of_giving_up_when_its_map_refuses_the_last_ste
     """A move the policy's own map refuses (towards the measured floor's edge) within
     ``edge_arrival_m`` of the goal ends the trip there: the agent looks around where it stands
     and keeps the goal's look; farther from the goal it gives the goal up and plans again."""
-    policy = FrontierPolicy()
-    env = _env("replica_like_room:no_ceiling", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
-    _free_grid_with_floor(policy, floor_x_max=3.5)
-    policy.scan_open = True
+    policy = _open_frontier_over_floor(floor_x_max=3.5)
     grid = policy.grid
     policy._traversable_cache = np.ones(grid.shape, bool)
     position = np.array([3.3, 2.0, 1.0])
@@ -310,25 +303,13 @@ def test_frontier_arrives_instead_of_giving_up_when_its_map_refuses_the_last_ste
             assert len(policy.visited_goals) == 1 and policy.visited_goals[0][0] > 3.9
 
 
-def _wall_panorama(wall_y: float, shape: tuple[int, int] = (64, 128)) -> np.ndarray:
-    """A panorama from the origin of a plane wall at y = ``wall_y`` (< 0), nothing else."""
-    from naruto_gym.sensors.panorama import EquirectangularCamera
-
-    rays = EquirectangularCamera(*shape).ray_directions.astype(np.float64)
-    towards = rays[:, 1] < -1e-6
-    distance = np.zeros(len(rays))
-    distance[towards] = wall_y / rays[towards, 1]
-    distance[distance > 10.0] = 0.0
-    return distance.reshape(shape).astype(np.float32)
-
-
 def test_first_contact_reads_the_way_ahead_from_the_panorama():
     """A sphere 7 cm from a wall: a move that takes it within its radius of the wall is
     blocked at the wall; moving along the wall or away from it is not, and (as the env's
     sweep) an agent already closer than its radius may move as long as it gets no closer."""
     from naruto_agent.policies.panorama_clearance import first_contact
 
-    panorama = _wall_panorama(-0.07)
+    panorama = wall_panorama(-0.07)
     contact = first_contact(panorama, np.array([0.06, -0.05, 0.07]), 0.06)
     assert contact is not None and contact[1] == pytest.approx(-0.07, abs=1e-4)
     assert contact[0] > 0.0  # ahead along the move, not the closest point sideways
@@ -344,15 +325,9 @@ def test_cone_supported_reads_the_envs_cone_test_from_the_panorama():
     points at or past the edge are not (a sector of their cone sees nothing); a closed floor
     supports everything, an empty panorama nothing."""
     from naruto_agent.policies.panorama_clearance import cone_supported
-    from naruto_gym.sensors.panorama import EquirectangularCamera
 
-    rays = EquirectangularCamera(64, 128).ray_directions.astype(np.float64)
-    down = rays[:, 2] < -1e-6
-    distance = np.where(down, 1.0 / np.maximum(-rays[:, 2], 1e-6), 0.0)
-    floor_ends = np.where(down & (distance * rays[:, 0] < 0.8), distance, 0.0)
     points = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.85, 0.0, 0.0], [0.5, 0.0, -0.9]])
-    supported = cone_supported(floor_ends.reshape(64, 128).astype(np.float32), points)
+    supported = cone_supported(floor_panorama(edge_x_m=0.8), points)
     assert supported.tolist() == [True, True, False, True]  # the last: 0.1 m above the floor
-    closed = distance.reshape(64, 128).astype(np.float32)
-    assert cone_supported(closed, points[:3]).all()
+    assert cone_supported(floor_panorama(), points[:3]).all()
     assert not cone_supported(np.zeros((64, 128), np.float32), points[:1]).any()
