@@ -596,8 +596,26 @@ class NarutoPolicy(Policy):
         if not self._panorama_shows_way_clear(start, end):
             return False
         if self._scan_open and self.config.sector_support_after_escape:
-            return self._panorama_keeps_to_scan(start, end) and self._stays_in_scan(start, end)
+            return (self._stays_below_top(start, end) and self._panorama_keeps_to_scan(start, end)
+                    and self._stays_in_scan(start, end))
         return True
+
+    def _stays_below_top(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """On an open scan a climb may not end above the scan's top: the flight ceiling a
+        refused climb taught, or the measured surfaces' top (:meth:`ObservedSpace.scan_top_z`,
+        voxel tops, so up to a voxel above the surfaces) less the agent's radius. The map
+        alone let a path's node a few centimetres above either through (the SDF blends
+        blocked voxels with free ones). A refused climb lowers the flight ceiling, so the
+        next plan stays under it; the goal stays. Level and descending moves always pass."""
+        if end[2] <= start[2]:
+            return True
+        top = self.mapper.observed_space.scan_top_z() - self.context.agent_radius_m
+        if end[2] <= min(top, self.blocked.ceiling_z):
+            return True
+        if top < self.blocked.ceiling_z:
+            self.blocked.lower_ceiling(max(top, float(start[2])))
+            self._blocked_space_changed(goal_failed=False)
+        return False
 
     def _panorama_from(self, start: np.ndarray) -> np.ndarray | None:
         """The newest panorama when it was taken at ``start`` and the panorama checks are on

@@ -209,18 +209,26 @@ def cone_supported(panorama: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 def move_leaves_scan(panorama: np.ndarray, move: np.ndarray, radius_m: float) -> bool:
     """Whether a move from the panorama's centre leaves the scanned space as the env judges
-    it (:func:`cone_supported`): the start is supported, and the end, or a point ``radius_m``
-    further on along the move or horizontally, is not (the env judges a point by the lattice
-    corners within its clearance, a few centimetres around it). From an unsupported start
-    any move passes: the agent has to get back in."""
+    it (:func:`cone_supported`): the start is supported, and the end, a point ``radius_m``
+    further on along the move or horizontally, or a corner of the cube ``radius_m`` around the
+    end, is not. The env judges a point by the lattice corners within its clearance, a few
+    centimetres around it on every side: beside a floor hole's rim or a wall's opening, a
+    corner to the side of the move can fall outside while the end itself is supported. From
+    an unsupported start any move passes: the agent has to get back in."""
     move = np.asarray(move, np.float64)
     probes = [np.zeros(3), move]
     for way in (move, np.array([move[0], move[1], 0.0])):
         length = float(np.linalg.norm(way))
         if length > 1e-9:
             probes.append(move + radius_m * way / length)
+    probes.extend(move + radius_m * _CUBE_CORNERS)
     supported = cone_supported(panorama, np.array(probes))
     return bool(supported[0] and not supported[1:].all())
+
+
+_CUBE_CORNERS = np.array(
+    [[x, y, z] for x in (-1.0, 1.0) for y in (-1.0, 1.0) for z in (-1.0, 1.0)]
+)
 
 
 @functools.lru_cache(maxsize=1)
