@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
@@ -446,3 +447,29 @@ def test_on_an_open_scan_a_move_the_panorama_shows_leaving_the_scan_is_refused()
     policy._scan_open = True
     assert not policy._panorama_keeps_to_scan(agent, towards_edge)
     assert len(policy.blocked.points) == 1 and policy.blocked.points[0][0] > towards_edge[0]
+
+
+def test_on_an_open_scan_a_climb_above_the_scans_top_is_refused_and_lowers_the_ceiling() -> None:
+    """Walls measured up to about 2.6 m and no ceiling: once the scan is known open, a climb
+    that ends above the measured top less the agent's radius is refused (the map alone let
+    such nodes through) and sets the flight ceiling there; level and descending moves pass,
+    and on a closed scan the check does not run."""
+    space = ObservedSpace(np.array([[0.0, 0.0, 0.0], [3.0, 3.0, 3.0]]))
+    heights = np.arange(0.05, 2.6, 0.1)
+    space.grid.mark_occupied(np.array([[x, 0.05, z] for x in np.arange(0.05, 3.0, 0.1)
+                                       for z in heights]))
+    agent = np.array([1.5, 1.5, 2.0])
+    policy = _agent_on_a_free_map(floor_panorama(height_m=2.0), agent)
+    policy.mapper = SimpleNamespace(observed_space=space)  # the agent's measured space only
+    limit = space.scan_top_z() - policy.context.agent_radius_m
+    assert 2.5 < limit < 2.7
+    below, above = agent + [0.0, 0.0, limit - 2.01], agent + [0.0, 0.0, limit - 1.95]
+    policy._scan_open = False
+    assert policy._move_is_free(agent, above)  # closed: the top is the ceiling the map shows
+    policy._scan_open = True
+    assert policy._stays_below_top(agent, below)
+    assert not policy._stays_below_top(agent, above)
+    assert policy.blocked.ceiling_z == pytest.approx(limit)
+    assert policy.sdf.sample(above[None])[0] < 0  # the next plan stays under it
+    assert policy._stays_below_top(above, above + [0.1, 0.0, 0.0])  # level, already above
+    assert policy._stays_below_top(above, below)

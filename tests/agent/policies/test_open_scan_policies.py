@@ -331,3 +331,18 @@ def test_cone_supported_reads_the_envs_cone_test_from_the_panorama():
     assert supported.tolist() == [True, True, False, True]  # the last: 0.1 m above the floor
     assert cone_supported(floor_panorama(), points[:3]).all()
     assert not cone_supported(np.zeros((64, 128), np.float32), points[:1]).any()
+
+
+def test_move_leaves_scan_probes_the_cube_around_the_moves_end():
+    """The floor ends 6 cm ahead (+x) of the agent: a move of 0.1 m along the edge (+y) ends
+    supported, as does a point a radius further on, but a corner of the cube a radius around
+    the end lies past the edge, where the env's lattice refuses; a move away from the edge
+    stays inside."""
+    from naruto_agent.policies.panorama_clearance import cone_supported, move_leaves_scan
+
+    panorama = floor_panorama(edge_x_m=0.06)
+    along_edge = np.array([0.0, 0.1, 0.0])
+    assert cone_supported(panorama, np.array([[0.0, 0.0, 0.0], along_edge,
+                                              along_edge + [0.0, 0.05, 0.0]])).all()
+    assert move_leaves_scan(panorama, along_edge, 0.05)
+    assert not move_leaves_scan(panorama, np.array([-0.1, 0.1, 0.0]), 0.05)
