@@ -174,6 +174,9 @@ class NarutoConfig:
             as the panorama shows it (the env's cone test on the surface points around the
             agent); one that leaves it is refused as by ``edge_probe_m``.
         panorama_margin_m: the panorama check keeps the env's agent radius plus this.
+        max_held_moves: after this many moves in a row from one spot that the panorama shows
+            leaving an open scan, the next is sent and the env decides (its refusal teaches
+            the edge as any other): low over a floor hole every way can look like leaving.
         escape_radius_m: how far the agent may look for free space when the map puts it
             inside a surface's clearance (0 switches the escape off).
         arrival_tolerance_m: a moving agent farther than this from its commanded node was
@@ -259,6 +262,7 @@ class NarutoConfig:
     check_moves_on_map: bool = True
     check_moves_on_panorama: bool = True
     panorama_margin_m: float = 0.01
+    max_held_moves: int = 3
     escape_radius_m: float = 0.3
     arrival_tolerance_m: float = 0.01
     use_panorama: bool = True
@@ -303,6 +307,8 @@ class NarutoConfig:
                              f"{self.open_sky_share}")
         if self.edge_probe_m < 0:
             raise ValueError(f"edge_probe_m must be >= 0, got {self.edge_probe_m}")
+        if self.max_held_moves < 0:
+            raise ValueError(f"max_held_moves must be >= 0, got {self.max_held_moves}")
         self.planner.validate()
 
 
@@ -398,6 +404,7 @@ class NarutoPolicy(Policy):
         self.visit_looks: np.ndarray | None = None  # looks per planner voxel from visits
         self._scan_open = False  # an escape refusal or the sky: the scan is open
         self._panorama: tuple[np.ndarray, np.ndarray] | None = None  # (panorama, where)
+        self._held: tuple[np.ndarray, int] | None = None  # where moves were held, how many
 
     # -- mapping -----------------------------------------------------------------------------
     def bind(self, context: EnvContext) -> None:
@@ -479,6 +486,7 @@ class NarutoPolicy(Policy):
         self.visit_looks = None
         self._scan_open = False  # an escape refusal or the sky: the scan is open
         self._panorama = None
+        self._held = None
         self._integrate(observation)
 
     def _note_refused_move(self, position: np.ndarray, info: Info) -> None:
@@ -648,6 +656,11 @@ class NarutoPolicy(Policy):
         radius = self.context.agent_radius_m
         if panorama is None or not move_leaves_scan(panorama, end - start, radius):
             return True
+        held_here = self._held is not None and np.linalg.norm(start - self._held[0]) <= 1e-3
+        count = self._held[1] + 1 if held_here else 1
+        if count > self.config.max_held_moves:
+            return True  # the env decides
+        self._held = (start.copy(), count)
         self._block_past_edge(start, end)
         return False
 

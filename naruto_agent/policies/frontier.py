@@ -55,7 +55,12 @@ from scipy import ndimage
 
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
 from naruto_agent.policies.occupancy import OccupancyGrid
-from naruto_agent.policies.panorama_clearance import RefusedMoves, steep_miss_share
+from naruto_agent.policies.panorama_clearance import (
+    RefusedMoves,
+    first_contact,
+    move_leaves_scan,
+    steep_miss_share,
+)
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, rotation_angle_between
 
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
@@ -95,6 +100,20 @@ class FrontierPolicy(Policy):
             policy learns the edge there as from an escape refusal and plans again.
         edge_arrival_m: such a move within this path length of the goal counts as arriving
             there (look around where the agent stands) instead of giving the goal up.
+        panorama_edge_probe: on an open scan, also refuse such a move when the depth
+            panorama taken where the agent stands shows it leaving the scanned space
+            (:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`; only when
+            the observation has a panorama).
+        panorama_move_check: before a move is sent, read its way from the depth panorama
+            taken where the agent stands (:func:`~naruto_agent.policies.panorama_clearance.
+            first_contact`, keeping the env's agent radius plus ``panorama_margin_m``): a
+            surface in the way is marked occupied in the map and the policy plans again
+            instead of bumping. The 0.1 m grid misses thin or small surfaces (a table's
+            edge, a chair's leg) by a few centimetres, and in a tight spot the policy bumped
+            into them several steps in a row, in every direction it tried.
+        panorama_margin_m: see ``panorama_move_check``.
+        max_held_moves: after this many moves held back by the panorama (in the way, or
+            leaving the scan) in a row at one spot, the move is sent and the env decides.
         scan_top_quantile: with ``scanned_space_support``, paths stay ``scan_top_margin_m``
             below the height under which this share of the occupied voxels lies.
         scan_top_margin_m: see ``scan_top_quantile``.
@@ -126,6 +145,10 @@ class FrontierPolicy(Policy):
         open_sky_share: float | None = 0.05,
         edge_probe_m: float = 0.15,
         edge_arrival_m: float = 0.5,
+        panorama_edge_probe: bool = True,
+        panorama_move_check: bool = True,
+        panorama_margin_m: float = 0.01,
+        max_held_moves: int = 3,
         scan_top_quantile: float = 0.99,
         scan_top_margin_m: float = 0.0,
         support_below_m: float = 3.0,
@@ -153,6 +176,11 @@ class FrontierPolicy(Policy):
         self.open_sky_share = open_sky_share
         self.edge_probe_m = edge_probe_m
         self.edge_arrival_m = edge_arrival_m
+        self.panorama_edge_probe = panorama_edge_probe
+        self.panorama_move_check = panorama_move_check
+        self.panorama_margin_m = panorama_margin_m
+        self.max_held_moves = max_held_moves
+        self._held_moves = 0
         self.scan_open = False  # an escape refusal or the sky: the scan is open
         self.scan_top_quantile = scan_top_quantile
         self.scan_top_margin_m = scan_top_margin_m
@@ -202,6 +230,7 @@ class FrontierPolicy(Policy):
         self.refused.reset()
         self._last_target = None
         self.scan_open = False
+        self._held_moves = 0
         pose = np.asarray(observation["pose"], np.float64)
         self._integrate(observation["depth"], pose)
         self._start_look_around(pose, focus=None)
@@ -432,7 +461,47 @@ class FrontierPolicy(Policy):
         cells = cells[self.grid.in_grid(cells) & np.any(cells != own, axis=1)]
         self._blocked[tuple(cells.T)] = True
 
-    def _move_action(self, pose: np.ndarray) -> np.ndarray | None:
+    def _panorama_shows_surface(
+        self, position: np.ndarray, target: np.ndarray, panorama: np.ndarray | None
+    ) -> bool:
+        """Whether the panorama taken where the agent stands shows a surface in the move's
+        way (``panorama_move_check``); the surface point is then marked occupied."""
+        assert self.grid is not None
+        if (not self.panorama_move_check or panorama is None
+                or self._held_moves >= self.max_held_moves):
+            return False
+        radius = self.context.agent_radius_m + self.panorama_margin_m
+        contact = first_contact(panorama, target - position, radius)
+        if contact is None:
+            return False
+        self._held_moves += 1
+        self.grid.mark_occupied((position + contact)[None])
+        return True
+
+    def _probe_refuses(
+        self, position: np.ndarray, target: np.ndarray, panorama: np.ndarray | None
+    ) -> bool:
+        """On an open scan, whether the move towards ``target`` would leave the scanned
+        space: on the policy's own map (``edge_probe_m``), or on the depth panorama taken
+        where it stands (:func:`move_leaves_scan`, with ``panorama_edge_probe``), which
+        places the floor's edge to within a few centimetres where the 0.1 m grid blurs it. After
+        ``max_held_moves`` moves held back in a row at one spot the panorama's word is
+        dropped and the env decides (its refusal teaches the edge as any other), as it does
+        from a start in the scan's margin (``margin_start_passes``): low over a floor hole
+        every move can look like leaving, and the refusals gave up every goal in reach."""
+        assert self.grid is not None
+        if self.grid.move_leaves_support(position, target, self.edge_probe_m):
+            return True
+        if (not self.panorama_edge_probe or panorama is None
+                or self._held_moves >= self.max_held_moves):
+            return False
+        if move_leaves_scan(panorama, target - position, self.context.agent_radius_m,
+                            margin_start_passes=True):
+            self._held_moves += 1
+            return True
+        return False
+
+    def _move_action(self, pose: np.ndarray, panorama: np.ndarray | None) -> np.ndarray | None:
         assert self.grid is not None
         position = pose[:3, 3]
         # Drop the path points already passed.
@@ -458,11 +527,12 @@ class FrontierPolicy(Policy):
         if length > self.context.max_translation_m:
             target = position + step * (self.context.max_translation_m / length)
         self._last_target = np.asarray(target, np.float64).copy()
-        if self._held_to_scan and self.grid.move_leaves_support(
-            position, self._last_target, self.edge_probe_m
-        ):
-            # Refused on the policy's own map, as the env would: learn the edge; close to the
-            # goal, arrive here (the caller looks around), else give the goal up and plan.
+        if self._panorama_shows_surface(position, self._last_target, panorama):
+            self.state = "plan"  # the goal stays; the marked surface reroutes the path
+            return None
+        if self._held_to_scan and self._probe_refuses(position, self._last_target, panorama):
+            # Refused as the env would: learn the edge; close to the goal, arrive here (the
+            # caller looks around), else give the goal up and plan.
             self._learn_edge(position, None)
             waypoints = np.concatenate([position[None], self._path])
             remaining = float(np.linalg.norm(np.diff(waypoints, axis=0), axis=1).sum())
@@ -489,6 +559,8 @@ class FrontierPolicy(Policy):
                 self._last_position is None or np.linalg.norm(position - self._last_position) > 1e-3
             )
             self._stuck = 0 if moved else self._stuck + 1
+            if moved:
+                self._held_moves = 0
             if collided and info.get("collision_reason") == "escape":
                 self.scan_open = True
                 self._learn_edge(position, observation.get("panorama"))
@@ -528,7 +600,7 @@ class FrontierPolicy(Policy):
                     self.state = "done"
                     break
             if self.state == "move":
-                action = self._move_action(pose)
+                action = self._move_action(pose, observation.get("panorama"))
                 if action is not None:
                     return clip_pose_action(action, self.context.action_space)
                 if self.state == "plan":

@@ -207,23 +207,43 @@ def cone_supported(panorama: np.ndarray, points: np.ndarray) -> np.ndarray:
     return supported
 
 
-def move_leaves_scan(panorama: np.ndarray, move: np.ndarray, radius_m: float) -> bool:
+def move_leaves_scan(
+    panorama: np.ndarray, move: np.ndarray, radius_m: float, margin_start_passes: bool = False
+) -> bool:
     """Whether a move from the panorama's centre leaves the scanned space as the env judges
-    it (:func:`cone_supported`): the start is supported, and the end, a point ``radius_m``
-    further on along the move or horizontally, or a corner of the cube ``radius_m`` around the
-    end, is not. The env judges a point by the lattice corners within its clearance, a few
-    centimetres around it on every side: beside a floor hole's rim or a wall's opening, a
-    corner to the side of the move can fall outside while the end itself is supported. From
-    an unsupported start any move passes: the agent has to get back in."""
+    it (:func:`cone_supported`).
+
+    The env judges a point by the lattice corners within its clearance, a few centimetres
+    around it on every side, so the move is probed at its end, a point ``radius_m`` further
+    on along it and horizontally, and the corners of the cube ``radius_m`` around the end:
+    beside a floor hole's rim or a wall's opening a corner to the side of the move can fall
+    outside while the end itself is supported. The move leaves when the start is supported
+    and one of the first three is not, or when the end's cube has unsupported corners and
+    at least as many as the start's own cube: along the edge in the margin the env refuses,
+    while a move that takes the agent further in (up from low over a floor hole, where the
+    cube's lower corners sink into it) passes. From an unsupported start any move passes:
+    the agent has to get back in; with ``margin_start_passes`` so does any move from a start
+    whose own cube is not wholly supported (the env then decides: for a caller that gives
+    its goal up at every refusal, where holding moves back in the margin can leave none)."""
     move = np.asarray(move, np.float64)
     probes = [np.zeros(3), move]
     for way in (move, np.array([move[0], move[1], 0.0])):
         length = float(np.linalg.norm(way))
         if length > 1e-9:
             probes.append(move + radius_m * way / length)
+    corners = len(_CUBE_CORNERS)
     probes.extend(move + radius_m * _CUBE_CORNERS)
+    probes.extend(radius_m * _CUBE_CORNERS)
     supported = cone_supported(panorama, np.array(probes))
-    return bool(supported[0] and not supported[1:].all())
+    if not supported[0]:
+        return False
+    end_outside = int(np.count_nonzero(~supported[-2 * corners : -corners]))
+    start_outside = int(np.count_nonzero(~supported[-corners:]))
+    if margin_start_passes and start_outside:
+        return False
+    if not supported[1 : len(supported) - 2 * corners].all():
+        return True
+    return end_outside > 0 and end_outside >= start_outside
 
 
 _CUBE_CORNERS = np.array(

@@ -294,7 +294,7 @@ def test_frontier_arrives_instead_of_giving_up_when_its_map_refuses_the_last_ste
         policy._goal_cell = grid.world_to_cell(policy._path[-1:])[0]
         policy.visited_goals = []
         policy.state = "move"
-        assert policy._move_action(pose) is None
+        assert policy._move_action(pose, None) is None
         if arrives:
             assert policy.state == "move" and len(policy._path) == 1
             assert not policy.visited_goals  # act() marks where it stands and looks around
