@@ -346,3 +346,43 @@ def test_move_leaves_scan_probes_the_cube_around_the_moves_end():
                                               along_edge + [0.0, 0.05, 0.0]])).all()
     assert move_leaves_scan(panorama, along_edge, 0.05)
     assert not move_leaves_scan(panorama, np.array([-0.1, 0.1, 0.0]), 0.05)
+
+
+def test_frontier_holds_back_a_move_the_panorama_shows_blocked_and_marks_the_surface():
+    """A wall 7 cm beside the agent that the 0.1 m map does not hold: a move towards it is
+    held back and the wall point marked occupied; a move along it is sent. After
+    ``max_held_moves`` holds in a row at one spot the env decides."""
+    policy = _open_frontier_over_floor(floor_x_max=3.5)
+    grid = policy.grid
+    position = np.array([2.0, 2.0, 1.0])
+    panorama = wall_panorama(-0.07)
+    wall = grid.world_to_cell(np.array([[2.0, 1.93, 1.0]]))[0]
+    assert not grid.occupied[tuple(wall)]
+    assert not policy._panorama_shows_surface(position, position + [0.1, 0.0, 0.0], panorama)
+    towards = position + [0.06, -0.05, 0.0]
+    assert policy._panorama_shows_surface(position, towards, panorama)
+    assert grid.occupied[tuple(wall)]
+    for _ in range(policy.max_held_moves - 1):
+        assert policy._panorama_shows_surface(position, towards, panorama)
+    assert not policy._panorama_shows_surface(position, towards, panorama)  # the env decides
+    policy._held_moves = 0
+    policy.panorama_move_check = False
+    assert not policy._panorama_shows_surface(position, towards, panorama)
+
+
+def test_frontier_leaves_a_move_from_the_scans_margin_to_the_env():
+    """The floor ends 6 cm ahead of the agent (+x): the cube around it is not wholly over
+    the floor, so a move along the edge is not held back by frontier's panorama probe (the
+    env decides; holding every such move back gave up every goal in reach over a floor
+    hole), while NARUTO's reading holds it; 0.25 m back from the edge a move towards it is
+    held back by both."""
+    from naruto_agent.policies.panorama_clearance import move_leaves_scan
+
+    along_edge = np.array([0.0, 0.1, 0.0])
+    margin = floor_panorama(edge_x_m=0.06)
+    assert move_leaves_scan(margin, along_edge, 0.05)
+    assert not move_leaves_scan(margin, along_edge, 0.05, margin_start_passes=True)
+    inside = floor_panorama(edge_x_m=0.3)
+    assert move_leaves_scan(inside, np.array([0.25, 0.0, 0.0]), 0.05, margin_start_passes=True)
+    assert not move_leaves_scan(inside, np.array([-0.1, 0.0, 0.0]), 0.05,
+                                margin_start_passes=True)
