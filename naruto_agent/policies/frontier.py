@@ -43,6 +43,13 @@ most of these refusals came in the last few steps before a goal). On a closed sc
 (no sky, no escape refusal) none of this applies: held to the test there, the policy lost up
 to a point of coverage on the Replica sample (frontier near a cluttered ceiling).
 
+Before a move is sent the policy reads its way from the depth panorama taken where it stands
+(``panorama_move_check``), as a robot reads its range sensor: a surface the agent's sphere
+would touch is marked occupied and the path planned again, instead of bumping into what the
+0.1 m grid missed. On an open scan the panorama also places the scan's edge to within a few
+centimetres (``panorama_edge_probe``). After ``max_held_moves`` moves held back in a row at
+one spot the move is sent and the env decides.
+
 When no frontier is left the map is complete and the agent keeps looking around where it is.
 """
 
