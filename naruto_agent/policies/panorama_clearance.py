@@ -221,7 +221,11 @@ def move_leaves_scan(
     and one of the first three is not, or when the end's cube has unsupported corners and
     at least as many as the start's own cube: along the edge in the margin the env refuses,
     while a move that takes the agent further in (up from low over a floor hole, where the
-    cube's lower corners sink into it) passes. From an unsupported start any move passes:
+    cube's lower corners sink into it) passes. A cube counts only when its corners lie
+    within the free ball around its point (the panorama's nearest surface point is farther),
+    as the env counts only lattice corners within the agent's clearance: next to a wall the
+    far corners lie behind it, where nothing below them is in view, and the walls of a room
+    would read as its edge. From an unsupported start any move passes:
     the agent has to get back in; with ``margin_start_passes`` so does any move from a start
     whose own cube is not wholly supported (the env then decides: for a caller that gives
     its goal up at every refusal, where holding moves back in the margin can leave none)."""
@@ -237,13 +241,29 @@ def move_leaves_scan(
     supported = cone_supported(panorama, np.array(probes))
     if not supported[0]:
         return False
+    # As the env, only corners within the free ball around a point count: next to a wall the
+    # cube's far corners lie behind it, where the panorama sees nothing below them.
+    clearance = _clearances(panorama, np.array([move, np.zeros(3)]))
+    reach = radius_m * float(np.sqrt(3.0))
     end_outside = int(np.count_nonzero(~supported[-2 * corners : -corners]))
-    start_outside = int(np.count_nonzero(~supported[-corners:]))
+    end_outside *= int(clearance[0] > reach)
+    start_outside = int(np.count_nonzero(~supported[-corners:])) * int(clearance[1] > reach)
     if margin_start_passes and start_outside:
         return False
     if not supported[1 : len(supported) - 2 * corners].all():
         return True
     return end_outside > 0 and end_outside >= start_outside
+
+
+def _clearances(panorama: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(K,) distance from each of (K, 3) points (relative to the panorama's centre) to the
+    nearest surface point the panorama shows (inf when it shows none)."""
+    distance = np.asarray(panorama, np.float64).reshape(-1)
+    hit = distance > 0.0
+    if not hit.any():
+        return np.full(len(points), np.inf)
+    surface = _panorama_rays(*panorama.shape)[hit] * distance[hit, None]
+    return np.array([float(np.min(np.linalg.norm(surface - point, axis=1))) for point in points])
 
 
 _CUBE_CORNERS = np.array(

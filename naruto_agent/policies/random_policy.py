@@ -13,7 +13,9 @@ Once the scan is known to be open (an escape refusal, or a depth frame that sees
 ``open_sky_share``), a run that the depth panorama taken where it stands shows leaving the
 scanned space (:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`) ends
 there as a blocked one would, without the move being sent: a walker with a cliff sensor.
-Surfaces still end runs by bumping, as on a closed scan, where nothing of this applies.
+Surfaces still end runs by bumping, as on a closed scan, where nothing of this applies: a
+move with a surface in its way (behind which the panorama sees nothing below the move's
+end, as past an edge) is sent.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import numpy as np
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
 from naruto_agent.policies.panorama_clearance import (
     RefusedMoves,
+    first_contact,
     move_leaves_scan,
     steep_miss_share,
 )
@@ -159,5 +162,8 @@ class RandomPolicy(Policy):
         panorama = observation.get("panorama")
         if not (self.sense_scan_edge and self.scan_open) or panorama is None:
             return False
-        return move_leaves_scan(np.asarray(panorama), move, self.context.agent_radius_m,
-                                margin_start_passes=True)
+        panorama = np.asarray(panorama)
+        radius = self.context.agent_radius_m
+        if first_contact(panorama, move, radius) is not None:
+            return False  # a surface in the way: the walker bumps, as on a closed scan
+        return move_leaves_scan(panorama, move, radius, margin_start_passes=True)
