@@ -8,14 +8,6 @@ the open) or when the run's random length is used up. A climb the env refuses as
 bounds' top does. It never keeps pushing against a wall,
 which is what ``action_space.sample()`` would do. All randomness comes from its own seeded
 generator, so one seed gives one trajectory.
-
-Once the scan is known to be open (an escape refusal, or a depth frame that sees the sky:
-``open_sky_share``), a run that the depth panorama taken where it stands shows leaving the
-scanned space (:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`) ends
-there as a blocked one would, without the move being sent: a walker with a cliff sensor.
-Surfaces still end runs by bumping, as on a closed scan, where nothing of this applies: a
-move with a surface in its way (behind which the panorama sees nothing below the move's
-end, as past an edge) is sent.
 """
 
 from __future__ import annotations
@@ -23,12 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
-from naruto_agent.policies.panorama_clearance import (
-    RefusedMoves,
-    first_contact,
-    move_leaves_scan,
-    steep_miss_share,
-)
+from naruto_agent.policies.panorama_clearance import RefusedMoves
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 
 
@@ -44,13 +31,6 @@ class RandomPolicy(Policy):
             floor and ceiling.
         avoid_blocked_deg: a new direction after a block is at least this far from the
             blocked one.
-        sense_scan_edge: on an open scan, end a run the panorama shows leaving the scanned
-            space before sending its move (see the module docstring).
-        open_sky_share: the scan counts as open once this share of a depth frame's steep
-            pixels hit nothing (:func:`~naruto_agent.policies.panorama_clearance.
-            steep_miss_share`); None: only an escape refusal tells.
-        max_held_moves: new directions tried per step when the panorama holds moves back;
-            the last one is sent whatever the panorama shows (the env decides).
     """
 
     def __init__(
@@ -62,9 +42,6 @@ class RandomPolicy(Policy):
         max_pitch_deg: float = 30.0,
         height_margin_m: float = 0.3,
         avoid_blocked_deg: float = 60.0,
-        sense_scan_edge: bool = True,
-        open_sky_share: float | None = 0.05,
-        max_held_moves: int = 3,
     ) -> None:
         super().__init__()
         if not 1 <= min_run_steps <= max_run_steps:
@@ -78,12 +55,6 @@ class RandomPolicy(Policy):
         self.max_pitch_rad = float(np.deg2rad(max_pitch_deg))
         self.height_margin_m = height_margin_m
         self.cos_avoid = float(np.cos(np.deg2rad(avoid_blocked_deg)))
-        self.sense_scan_edge = sense_scan_edge
-        self.open_sky_share = open_sky_share
-        self.max_held_moves = max_held_moves
-        self.scan_open = False
-        #: Runs ended because the panorama showed them leaving the scan (for tests and logs).
-        self.turns_at_edge = 0
         self.rng = np.random.default_rng(seed)
         self.direction = np.array([1.0, 0.0, 0.0])
         self.pitch = 0.0
@@ -98,8 +69,6 @@ class RandomPolicy(Policy):
             self.seed = seed
             self.rng = np.random.default_rng(seed)
         self.turns_after_block = 0
-        self.turns_at_edge = 0
-        self.scan_open = False
         self.refused.reset()
         self._new_run(np.asarray(observation["pose"], np.float64), blocked=None)
 
@@ -124,10 +93,8 @@ class RandomPolicy(Policy):
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         pose = np.asarray(observation["pose"], np.float64)
-        self._note_open_sky(observation, pose)
         if info is not None and info.get("collided", False):
             if info.get("collision_reason") == "escape":
-                self.scan_open = True
                 self.refused.record(pose[:3, 3], pose[:3, 3] + self.direction)
             self.turns_after_block += 1
             self._new_run(pose, blocked=self.direction)
@@ -136,34 +103,8 @@ class RandomPolicy(Policy):
         self.steps_left -= 1
         position = pose[:3, 3]
         target = position + self.direction * self.context.max_translation_m
-        for _ in range(self.max_held_moves):
-            if not self._leaves_scan(observation, target - position):
-                break
-            self.turns_at_edge += 1
-            self._new_run(pose, blocked=self.direction)
-            self.steps_left -= 1
-            target = position + self.direction * self.context.max_translation_m
         heading = np.array([self.direction[0], self.direction[1], 0.0])
         heading /= max(np.linalg.norm(heading), 1e-9)
         look = heading * np.cos(self.pitch) + np.array([0.0, 0.0, np.sin(self.pitch)])
         rotation = look_at_rotation(target, target + look)
         return clip_pose_action(pose_action(make_pose(rotation, target)), self.context.action_space)
-
-    def _note_open_sky(self, observation: Observation, pose: np.ndarray) -> None:
-        """The scan is open once a depth frame sees the sky (``open_sky_share``)."""
-        depth = observation.get("depth")
-        if self.scan_open or self.open_sky_share is None or depth is None:
-            return
-        miss = steep_miss_share(depth, pose, self.context.camera)
-        self.scan_open = miss >= self.open_sky_share
-
-    def _leaves_scan(self, observation: Observation, move: np.ndarray) -> bool:
-        """On an open scan, whether the panorama shows ``move`` leaving the scanned space."""
-        panorama = observation.get("panorama")
-        if not (self.sense_scan_edge and self.scan_open) or panorama is None:
-            return False
-        panorama = np.asarray(panorama)
-        radius = self.context.agent_radius_m
-        if first_contact(panorama, move, radius) is not None:
-            return False  # a surface in the way: the walker bumps, as on a closed scan
-        return move_leaves_scan(panorama, move, radius, margin_start_passes=True)
