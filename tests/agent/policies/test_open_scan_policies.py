@@ -386,28 +386,3 @@ def test_frontier_leaves_a_move_from_the_scans_margin_to_the_env():
     assert move_leaves_scan(inside, np.array([0.25, 0.0, 0.0]), 0.05, margin_start_passes=True)
     assert not move_leaves_scan(inside, np.array([-0.1, 0.0, 0.0]), 0.05,
                                 margin_start_passes=True)
-
-
-def test_random_walk_turns_where_the_panorama_shows_the_scans_edge():
-    """On an open scan the random walk ends a run whose move the panorama shows leaving the
-    scanned space (the floor ends 0.12 m ahead) before sending it, and walks on in a new
-    direction; on a closed scan (no sky, no escape refusal yet) the move is sent."""
-    from naruto_agent.policies import RandomPolicy
-
-    policy = RandomPolicy(seed=0)
-    env = _env("replica_like_room:no_ceiling", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
-    env.close()
-    position = np.array([2.0, 2.0, 1.0])
-    observation = {"pose": make_pose(np.eye(3), position),
-                   "panorama": floor_panorama(edge_x_m=0.12)}
-    for scan_open, turns in ((False, 0), (True, 1)):
-        policy.scan_open = scan_open
-        policy.turns_at_edge = 0
-        policy.direction = np.array([1.0, 0.0, 0.0])
-        policy.steps_left = 10
-        target = np.asarray(policy.act(observation, {}))[:3]
-        assert policy.turns_at_edge == turns
-        ahead = (target - position)[0] / policy.context.max_translation_m
-        assert ahead > 0.99 if not scan_open else ahead < 0.51
