@@ -649,9 +649,10 @@ class NarutoPolicy(Policy):
 
     def _panorama_keeps_to_scan(self, start: np.ndarray, end: np.ndarray) -> bool:
         """On an open scan, the env's cone test read from the panorama where the move starts
-        (``check_moves_on_panorama``, :func:`move_leaves_scan`): a move from a supported point
-        to a point (or a point the agent's radius further on) that is not is refused, and the
-        space past it blocked, as after an escape refusal."""
+        (``check_moves_on_panorama``, :func:`move_leaves_scan`): a move that leaves the
+        scanned space there is refused, and the space past it blocked, as after an escape
+        refusal; after ``max_held_moves`` such refusals in a row at one spot the move passes
+        and the env decides."""
         panorama = self._panorama_from(start)
         radius = self.context.agent_radius_m
         if panorama is None or not move_leaves_scan(panorama, end - start, radius):

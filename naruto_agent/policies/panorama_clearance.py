@@ -26,17 +26,13 @@ class PanoramaClearance:
 
     def __init__(self, cone_half_angle_deg: float = 25.0) -> None:
         self.cos_half_angle = float(np.cos(np.deg2rad(cone_half_angle_deg)))
-        self._shape: tuple[int, int] | None = None
-        self._directions = np.zeros((0, 3), np.float32)
 
-    def _directions_for(self, panorama: np.ndarray) -> np.ndarray:
+    @staticmethod
+    def _directions_for(panorama: np.ndarray) -> np.ndarray:
         shape = tuple(panorama.shape)
-        if shape != self._shape:
-            if len(shape) != 2:
-                raise ValueError(f"panorama must be (H, W), got shape {shape}")
-            self._directions = EquirectangularCamera(*shape).ray_directions
-            self._shape = shape
-        return self._directions
+        if len(shape) != 2:
+            raise ValueError(f"panorama must be (H, W), got shape {shape}")
+        return _panorama_rays(*shape)
 
     def clearance(self, panorama: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Nearest hit distance within the cone around each direction (inf when none).
@@ -54,7 +50,7 @@ class PanoramaClearance:
         rays = self._directions_for(panorama)
         distance = np.asarray(panorama, np.float64).reshape(-1)
         distance = np.where(distance > 0.0, distance, np.inf)
-        inside = directions @ rays.T.astype(np.float64) >= self.cos_half_angle
+        inside = directions @ rays.T >= self.cos_half_angle
         return np.where(inside, distance[None, :], np.inf).min(axis=1)
 
 
@@ -126,6 +122,14 @@ def _panorama_rays(height: int, width: int) -> np.ndarray:
     return rays
 
 
+def _surface_points(panorama: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) the surface points a panorama shows (relative to its centre), one per hit
+    pixel, and their (N,) distances."""
+    distance = np.asarray(panorama, np.float64).reshape(-1)
+    hit = distance > 0.0
+    return _panorama_rays(*panorama.shape)[hit] * distance[hit, None], distance[hit]
+
+
 def first_contact(panorama: np.ndarray, move: np.ndarray, radius_m: float) -> np.ndarray | None:
     """The surface point the panorama shows in a move's way, or None when the way is clear.
 
@@ -144,15 +148,14 @@ def first_contact(panorama: np.ndarray, move: np.ndarray, radius_m: float) -> np
     """
     move = np.asarray(move, np.float64)
     length = float(np.linalg.norm(move))
-    distance = np.asarray(panorama, np.float64).reshape(-1)
-    hit = distance > 0.0
-    if length < 1e-9 or not hit.any():
+    points, distance = _surface_points(panorama)
+    if length < 1e-9 or len(distance) == 0:
         return None
-    threshold = min(radius_m, float(distance[hit].min()) - 1e-3)
-    near = hit & (distance < length + radius_m)
+    threshold = min(radius_m, float(distance.min()) - 1e-3)
+    near = distance < length + radius_m
     if threshold <= 0.0 or not near.any():
         return None
-    points = _panorama_rays(*panorama.shape)[near] * distance[near, None]
+    points = points[near]
     direction = move / length
     along = np.clip(points @ direction, 0.0, length)
     gap = np.linalg.norm(points - along[:, None] * direction, axis=1)
@@ -182,12 +185,10 @@ def cone_supported(panorama: np.ndarray, points: np.ndarray) -> np.ndarray:
         (K,) bool.
     """
     points = np.atleast_2d(np.asarray(points, np.float64))
-    distance = np.asarray(panorama, np.float64).reshape(-1)
-    hit = distance > 0.0
-    surface = _panorama_rays(*panorama.shape)[hit] * distance[hit, None]
+    surface, distance = _surface_points(panorama)
     # Half the larger pixel pitch, as a width per metre from the agent.
     pitch = 0.5 * max(np.pi / panorama.shape[0], 2.0 * np.pi / panorama.shape[1])
-    patch = pitch * distance[hit]
+    patch = pitch * distance
     directions, sectors = _support_rays()
     count = int(sectors.max()) + 1
     slope = float(np.tan(np.arccos(-float(directions[:, 2].max())) + 2.0 * pitch))
@@ -258,11 +259,9 @@ def move_leaves_scan(
 def _clearances(panorama: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(K,) distance from each of (K, 3) points (relative to the panorama's centre) to the
     nearest surface point the panorama shows (inf when it shows none)."""
-    distance = np.asarray(panorama, np.float64).reshape(-1)
-    hit = distance > 0.0
-    if not hit.any():
+    surface, _ = _surface_points(panorama)
+    if len(surface) == 0:
         return np.full(len(points), np.inf)
-    surface = _panorama_rays(*panorama.shape)[hit] * distance[hit, None]
     return np.array([float(np.min(np.linalg.norm(surface - point, axis=1))) for point in points])
 
 
