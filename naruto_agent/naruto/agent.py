@@ -514,21 +514,24 @@ class NarutoPolicy(Policy):
         supported = self.mapper.observed_space.sectors_seen_below(position[None])[0]
         return refused_at_top(position, target, bool(supported))
 
-    def _block_past_edge(self, position: np.ndarray, target: np.ndarray) -> None:
+    def _block_past_edge(
+        self, position: np.ndarray, target: np.ndarray, goal_failed: bool = True
+    ) -> None:
         """The scan ends at ``target``: block the space beyond it, in a ball that touches
-        the target and leaves the agent's side alone."""
+        the target and leaves the agent's side alone (the plan's goal failed unless
+        ``goal_failed`` is False)."""
         radius = self.config.recovery.escape_blocked_radius_m
         if radius <= 0:
-            self._block(target, None)
+            self._block(target, None, goal_failed)
             return
         direction = target - position
-        self._block(target + radius * direction / np.linalg.norm(direction), radius)
+        self._block(target + radius * direction / np.linalg.norm(direction), radius, goal_failed)
 
-    def _block(self, centre: np.ndarray, radius: float | None) -> None:
+    def _block(self, centre: np.ndarray, radius: float | None, goal_failed: bool = True) -> None:
         """Block a ball in the agent's map (the blocked space's own radius when None); the
-        plan's goal failed."""
+        plan's goal failed (unless ``goal_failed`` is False)."""
         self.blocked.add(centre, radius)
-        self._blocked_space_changed()
+        self._blocked_space_changed(goal_failed)
 
     def _blocked_space_changed(self, goal_failed: bool = True) -> None:
         """Apply the blocked space to the agent's map; the plan's goal failed (unless
@@ -662,7 +665,8 @@ class NarutoPolicy(Policy):
         if count > self.config.max_held_moves:
             return True  # the env decides
         self._held = (start.copy(), count)
-        self._block_past_edge(start, end)
+        # Held before the env saw it: the goal may still be reached another way.
+        self._block_past_edge(start, end, goal_failed=False)
         return False
 
     def _stays_in_scan(self, start: np.ndarray, end: np.ndarray) -> bool:

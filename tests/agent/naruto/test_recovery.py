@@ -478,14 +478,20 @@ def test_on_an_open_scan_a_climb_above_the_scans_top_is_refused_and_lowers_the_c
 def test_naruto_hands_a_move_to_the_env_after_max_held_moves_holds_at_one_spot() -> None:
     """Low over a floor hole every way out can look like leaving the scan on the panorama:
     after ``max_held_moves`` moves held back in a row at one spot the next is sent (the env
-    decides), and a new spot starts counting again."""
+    decides), and a new spot starts counting again. A held move blocks the space past the
+    edge but keeps the plan's goal (the env never refused it)."""
     agent = np.array([1.5, 1.5, 1.0])
     policy = _agent_on_a_free_map(floor_panorama(edge_x_m=0.3), agent)
     policy._scan_open = True
+    failed: list[np.ndarray] = []
+    policy.monitor.goal_failed = failed.append
+    policy.machine.plan = SimpleNamespace(goal=agent + [1.0, 0.0, 0.0], info={})
     towards_edge = agent + [0.25, 0.0, 0.0]
     for _ in range(policy.config.max_held_moves):
         assert not policy._panorama_keeps_to_scan(agent, towards_edge)
     assert policy._panorama_keeps_to_scan(agent, towards_edge)
+    assert len(policy.blocked.points) == policy.config.max_held_moves
+    assert failed == []
     elsewhere = agent + [0.0, 0.05, 0.0]
     policy._panorama = (floor_panorama(edge_x_m=0.3), elsewhere)
     assert not policy._panorama_keeps_to_scan(elsewhere, elsewhere + [0.25, 0.0, 0.0])
