@@ -7,6 +7,8 @@ rendered depth at its pixel, i.e. not occluded.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 
@@ -52,6 +54,71 @@ def visible_samples(
     return mask
 
 
+# Side (metres) of the grid cells that group the surface samples: a frame skips every cell
+# whose bounding sphere lies outside its view volume (most of them: a 90 degree frustum sees a
+# fraction of a room) without touching the cell's samples.
+SAMPLE_CELL_M = 0.5
+
+
+class SampleCells(NamedTuple):
+    """Surface samples grouped by grid cell, for culling whole cells against a frame.
+
+    Attributes:
+        order: (N,) int64 sample indices, cell after cell.
+        starts: (C + 1,) int64: cell ``c`` holds ``order[starts[c]:starts[c + 1]]``.
+        centres: (C, 3) float64 centre of each cell's samples' bounding box.
+        radii: (C,) float64 distance from the centre to the cell's farthest sample.
+    """
+
+    order: np.ndarray
+    starts: np.ndarray
+    centres: np.ndarray
+    radii: np.ndarray
+
+
+def sample_cells(samples_world: np.ndarray, cell_m: float = SAMPLE_CELL_M) -> SampleCells:
+    """Group samples (N, 3) by the grid cell of side ``cell_m`` they fall in (pure function)."""
+    samples = np.asarray(samples_world, np.float64)
+    if cell_m <= 0:
+        raise ValueError(f"cell_m must be positive, got {cell_m}")
+    keys = np.floor((samples - samples.min(axis=0)) / cell_m).astype(np.int64)
+    _, cell_of, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    cell_of = cell_of.reshape(-1)
+    order = np.argsort(cell_of, kind="stable").astype(np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    low = np.full((len(counts), 3), np.inf)
+    high = np.full((len(counts), 3), -np.inf)
+    np.minimum.at(low, cell_of, samples)
+    np.maximum.at(high, cell_of, samples)
+    centres = (low + high) / 2.0
+    radii = np.zeros(len(counts))
+    np.maximum.at(radii, cell_of, np.linalg.norm(samples - centres[cell_of], axis=1))
+    return SampleCells(order, starts, centres, radii)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _sees_sample(
+    samples_world, i, r, tx, ty, tz, width, height, fx, fy, cx, cy, depth, max_range_m,
+    tolerance, share,
+):
+    """Whether the frame sees sample ``i`` (in view, in range, not occluded)."""
+    dx = samples_world[i, 0] - tx
+    dy = samples_world[i, 1] - ty
+    dz = samples_world[i, 2] - tz
+    z = dx * r[0, 2] + dy * r[1, 2] + dz * r[2, 2]
+    if not (z > 1e-3 and z <= max_range_m):
+        return False
+    x = dx * r[0, 0] + dy * r[1, 0] + dz * r[2, 0]
+    y = dx * r[0, 1] + dy * r[1, 1] + dz * r[2, 1]
+    u = int(np.floor(fx * x / z + cx + 0.5))
+    v = int(np.floor(fy * y / z + cy + 0.5))
+    if u < 0 or u >= width or v < 0 or v >= height:
+        return False
+    rendered = depth[v, u]
+    # The depth image is float32: the occlusion bound is summed in float32 like numpy does.
+    return rendered > 0 and z <= rendered + tolerance + share * rendered
+
+
 @numba.njit(cache=True, nogil=True)
 def mark_visible_samples(
     samples_world: np.ndarray,
@@ -77,30 +144,82 @@ def mark_visible_samples(
     width, height = int(intrinsics[0]), int(intrinsics[1])
     fx, fy, cx, cy = intrinsics[2], intrinsics[3], intrinsics[4], intrinsics[5]
     tx, ty, tz = camera_to_world[0, 3], camera_to_world[1, 3], camera_to_world[2, 3]
-    r = camera_to_world
-    tolerance = np.float32(tolerance_m)
-    share = np.float32(0.01)
+    tolerance, share = np.float32(tolerance_m), np.float32(0.01)
     added = 0
     for i in range(samples_world.shape[0]):
-        if seen[i]:
-            continue
-        dx = samples_world[i, 0] - tx
-        dy = samples_world[i, 1] - ty
-        dz = samples_world[i, 2] - tz
-        z = dx * r[0, 2] + dy * r[1, 2] + dz * r[2, 2]
-        if not (z > 1e-3 and z <= max_range_m):
-            continue
-        x = dx * r[0, 0] + dy * r[1, 0] + dz * r[2, 0]
-        y = dx * r[0, 1] + dy * r[1, 1] + dz * r[2, 1]
-        u = int(np.floor(fx * x / z + cx + 0.5))
-        v = int(np.floor(fy * y / z + cy + 0.5))
-        if u < 0 or u >= width or v < 0 or v >= height:
-            continue
-        rendered = depth[v, u]
-        # The depth image is float32: the occlusion bound is summed in float32 like numpy does.
-        if rendered > 0 and z <= rendered + tolerance + share * rendered:
+        if not seen[i] and _sees_sample(
+            samples_world, i, camera_to_world, tx, ty, tz, width, height, fx, fy, cx, cy, depth,
+            max_range_m, tolerance, share,
+        ):
             seen[i] = True
             added += 1
+    return added
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _outside_plane(x, z, slope, reach):
+    """Whether a ball (centre x, z in the plane's cut, ``reach`` its radius plus a margin)
+    lies wholly on the side of the plane x = slope * z through the camera centre where x is
+    smaller."""
+    return (x - slope * z) / np.sqrt(1.0 + slope * slope) < -reach
+
+
+@numba.njit(cache=True, nogil=True)
+def mark_visible_in_cells(
+    samples_world: np.ndarray,
+    order: np.ndarray,
+    starts: np.ndarray,
+    centres: np.ndarray,
+    radii: np.ndarray,
+    seen: np.ndarray,
+    camera_to_world: np.ndarray,
+    intrinsics: np.ndarray,
+    depth: np.ndarray,
+    max_range_m: float,
+    tolerance_m: float,
+) -> int:
+    """:func:`mark_visible_samples` that skips the cells (:func:`sample_cells`) whose bounding
+    sphere lies wholly outside the frame's view volume: the same samples are marked.
+
+    A pixel (u, v) is in the image when ``u = floor(fx * x / z + cx + 0.5)`` lies in
+    ``[0, width)``: for z > 0 that is ``lo * z <= x < hi * z`` with ``lo = -(cx + 0.5) / fx``
+    and ``hi = (width - 0.5 - cx) / fx``, four planes through the camera centre (likewise in
+    y); with the near (z > 1e-3) and far (z <= range) planes they bound the view volume.
+    """
+    width, height = int(intrinsics[0]), int(intrinsics[1])
+    fx, fy, cx, cy = intrinsics[2], intrinsics[3], intrinsics[4], intrinsics[5]
+    r = camera_to_world
+    tx, ty, tz = r[0, 3], r[1, 3], r[2, 3]
+    tolerance, share = np.float32(tolerance_m), np.float32(0.01)
+    left, right = -(cx + 0.5) / fx, (width - 0.5 - cx) / fx
+    top, bottom = -(cy + 0.5) / fy, (height - 0.5 - cy) / fy
+    added = 0
+    for cell in range(starts.shape[0] - 1):
+        dx = centres[cell, 0] - tx
+        dy = centres[cell, 1] - ty
+        dz = centres[cell, 2] - tz
+        z = dx * r[0, 2] + dy * r[1, 2] + dz * r[2, 2]
+        x = dx * r[0, 0] + dy * r[1, 0] + dz * r[2, 0]
+        y = dx * r[0, 1] + dy * r[1, 1] + dz * r[2, 1]
+        # A margin well above rounding keeps the culling conservative.
+        reach = radii[cell] * (1.0 + 1e-9) + 1e-6
+        if (
+            z + reach <= 1e-3
+            or z - reach > max_range_m
+            or _outside_plane(x, z, left, reach)
+            or _outside_plane(-x, z, -right, reach)
+            or _outside_plane(y, z, top, reach)
+            or _outside_plane(-y, z, -bottom, reach)
+        ):
+            continue
+        for k in range(starts[cell], starts[cell + 1]):
+            i = order[k]
+            if not seen[i] and _sees_sample(
+                samples_world, i, r, tx, ty, tz, width, height, fx, fy, cx, cy, depth,
+                max_range_m, tolerance, share,
+            ):
+                seen[i] = True
+                added += 1
     return added
 
 
@@ -115,6 +234,7 @@ class CoverageTracker:
         self.max_range_m = float(max_range_m)
         self.seen = np.zeros(len(samples_world), dtype=bool)
         self.intrinsics = camera_intrinsics_vector(camera)
+        self.cells = sample_cells(self.samples_world)
         self._count = 0
 
     def reset(self) -> None:
@@ -129,10 +249,10 @@ class CoverageTracker:
     def update(self, camera_to_world: np.ndarray, depth: np.ndarray) -> float:
         """Mark what a frame sees and return the coverage gain (share, not percent)."""
         before = self.coverage
-        self._count += mark_visible_samples(
-            self.samples_world, self.seen, np.ascontiguousarray(camera_to_world, np.float64),
-            self.intrinsics, np.ascontiguousarray(depth, np.float32), self.max_range_m,
-            COVERAGE_TOLERANCE_M,
+        self._count += mark_visible_in_cells(
+            self.samples_world, *self.cells, self.seen,
+            np.ascontiguousarray(camera_to_world, np.float64), self.intrinsics,
+            np.ascontiguousarray(depth, np.float32), self.max_range_m, COVERAGE_TOLERANCE_M,
         )
         return self.coverage - before
 

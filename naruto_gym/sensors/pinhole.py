@@ -206,9 +206,10 @@ class RgbdRenderer:
     def render_hits_many(self, camera_to_world: np.ndarray) -> PixelHits:
         """:meth:`render_hits` of K poses (K, 4, 4) at once, the same hits frame by frame.
 
-        The rasterizer draws whole frames in parallel (each thread its own frames, with its
-        own single-threaded rasterizer): small frames are too small to split, but a batched
-        env has many. The ray cast casts all frames' rays in one call.
+        The rasterizer draws whole frames in parallel (each thread a contiguous share of the
+        frames in one compiled call, with its own single-threaded rasterizer): small frames
+        are too small to split, but a batched env has many. The ray cast casts all frames'
+        rays in one call.
 
         Returns:
             ``depth`` (K, H, W), ``triangle_ids`` (K * H * W,), ``barycentric_uv``
@@ -222,14 +223,15 @@ class RgbdRenderer:
         triangle_ids = np.empty(count * pixels, np.int32)
         barycentric_uv = np.empty((count * pixels, 2), np.float32)
         workers = self._frame_rasterizers(min(self.threads, count))
+        bounds = np.linspace(0, count, len(workers) + 1).astype(np.int64)
 
         def draw(part: int) -> None:
-            rasterizer = workers[part]
-            for k in range(part, count, len(workers)):
-                frame = rasterizer.render(poses[k], self.max_depth_m)
-                depth[k] = frame[0]
-                triangle_ids[k * pixels:(k + 1) * pixels] = frame[1]
-                barycentric_uv[k * pixels:(k + 1) * pixels] = frame[2]
+            first, stop = bounds[part], bounds[part + 1]
+            workers[part].render_many_into(
+                poses[first:stop], self.max_depth_m, depth[first:stop],
+                triangle_ids[first * pixels:stop * pixels],
+                barycentric_uv[first * pixels:stop * pixels],
+            )
 
         run_parallel(draw, len(workers))
         return PixelHits(depth, triangle_ids, barycentric_uv)

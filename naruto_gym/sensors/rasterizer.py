@@ -451,6 +451,66 @@ def draw_bands(
         )
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def render_frames(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    poses: np.ndarray,
+    intrinsics: np.ndarray,
+    width: int,
+    height: int,
+    far_cut: float,
+    nearest: float,
+    max_depth: float,
+    want_barycentrics: bool,
+    scratch_outcodes: np.ndarray,
+    scratch_projections: np.ndarray,
+    scratch_records: np.ndarray,
+    scratch_hit_planes: np.ndarray,
+    scratch_record_rows: np.ndarray,
+    inverse_depth: np.ndarray,
+    winners: np.ndarray,
+    depth: np.ndarray,
+    triangle_ids: np.ndarray,
+    barycentric_uv: np.ndarray,
+) -> None:
+    """All four passes of frames ``0 .. K - 1`` in one thread, frame after frame.
+
+    A batch of small frames is drawn a whole frame per thread: calling the passes from Python
+    once per frame costs about as much as a 64 x 64 frame's drawing.
+
+    Args:
+        poses: (K, 4, 4) float64 camera-to-world poses (already rounded to float32).
+        scratch_*: the single-frame buffers of :class:`PinholeRasterizer`.
+        inverse_depth, winners: one band's z-buffer.
+        depth: (K, H, W) float32; triangle_ids: (K * H * W,) int32; barycentric_uv:
+            (K * H * W, 2) float32 outputs, frame after frame.
+    """
+    pixels = width * height
+    band_rows = inverse_depth.shape[0]
+    band_count = (height + band_rows - 1) // band_rows
+    segments = np.zeros((1, 2), np.int64)
+    for frame in range(poses.shape[0]):
+        rotation = np.ascontiguousarray(poses[frame, :3, :3])
+        origin = np.ascontiguousarray(poses[frame, :3, 3])
+        vertex_outcodes(
+            vertices, 0, vertices.shape[0], rotation, origin, intrinsics, width, height,
+            far_cut, scratch_outcodes, scratch_projections,
+        )
+        segments[0, 1] = setup_triangles(
+            vertices, scratch_outcodes, scratch_projections, faces, 0, faces.shape[0], rotation,
+            origin, intrinsics, width, height, scratch_records, scratch_hit_planes,
+            scratch_record_rows,
+        )
+        band_starts, entries = bin_records(scratch_record_rows, segments, band_rows, band_count)
+        first = frame * pixels
+        draw_bands(
+            scratch_records, scratch_hit_planes, scratch_record_rows, band_starts, entries, 0, 1,
+            nearest, max_depth, want_barycentrics, inverse_depth, winners, depth[frame],
+            triangle_ids[first:first + pixels], barycentric_uv[first:first + pixels],
+        )
+
+
 # -- thread pool ---------------------------------------------------------------------------
 # Pixels plus triangles below which a frame is drawn in the calling thread alone.
 PARALLEL_MIN_WORK = 150_000
@@ -620,21 +680,13 @@ class PinholeRasterizer:
             ``barycentric_uv`` (H * W, 2) float32 with point = (1 - u - v) v0 + u v1 + v v2,
             or None when not asked for.
         """
-        pose = np.asarray(camera_to_world, dtype=np.float32).astype(np.float64)
-        if pose.shape != (4, 4) or not np.isfinite(pose).all():
-            raise ValueError(
-                f"camera_to_world must be a finite 4x4 matrix, got shape {pose.shape}"
-                + ("" if pose.shape != (4, 4) else " with non-finite entries")
-            )
+        pose = _checked_poses(camera_to_world, (4, 4))
         rotation = np.ascontiguousarray(pose[:3, :3])
         origin = np.ascontiguousarray(pose[:3, 3])
         (
             outcodes, projections, records, hit_planes, record_rows, inverse_depth, winners
         ) = self._scratch()
-        max_depth = float(max_depth_m)
-        # A triangle whose every corner lies beyond the range can only give depth-0 pixels.
-        far_cut = max_depth * (1.0 + 1e-6) + 1e-6 if np.isfinite(max_depth) else np.inf
-        nearest = 1.0 / far_cut
+        max_depth, far_cut, nearest = _depth_limits(max_depth_m)
         # Handing work to another thread costs more than it saves on small frames.
         small = self.width * self.height + len(self.faces) < PARALLEL_MIN_WORK
         groups = 1 if small else self.threads
@@ -674,3 +726,59 @@ class PinholeRasterizer:
 
         run_parallel(draw, groups)
         return depth, triangle_ids, (uv if barycentrics else None)
+
+    def render_many_into(
+        self,
+        camera_to_world: np.ndarray,
+        max_depth_m: float,
+        depth: np.ndarray,
+        triangle_ids: np.ndarray,
+        barycentric_uv: np.ndarray,
+    ) -> None:
+        """:meth:`render` of K poses (K, 4, 4) in the calling thread, into given arrays.
+
+        The frames are the same as :meth:`render`'s, frame after frame: ``depth`` (K, H, W)
+        float32, ``triangle_ids`` (K * H * W,) int32, ``barycentric_uv`` (K * H * W, 2)
+        float32. One compiled call draws them all, which is what makes many small frames
+        cheap (a batched env's 64 x 64 frames); threads each call this on their own
+        rasterizer (the scratch space is per rasterizer).
+        """
+        poses = _checked_poses(camera_to_world, (len(camera_to_world), 4, 4))
+        count, pixels = len(poses), self.width * self.height
+        if (
+            depth.shape != (count, self.height, self.width)
+            or triangle_ids.shape != (count * pixels,)
+            or barycentric_uv.shape != (count * pixels, 2)
+        ):
+            raise ValueError(
+                f"output arrays must hold {count} frames of {self.height} x {self.width}, got "
+                f"{depth.shape}, {triangle_ids.shape}, {barycentric_uv.shape}"
+            )
+        max_depth, far_cut, nearest = _depth_limits(max_depth_m)
+        outcodes, projections, records, hit_planes, record_rows, inverse_depth, winners = (
+            self._scratch()
+        )
+        render_frames(
+            self.vertices, self.faces, poses, self.intrinsics, self.width, self.height,
+            far_cut, nearest, max_depth, True, outcodes, projections, records, hit_planes,
+            record_rows, inverse_depth[0], winners[0], depth, triangle_ids, barycentric_uv,
+        )
+
+
+def _checked_poses(camera_to_world: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """Camera-to-world pose(s) rounded to float32 like the ray caster's rays, as float64."""
+    poses = np.asarray(camera_to_world, dtype=np.float32).astype(np.float64)
+    if poses.shape != shape or not np.isfinite(poses).all():
+        raise ValueError(
+            f"camera_to_world must be finite {' x '.join(map(str, shape))} matrices, got "
+            f"shape {poses.shape}" + ("" if poses.shape != shape else " with non-finite entries")
+        )
+    return poses
+
+
+def _depth_limits(max_depth_m: float) -> tuple[float, float, float]:
+    """(range, far cut, 1 / far cut) of a frame: a triangle whose every corner lies beyond
+    the far cut can only give depth-0 pixels."""
+    max_depth = float(max_depth_m)
+    far_cut = max_depth * (1.0 + 1e-6) + 1e-6 if np.isfinite(max_depth) else np.inf
+    return max_depth, far_cut, 1.0 / far_cut

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from naruto_gym.coverage import mark_visible_samples
+from naruto_gym.coverage import mark_visible_in_cells
 from naruto_gym.sensors.kernels import fill_world_rays
 
 
@@ -63,6 +63,10 @@ def fill_panorama_rays(
 @numba.njit(cache=True, nogil=True)
 def mark_visible_batch(
     samples_world: np.ndarray,
+    order: np.ndarray,
+    starts: np.ndarray,
+    centres: np.ndarray,
+    radii: np.ndarray,
     seen: np.ndarray,
     poses: np.ndarray,
     intrinsics: np.ndarray,
@@ -71,10 +75,11 @@ def mark_visible_batch(
     tolerance_m: float,
     added: np.ndarray,
 ) -> None:
-    """:func:`naruto_gym.coverage.mark_visible_samples` for N agents in one scene.
+    """:func:`naruto_gym.coverage.mark_visible_in_cells` for N agents in one scene.
 
     Args:
         samples_world: (M, 3) float64 surface samples of the scene.
+        order, starts, centres, radii: the samples' cells (``CoverageTracker.cells``).
         seen: (N, M) bool per-agent seen flags, updated in place.
         poses: (N, 4, 4) float64 poses.
         intrinsics: (6,) float64 ``(width, height, fx, fy, cx, cy)``.
@@ -83,8 +88,9 @@ def mark_visible_batch(
         added: (N,) int64 output, samples newly seen by each agent.
     """
     for i in range(poses.shape[0]):
-        added[i] = mark_visible_samples(
-            samples_world, seen[i], poses[i], intrinsics, depth[i], max_range_m, tolerance_m
+        added[i] = mark_visible_in_cells(
+            samples_world, order, starts, centres, radii, seen[i], poses[i], intrinsics,
+            depth[i], max_range_m, tolerance_m,
         )
 
 
@@ -103,3 +109,95 @@ def no_hit_counts(distance: np.ndarray, offset: int, per_agent: int, agents: int
             if not (value > 0.0 and value < np.inf):
                 counts[i] += 1
     return counts
+
+
+@numba.njit(cache=True, nogil=True)
+def plan_sweeps(
+    starts: np.ndarray,
+    targets: np.ndarray,
+    box_min: np.ndarray,
+    box_max: np.ndarray,
+    start_clearances: np.ndarray,
+    radius_m: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The box clip and sweep samples of N moves, as the single env's checker makes them
+    (:func:`~naruto_gym.motion.collision.segment_fraction_inside_box`, then
+    :func:`~naruto_gym.sensors.raycaster.segment_samples` with the clearance the checker
+    gives a start closer than its radius), the same numbers for every move.
+
+    Returns:
+        ``box`` (N,) fraction inside the box, ``ends`` (N, 3), ``clearances`` (N,),
+        ``lengths`` (N,), ``offsets`` (N + 1,) (move ``i``'s samples are
+        ``offsets[i]:offsets[i + 1]``), ``fractions`` and ``points`` (S,) / (S, 3).
+    """
+    count = starts.shape[0]
+    box = np.ones(count)
+    ends = np.empty((count, 3))
+    clearances = np.empty(count)
+    lengths = np.empty(count)
+    offsets = np.zeros(count + 1, np.int64)
+    steps = np.empty(count, np.int64)
+    for i in range(count):
+        fraction = 1.0
+        for axis in range(3):
+            delta = targets[i, axis] - starts[i, axis]
+            if delta > 0 and targets[i, axis] > box_max[axis]:
+                fraction = min(fraction, (box_max[axis] - starts[i, axis]) / delta)
+            elif delta < 0 and targets[i, axis] < box_min[axis]:
+                fraction = min(fraction, (box_min[axis] - starts[i, axis]) / delta)
+        box[i] = min(max(fraction, 0.0), 1.0)
+        squared = 0.0
+        for axis in range(3):
+            ends[i, axis] = starts[i, axis] + box[i] * (targets[i, axis] - starts[i, axis])
+            delta = ends[i, axis] - starts[i, axis]
+            squared += delta * delta
+        lengths[i] = np.sqrt(squared)
+        clearances[i] = max(min(radius_m, start_clearances[i] - 1e-4), 0.0)
+        step = max(clearances[i] / 4.0, 1e-3)
+        steps[i] = max(int(np.ceil(lengths[i] / step)), 1)
+        offsets[i + 1] = offsets[i] + steps[i] + 1
+    fractions = np.empty(offsets[count])
+    points = np.empty((offsets[count], 3))
+    for i in range(count):
+        # np.linspace(0, 1, steps + 1): k * (1 / steps), the last exactly 1.
+        spacing = 1.0 / steps[i]
+        for k in range(steps[i] + 1):
+            sample = offsets[i] + k
+            fractions[sample] = 1.0 if k == steps[i] else k * spacing
+            for axis in range(3):
+                points[sample, axis] = starts[i, axis] + fractions[sample] * (
+                    ends[i, axis] - starts[i, axis]
+                )
+    return box, ends, clearances, lengths, offsets, fractions, points
+
+
+@numba.njit(cache=True, nogil=True)
+def sweep_stops(
+    fractions: np.ndarray,
+    offsets: np.ndarray,
+    lengths: np.ndarray,
+    distances: np.ndarray,
+    walls: np.ndarray,
+    clearances: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Where each of N sweeps (:func:`plan_sweeps`) stops and the surface distance there:
+    :func:`~naruto_gym.sensors.raycaster.sweep_stop_from_distances` move by move (the last
+    free sample's fraction, 1 when all are free; nan as the clearance of a stop at 0)."""
+    count = lengths.shape[0]
+    stops = np.empty(count)
+    stop_clearances = np.empty(count)
+    for i in range(count):
+        first_blocked = -1
+        for sample in range(offsets[i], offsets[i + 1]):
+            # The distances are float32 and numpy compares them with a float in float32.
+            clear = distances[sample] >= np.float32(clearances[i])
+            if lengths[i] > 0:
+                clear = clear and fractions[sample] * lengths[i] < walls[i] - clearances[i]
+            if not clear:
+                first_blocked = sample - offsets[i]
+                break
+        last_free = offsets[i + 1] - 1 if first_blocked == -1 else offsets[i] + first_blocked - 1
+        stops[i] = 0.0 if first_blocked == 0 else fractions[last_free]
+        # A sweep that cannot leave its start (stop 0) has no stop clearance.
+        stop_clearances[i] = distances[last_free] if stops[i] > 0.0 else np.nan
+    return stops, stop_clearances

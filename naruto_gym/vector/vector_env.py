@@ -32,7 +32,6 @@ from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
 from naruto_gym.evaluation.scoring import EpisodeReconstruction
 from naruto_gym.geometry.transforms import validate_pose
 from naruto_gym.motion.actions import MAX_DISCRETE_PITCH_RAD
-from naruto_gym.motion.collision import segment_fraction_inside_box
 from naruto_gym.motion.pose_kernels import (
     MODE_DELTA,
     MODE_DISCRETE,
@@ -46,12 +45,13 @@ from naruto_gym.scenes.stream import (
     parse_procedural_name,
 )
 from naruto_gym.sensors.rasterizer import default_thread_count, run_parallel
-from naruto_gym.sensors.raycaster import segment_samples, sweep_stop_from_distances
 from naruto_gym.vector.batch_kernels import (
     fill_panorama_rays,
     fill_pinhole_rays,
     mark_visible_batch,
     no_hit_counts,
+    plan_sweeps,
+    sweep_stops,
 )
 
 _MODES = {"pose": MODE_POSE, "delta": MODE_DELTA, "discrete": MODE_DISCRETE}
@@ -505,41 +505,26 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         env = self._scenes[members[0]]
         checker = env.collision
         raycaster = env.raycaster
-        start = moves.starts[group]
-        target = targets[group]
-        box = np.array([
-            segment_fraction_inside_box(s, t, checker.box_min, checker.box_max)
-            for s, t in zip(start, target, strict=True)
-        ])
-        end = start + box[:, None] * (target - start)
+        start = np.ascontiguousarray(moves.starts[group])
         # From a start closer than the radius (an exact start pose) the sphere may move on as
         # long as it gets no closer than it already is.
-        start_clearance = raycaster.unsigned_distance(start)
-        clearances = [
-            max(min(checker.radius_m, float(c) - 1e-4), 0) for c in start_clearance
-        ]
-        sweeps = [segment_samples(s, e, c) for s, e, c in zip(start, end, clearances,
-                                                               strict=True)]
-        distances = np.split(
-            raycaster.unsigned_distance(np.concatenate([sweep[1] for sweep in sweeps])),
-            np.cumsum([len(sweep[0]) for sweep in sweeps])[:-1],
+        box, end, clearances, lengths, offsets, fractions, points = plan_sweeps(
+            start, np.ascontiguousarray(targets[group]), checker.box_min, checker.box_max,
+            raycaster.unsigned_distance(start), float(checker.radius_m),
         )
-        lengths = np.array([sweep[2] for sweep in sweeps])
+        distances = raycaster.unsigned_distance(points)
         walls = np.full(len(group), np.inf)
         along = lengths > 0
         if along.any():
             directions = (end[along] - start[along]) / lengths[along, None]
             walls[along] = raycaster.cast_distance(start[along], directions)
-        for k, index in enumerate(group):
-            fraction, end_clearances[index] = sweep_stop_from_distances(
-                sweeps[k][0], float(lengths[k]), distances[k], float(walls[k]), clearances[k]
-            )
-            positions[index] = start[k] + fraction * (end[k] - start[k])
-            if fraction < 1.0:
-                moves.reasons[index] = "surface"
-            elif box[k] < 1.0:
-                moves.reasons[index] = "bounds"
-            moves.collided[index] = moves.reasons[index] != ""
+        stops, end_clearances[group] = sweep_stops(
+            fractions, offsets, lengths, distances, walls, clearances
+        )
+        positions[group] = start + stops[:, None] * (end - start)
+        reasons = np.where(stops < 1.0, "surface", np.where(box < 1.0, "bounds", ""))
+        moves.reasons[group] = reasons
+        moves.collided[group] = reasons != ""
 
     # -- observation -----------------------------------------------------------------------
     def _observe(self, agents: np.ndarray, moves: _Moves | None) -> np.ndarray:
@@ -583,8 +568,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             _in_threads(
                 lambda part, coverage=coverage, seen=seen, poses=poses, depth=depth,
                 added=added: mark_visible_batch(
-                    coverage.samples_world, seen[part], poses[part], coverage.intrinsics,
-                    depth[part], coverage.max_range_m, COVERAGE_TOLERANCE_M, added[part],
+                    coverage.samples_world, *coverage.cells, seen[part], poses[part],
+                    coverage.intrinsics, depth[part], coverage.max_range_m, COVERAGE_TOLERANCE_M,
+                    added[part],
                 ),
                 len(members), self._threads,
             )

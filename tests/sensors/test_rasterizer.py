@@ -395,3 +395,21 @@ def test_frames_of_many_poses_at_once_are_the_frames_one_by_one(backend):
         hit = one.triangle_ids >= 0
         np.testing.assert_array_equal(many.barycentric_uv[frame][hit], one.barycentric_uv[hit])
     assert (many.triangle_ids >= 0).mean() > 0.5
+
+
+def test_frames_drawn_in_one_call_need_outputs_of_their_size():
+    scene = _scene("replica_like_room")
+    rasterizer = PinholeRasterizer(scene.vertices, scene.faces, 16, 12, 8.0, 8.0, 7.5, 5.5,
+                                   threads=1)
+    poses = random_poses(scene, 3, 5)
+    depth = np.empty((3, 12, 16), np.float32)
+    with pytest.raises(ValueError, match="3 frames of 12 x 16"):
+        rasterizer.render_many_into(poses, 10.0, depth, np.empty(10, np.int32),
+                                    np.empty((10, 2), np.float32))
+    with pytest.raises(ValueError, match="finite 3 x 4 x 4"):
+        rasterizer.render_many_into(np.full((3, 4, 4), np.nan), 10.0, depth,
+                                    np.empty(3 * 192, np.int32), np.empty((3 * 192, 2), np.float32))
+    ids = np.empty(3 * 192, np.int32)
+    rasterizer.render_many_into(poses, 10.0, depth, ids, np.empty((3 * 192, 2), np.float32))
+    for k, pose in enumerate(poses):
+        np.testing.assert_array_equal(depth[k], rasterizer.render(pose, 10.0)[0])

@@ -1,0 +1,70 @@
+"""The coverage kernels: culling by sample cells marks the same samples as the plain loop."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import naruto_gym  # noqa: F401  (registers the ids)
+from naruto_gym.coverage import (
+    COVERAGE_TOLERANCE_M,
+    mark_visible_in_cells,
+    mark_visible_samples,
+    sample_cells,
+    visible_samples,
+)
+from naruto_gym.sensors.pinhole import PinholeCamera
+
+
+def test_sample_cells_hold_every_sample_once_within_their_radius():
+    rng = np.random.default_rng(0)
+    samples = rng.uniform(-2.0, 3.0, (5000, 3))
+    cells = sample_cells(samples, cell_m=0.7)
+    assert np.array_equal(np.sort(cells.order), np.arange(len(samples)))
+    assert cells.starts[0] == 0 and cells.starts[-1] == len(samples)
+    for cell in range(len(cells.radii)):
+        members = samples[cells.order[cells.starts[cell]:cells.starts[cell + 1]]]
+        assert len(members) > 0
+        distance = np.linalg.norm(members - cells.centres[cell], axis=1)
+        assert distance.max() <= cells.radii[cell] + 1e-12
+        assert np.ptp(np.floor((members - samples.min(axis=0)) / 0.7), axis=0).max() == 0
+    with pytest.raises(ValueError, match="cell_m"):
+        sample_cells(samples, cell_m=0.0)
+
+
+@pytest.mark.parametrize("scene", ["replica_like_room", "apartment"])
+@pytest.mark.parametrize("camera", [PinholeCamera(64, 64, 32, 32, 31.5, 31.5),
+                                    PinholeCamera(40, 24, 30, 30, 19.5, 11.5)])
+def test_culling_by_cells_marks_what_every_sample_would(scene, camera):
+    env = gym.make("NarutoRecon-v0", scene=scene, camera=camera, panorama_shape=None,
+                   coverage_samples=4000).unwrapped
+    coverage = env.coverage
+    rng = np.random.default_rng(1)
+    seen_cells = np.zeros(len(coverage.samples_world), bool)
+    seen_plain = seen_cells.copy()
+    for episode in range(25):
+        env.reset(seed=int(rng.integers(1 << 30)))
+        pose = env.unwrapped._pose.copy()
+        if episode % 2:  # any rotation, not only the start poses' upright ones
+            pose[:3, :3] = Rotation.random(random_state=episode).as_matrix()
+        _, depth = env.renderer.render(pose)
+        expected = visible_samples(coverage.samples_world, pose, camera, depth,
+                                   coverage.max_range_m, COVERAGE_TOLERANCE_M)
+        fresh = np.zeros_like(seen_cells)
+        added = mark_visible_in_cells(coverage.samples_world, *coverage.cells, fresh, pose,
+                                      coverage.intrinsics, depth, coverage.max_range_m,
+                                      COVERAGE_TOLERANCE_M)
+        assert np.array_equal(fresh, expected) and added == expected.sum()
+        # With samples already seen: only the new ones count, as in the plain loop.
+        added_cells = mark_visible_in_cells(
+            coverage.samples_world, *coverage.cells, seen_cells, pose, coverage.intrinsics,
+            depth, coverage.max_range_m, COVERAGE_TOLERANCE_M)
+        added_plain = mark_visible_samples(
+            coverage.samples_world, seen_plain, pose, coverage.intrinsics, depth,
+            coverage.max_range_m, COVERAGE_TOLERANCE_M)
+        assert added_cells == added_plain
+        assert np.array_equal(seen_cells, seen_plain)
+    assert 0 < seen_cells.sum() < len(seen_cells)
+    env.close()
