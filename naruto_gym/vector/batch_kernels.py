@@ -68,6 +68,7 @@ def mark_visible_batch(
     centres: np.ndarray,
     radii: np.ndarray,
     seen: np.ndarray,
+    agents: np.ndarray,
     poses: np.ndarray,
     intrinsics: np.ndarray,
     depth: np.ndarray,
@@ -75,22 +76,25 @@ def mark_visible_batch(
     tolerance_m: float,
     added: np.ndarray,
 ) -> None:
-    """:func:`naruto_gym.coverage.mark_visible_in_cells` for N agents in one scene.
+    """:func:`naruto_gym.coverage.mark_visible_in_cells` for the agents ``agents`` of one
+    scene, in place in the batch's arrays (no per-agent copies).
 
     Args:
         samples_world: (M, 3) float64 surface samples of the scene.
         order, starts, centres, radii: the samples' cells (``CoverageTracker.cells``).
-        seen: (N, M) bool per-agent seen flags, updated in place.
-        poses: (N, 4, 4) float64 poses.
+        seen: (N, >= M) bool seen flags of all agents (row per agent), updated in place.
+        agents: (K,) int64 rows of the agents to update.
+        poses: (N, 4, 4) float64 poses of all agents.
         intrinsics: (6,) float64 ``(width, height, fx, fy, cx, cy)``.
-        depth: (N, H, W) float32 depth frames.
+        depth: (N, H, W) float32 depth frames of all agents.
         max_range_m, tolerance_m: as the single agent's kernel.
-        added: (N,) int64 output, samples newly seen by each agent.
+        added: (K,) int64 output, samples newly seen by each of ``agents``.
     """
-    for i in range(poses.shape[0]):
-        added[i] = mark_visible_in_cells(
-            samples_world, order, starts, centres, radii, seen[i], poses[i], intrinsics,
-            depth[i], max_range_m, tolerance_m,
+    for k in range(agents.shape[0]):
+        agent = agents[k]
+        added[k] = mark_visible_in_cells(
+            samples_world, order, starts, centres, radii, seen[agent], poses[agent],
+            intrinsics, depth[agent], max_range_m, tolerance_m,
         )
 
 

@@ -213,7 +213,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             np.zeros((n, self.panorama_camera.height, self.panorama_camera.width), np.float32)
             if self.panorama_camera is not None else None
         )
-        self._seen: list[np.ndarray] = [np.zeros(0, bool)] * n
+        # Seen flags of each agent's scene samples (row i, the first len(samples) columns):
+        # one array, so the coverage kernel updates them in place.
+        self._seen = np.zeros((n, 0), bool)
         self._seen_counts = np.zeros(n, np.int64)
         self._path_length = np.zeros(n)
         self._steps = np.zeros(n, np.int64)
@@ -388,10 +390,12 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             env.np_random = rng
             pose = env._sample_start_pose()
         self._poses[i] = pose
-        if len(self._seen[i]) != len(env.coverage.samples_world):
-            self._seen[i] = np.zeros(len(env.coverage.samples_world), bool)
-        else:
-            self._seen[i][:] = False
+        samples = len(env.coverage.samples_world)
+        if samples > self._seen.shape[1]:
+            wider = np.zeros((self.num_envs, samples), bool)
+            wider[:, :self._seen.shape[1]] = self._seen
+            self._seen = wider
+        self._seen[i] = False
         self._seen_counts[i] = 0
         self._path_length[i] = 0.0
         self._steps[i] = 0
@@ -560,26 +564,22 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             members = agents[group]
             env = self._scenes[members[0]]
             coverage = env.coverage
-            seen = np.stack([self._seen[i] for i in members])
             added = np.zeros(len(members), np.int64)
-            poses = np.ascontiguousarray(self._poses[members])
-            depth = self._depth[members]
 
             _in_threads(
-                lambda part, coverage=coverage, seen=seen, poses=poses, depth=depth,
-                added=added: mark_visible_batch(
-                    coverage.samples_world, *coverage.cells, seen[part], poses[part],
-                    coverage.intrinsics, depth[part], coverage.max_range_m, COVERAGE_TOLERANCE_M,
-                    added[part],
+                lambda part, coverage=coverage, members=members, added=added: (
+                    mark_visible_batch(
+                        coverage.samples_world, *coverage.cells, self._seen, members[part],
+                        self._poses, coverage.intrinsics, self._depth, coverage.max_range_m,
+                        COVERAGE_TOLERANCE_M, added[part],
+                    )
                 ),
                 len(members), self._threads,
             )
             total = len(coverage.samples_world)
-            for k, i in enumerate(members):
-                self._seen[i] = seen[k]
-                before = self._seen_counts[i] / total
-                self._seen_counts[i] += added[k]
-                gains[group[k]] = self._seen_counts[i] / total - before
+            before = self._seen_counts[members] / total
+            self._seen_counts[members] += added
+            gains[group] = self._seen_counts[members] / total - before
         if self._reconstruct:
             for i in agents:
                 self._reconstructions[i].add_frame(self._rgb[i], self._depth[i], self._poses[i])
