@@ -203,13 +203,19 @@ class RgbdRenderer:
             return PixelHits(*self.rasterizer.render(camera_to_world, self.max_depth_m))
         return self._cast_hits(camera_to_world, (self.camera.height, self.camera.width))
 
-    def render_hits_many(self, camera_to_world: np.ndarray) -> PixelHits:
+    def render_hits_many(
+        self, camera_to_world: np.ndarray, worker: int | None = None
+    ) -> PixelHits:
         """:meth:`render_hits` of K poses (K, 4, 4) at once, the same hits frame by frame.
 
         The rasterizer draws whole frames in parallel (each thread a contiguous share of the
         frames in one compiled call, with its own single-threaded rasterizer): small frames
         are too small to split, but a batched env has many. The ray cast casts all frames'
         rays in one call.
+
+        ``worker``: draw every frame in the calling thread with the frame rasterizer of
+        that index (made beforehand by :meth:`prepare_workers`): for callers that split
+        their work between threads themselves, each thread with its own index.
 
         Returns:
             ``depth`` (K, H, W), ``triangle_ids`` (K * H * W,), ``barycentric_uv``
@@ -222,6 +228,11 @@ class RgbdRenderer:
         depth = np.empty((count, self.camera.height, self.camera.width), np.float32)
         triangle_ids = np.empty(count * pixels, np.int32)
         barycentric_uv = np.empty((count * pixels, 2), np.float32)
+        if worker is not None:
+            self._workers[worker].render_many_into(
+                poses, self.max_depth_m, depth, triangle_ids, barycentric_uv
+            )
+            return PixelHits(depth, triangle_ids, barycentric_uv)
         workers = self._frame_rasterizers(min(self.threads, count))
         bounds = np.linspace(0, count, len(workers) + 1).astype(np.int64)
 
@@ -235,6 +246,12 @@ class RgbdRenderer:
 
         run_parallel(draw, len(workers))
         return PixelHits(depth, triangle_ids, barycentric_uv)
+
+    def prepare_workers(self, count: int) -> None:
+        """Make the frame rasterizers ``0 .. count - 1`` that :meth:`render_hits_many`'s
+        ``worker`` picks (from one thread, before the threads that use them start)."""
+        if self.frame_backend == "raster":
+            self._frame_rasterizers(count)
 
     def _frame_rasterizers(self, count: int) -> list[PinholeRasterizer]:
         """``count`` single-threaded rasterizers of this renderer's mesh (scratch space is per

@@ -19,6 +19,7 @@ different scenes (a list of scenes, or ``"procedural:..."`` streams) are grouped
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import gymnasium as gym
@@ -66,6 +67,16 @@ class _Moves:
         self.collided = np.zeros(len(agents), bool)
         self.reasons = np.full(len(agents), "", dtype=object)
         self.check_escape = np.zeros(len(agents), bool)
+
+    @classmethod
+    def joined(cls, shares: list[_Moves]) -> _Moves:
+        """The moves of several shares of a step, in order, as one."""
+        moves = cls(np.concatenate([share.agents for share in shares]))
+        moves.starts = np.concatenate([share.starts for share in shares])
+        moves.collided = np.concatenate([share.collided for share in shares])
+        moves.reasons = np.concatenate([share.reasons for share in shares])
+        moves.check_escape = np.concatenate([share.check_escape for share in shares])
+        return moves
 
 
 def _in_threads(work: Any, count: int, threads: int) -> None:
@@ -228,6 +239,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self._threads = default_thread_count()
         # Rays cast for frames, panoramas and escape checks (benchmarks report rays/s).
         self.rays_cast = 0
+        self._rays_lock = threading.Lock()
+        # A step is split into shares of at least this many agents (_move_and_observe).
+        self._min_agents_per_part = 8
         self._intrinsics = self.camera.as_dict()
         self._discrete_zeros = np.zeros(n, np.int64)
         self._continuous_zeros = np.zeros((n, 7))
@@ -301,9 +315,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         stepping = everyone[~np.isin(everyone, resetting)]
         for i in resetting:
             self._reset_state(int(i), None, {})
-        moves = self._move(stepping, discrete, continuous)
-        gains = np.zeros(n)
-        gains[everyone] = self._observe(everyone, moves)
+        moves, gains = self._move_and_observe(stepping, discrete, continuous)
         collided = np.zeros(n, bool)
         reasons = np.full(n, "", dtype=object)
         rewards = np.zeros(n)
@@ -450,6 +462,47 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         return self._discrete_zeros, padded
 
     # -- motion ----------------------------------------------------------------------------
+    def _move_and_observe(
+        self, stepping: np.ndarray, discrete: np.ndarray, continuous: np.ndarray
+    ) -> tuple[_Moves, np.ndarray]:
+        """Move ``stepping`` agents and observe every agent; returns the moves and each
+        agent's coverage gain.
+
+        With many agents the step is split into contiguous shares, one per thread, each moved
+        and observed start to finish in its thread: the compiled loops, the ray caster and the
+        distance queries release the GIL, so the shares overlap where a step split phase by
+        phase would wait at every phase for its slowest thread (and run the sweeps' queries
+        and the bookkeeping between phases on one core). Agents never share state, so the
+        result is the same as in one piece.
+        """
+        n = self.num_envs
+        parts = 1 if self._reconstruct else max(
+            1, min(self._threads, n // self._min_agents_per_part)
+        )
+        if parts == 1:
+            moves = self._move(stepping, discrete, continuous)
+            return moves, self._observe(np.arange(n), moves)
+        bounds = np.linspace(0, n, parts + 1).astype(np.int64)
+        for env in {id(env): env for env in self._scenes if env is not None}.values():
+            env.renderer.prepare_workers(parts)
+
+        def run(part: int) -> tuple[_Moves, np.ndarray]:
+            agents = np.arange(bounds[part], bounds[part + 1])
+            moves = self._move(
+                stepping[(stepping >= bounds[part]) & (stepping < bounds[part + 1])],
+                discrete, continuous,
+            )
+            return moves, self._observe(agents, moves, part)
+
+        shares = run_parallel(run, parts)
+        return _Moves.joined([moves for moves, _ in shares]), np.concatenate(
+            [gains for _, gains in shares]
+        )
+
+    def _count_rays(self, count: int) -> None:
+        with self._rays_lock:  # the shares of a step count from their threads
+            self.rays_cast += count
+
     def _move(self, agents: np.ndarray, discrete: np.ndarray, continuous: np.ndarray) -> _Moves:
         """Bounded pose step and collision sweep of ``agents``; their poses become the
         candidate poses. The escape check of those that moved is left to :meth:`_observe`,
@@ -531,10 +584,14 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         moves.collided[group] = reasons != ""
 
     # -- observation -----------------------------------------------------------------------
-    def _observe(self, agents: np.ndarray, moves: _Moves | None) -> np.ndarray:
+    def _observe(
+        self, agents: np.ndarray, moves: _Moves | None, part: int | None = None
+    ) -> np.ndarray:
         """Render ``agents`` at their poses (one cast per scene, with the escape rays of the
         agents ``moves`` flags), undo refused moves, update path length and coverage.
-        Returns each agent's coverage gain."""
+        Returns each agent's coverage gain. ``part``: the share of the step this runs as
+        (:meth:`_move_and_observe`; its compiled loops then stay in the calling thread)."""
+        threads = self._threads if part is None else 1
         agents = np.asarray(agents, np.int64)
         gains = np.zeros(len(agents))
         if len(agents) == 0:
@@ -545,7 +602,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         refused: list[int] = []
         for group in _groups(self._scenes, agents, np.ones(len(agents), bool)):
             members = agents[group]
-            refused += self._render(members, escape[members])
+            refused += self._render(members, escape[members], part)
         if refused:
             # A refused move stays at its start (with the new rotation): render it there.
             lookup = {int(a): k for k, a in enumerate(moves.agents)}
@@ -555,7 +612,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                 moves.collided[k] = True
                 moves.reasons[k] = "escape"
             for group in _groups(self._scenes, np.array(refused), np.ones(len(refused), bool)):
-                self._render(np.array(refused)[group], np.zeros(len(group), bool))
+                self._render(np.array(refused)[group], np.zeros(len(group), bool), part)
         if moves is not None and len(moves.agents):
             self._path_length[moves.agents] += np.linalg.norm(
                 self._poses[moves.agents, :3, 3] - moves.starts, axis=1
@@ -574,7 +631,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                         COVERAGE_TOLERANCE_M, added[part],
                     )
                 ),
-                len(members), self._threads,
+                len(members), threads,
             )
             total = len(coverage.samples_world)
             before = self._seen_counts[members] / total
@@ -585,7 +642,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                 self._reconstructions[i].add_frame(self._rgb[i], self._depth[i], self._poses[i])
         return gains
 
-    def _render(self, members: np.ndarray, escape: np.ndarray) -> list[int]:
+    def _render(
+        self, members: np.ndarray, escape: np.ndarray, part: int | None = None
+    ) -> list[int]:
         """Render agents of one scene with one cast that carries their pinhole rays, their
         observation panorama rays and the first escape-check rays of the agents flagged in
         ``escape``; returns the agents whose move the escape check refuses.
@@ -597,6 +656,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         camera = self.camera
         count = len(members)
         pixels = camera.width * camera.height
+        threads = self._threads if part is None else 1
         raster = getattr(env.renderer, "frame_backend", "raycast") == "raster"
         cast_pixels = 0 if raster else pixels
         poses32 = self._poses[members].astype(np.float32)
@@ -613,17 +673,17 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                 fill_pinhole_rays(camera.ray_directions, poses32[part], rays,
                                   (part.start or 0) * pixels)
 
-            _in_threads(fill, count, self._threads)
+            _in_threads(fill, count, threads)
         if panorama is not None:
             fill_panorama_rays(panorama.ray_directions, positions32, rays, count * cast_pixels)
         if len(escapers):
             fill_panorama_rays(order[:first], np.ascontiguousarray(positions32[escape]), rays,
                                escape_offset)
         hits = env.raycaster.cast_packed(rays) if len(rays) else None
-        self.rays_cast += len(rays)
+        self._count_rays(len(rays))
 
         if raster:
-            frames = env.renderer.render_hits_many(self._poses[members])
+            frames = env.renderer.render_hits_many(self._poses[members], worker=part)
             depth = frames.depth.reshape(-1)
             triangle_ids, barycentric_uv = frames.triangle_ids, frames.barycentric_uv
         else:
@@ -640,7 +700,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             rgb[pixels_of] = env.scene.colour_at(triangle_ids[pixels_of],
                                                  barycentric_uv[pixels_of])
 
-        _in_threads(shade, count, self._threads)
+        _in_threads(shade, count, threads)
         self._depth[members] = depth.reshape(count, camera.height, camera.width)
         self._rgb[members] = rgb.reshape(count, camera.height, camera.width, 3)
         if panorama is not None:
@@ -661,7 +721,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         fill_panorama_rays(rest, np.ascontiguousarray(positions32[escape][undecided]), extra, 0)
         more = no_hit_counts(env.raycaster.cast_packed(extra).distance, 0, len(rest),
                              int(undecided.sum()))
-        self.rays_cast += len(extra)
+        self._count_rays(len(extra))
         shares = (misses[undecided] + more) / total
         return [int(a) for a in escapers[undecided][shares > threshold]]
 

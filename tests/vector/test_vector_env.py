@@ -55,12 +55,14 @@ def assert_same(vector: Any, sync: Any, where: str) -> None:
 
 def run_both(
     num_envs: int, steps: int, actions: Any, autoreset: AutoresetMode = AutoresetMode.NEXT_STEP,
-    budget: int = 12, seed: int = 3, **kwargs: Any,
+    budget: int = 12, seed: int = 3, split: bool = False, **kwargs: Any,
 ) -> tuple[list[str], NarutoReconVectorEnv]:
     settings = {**SMALL, **kwargs}
     vector = NarutoReconVectorEnv(
         num_envs, max_episode_steps=budget, autoreset_mode=autoreset, **settings
     )
+    if split:  # each step in two shares, one per thread, however few the agents
+        vector._threads, vector._min_agents_per_part = 2, 1
     sync = gym.vector.SyncVectorEnv(
         [lambda: gym.make("NarutoRecon-v0", max_episode_steps=budget, **settings)] * num_envs,
         autoreset_mode=autoreset,
@@ -78,38 +80,44 @@ def run_both(
     return reasons, vector
 
 
-def test_matches_sync_vector_env_with_autoreset_next_step():
+@pytest.mark.parametrize("split", [False, True])
+def test_matches_sync_vector_env_with_autoreset_next_step(split):
     rng = np.random.default_rng(0)
     # Mostly forward and down, so that agents reach walls and the floor within the test.
     weights = np.array([4, 1, 1, 1, 0, 12, 1, 0, 0, 0]) / 20
-    reasons, vector = run_both(3, 34, lambda _: rng.choice(10, 3, p=weights), budget=25)
+    reasons, vector = run_both(3, 34, lambda _: rng.choice(10, 3, p=weights), budget=25,
+                               split=split)
     assert vector.single_observation_space["rgb"].shape == (24, 24, 3)
     assert reasons, "no collision happened: the collision path went untested"
 
 
-def test_matches_sync_vector_env_same_step_autoreset():
+@pytest.mark.parametrize("split", [False, True])
+def test_matches_sync_vector_env_same_step_autoreset(split):
     rng = np.random.default_rng(1)
-    run_both(2, 16, lambda _: rng.integers(0, 10, 2), AutoresetMode.SAME_STEP, budget=7)
+    run_both(2, 16, lambda _: rng.integers(0, 10, 2), AutoresetMode.SAME_STEP, budget=7,
+             split=split)
 
 
+@pytest.mark.parametrize("split", [False, True])
 @pytest.mark.parametrize("rule", ["published", "scanned_space"])
-def test_matches_sync_in_open_scene_where_escapes_are_refused(rule):
+def test_matches_sync_in_open_scene_where_escapes_are_refused(rule, split):
     rng = np.random.default_rng(0)
     # Mostly forward, sometimes sideways, up or turning: some agents reach the open side.
     reasons, _ = run_both(
         3, 60, lambda step: np.zeros(3, int) if step % 3 else rng.choice([0, 2, 3, 4, 6], 3),
-        budget=80, seed=0, scene=open_room(), escape_rule=rule,
+        budget=80, seed=0, split=split, scene=open_room(), escape_rule=rule,
     )
     assert "surface" in reasons
     if rule == "published":
         assert "escape" in reasons
 
 
-def test_matches_sync_with_rasterized_frames():
-    """Frames of many agents drawn in parallel (one rasterizer per thread) are each agent's
-    single-env rasterized frame."""
+@pytest.mark.parametrize("split", [False, True])
+def test_matches_sync_with_rasterized_frames(split):
+    """Frames of many agents drawn in parallel (one rasterizer per thread, or each share of
+    the step in its thread) are each agent's single-env rasterized frame."""
     rng = np.random.default_rng(5)
-    run_both(5, 30, lambda step: rng.integers(0, 10, 5), pinhole_backend="raster")
+    run_both(5, 30, lambda step: rng.integers(0, 10, 5), split=split, pinhole_backend="raster")
 
 
 def test_default_frames_are_rasterized_where_cheaper():
