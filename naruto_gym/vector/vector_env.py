@@ -469,11 +469,11 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         agent's coverage gain.
 
         With many agents the step is split into contiguous shares, one per thread, each moved
-        and observed start to finish in its thread: the compiled loops, the ray caster and the
-        distance queries release the GIL, so the shares overlap where a step split phase by
-        phase would wait at every phase for its slowest thread (and run the sweeps' queries
-        and the bookkeeping between phases on one core). Agents never share state, so the
-        result is the same as in one piece.
+        and observed start to finish in its thread: the compiled loops (frames, colours,
+        coverage) release the GIL, so one share's frames are drawn while the other share's
+        Python runs, where a step split phase by phase would wait at every phase for its
+        slowest thread and run everything between the phases on one core. Agents never share
+        state, so the result is the same as in one piece.
         """
         n = self.num_envs
         parts = 1 if self._reconstruct else max(
