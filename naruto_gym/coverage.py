@@ -81,18 +81,17 @@ def sample_cells(samples_world: np.ndarray, cell_m: float = SAMPLE_CELL_M) -> Sa
     samples = np.asarray(samples_world, np.float64)
     if cell_m <= 0:
         raise ValueError(f"cell_m must be positive, got {cell_m}")
-    keys = np.floor((samples - samples.min(axis=0)) / cell_m).astype(np.int64)
-    _, cell_of, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    cell_of = cell_of.reshape(-1)
-    order = np.argsort(cell_of, kind="stable").astype(np.int64)
-    starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    low = np.full((len(counts), 3), np.inf)
-    high = np.full((len(counts), 3), -np.inf)
-    np.minimum.at(low, cell_of, samples)
-    np.maximum.at(high, cell_of, samples)
-    centres = (low + high) / 2.0
-    radii = np.zeros(len(counts))
-    np.maximum.at(radii, cell_of, np.linalg.norm(samples - centres[cell_of], axis=1))
+    cells = np.floor((samples - samples.min(axis=0)) / cell_m).astype(np.int64)
+    size = cells.max(axis=0) + 1
+    keys = (cells[:, 0] * size[1] + cells[:, 1]) * size[2] + cells[:, 2]
+    order = np.argsort(keys, kind="stable").astype(np.int64)
+    ordered = keys[order]
+    firsts = np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])
+    starts = np.r_[firsts, len(samples)].astype(np.int64)
+    points = samples[order]
+    centres = (np.minimum.reduceat(points, firsts) + np.maximum.reduceat(points, firsts)) / 2.0
+    owner = np.repeat(np.arange(len(firsts)), np.diff(starts))
+    radii = np.maximum.reduceat(np.linalg.norm(points - centres[owner], axis=1), firsts)
     return SampleCells(order, starts, centres, radii)
 
 
