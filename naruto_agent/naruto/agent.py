@@ -174,9 +174,11 @@ class NarutoConfig:
             as the panorama shows it (the env's cone test on the surface points around the
             agent); one that leaves it is refused as by ``edge_probe_m``.
         panorama_margin_m: the panorama check keeps the env's agent radius plus this.
-        max_held_moves: after this many moves in a row from one spot that the panorama shows
-            leaving an open scan, the next is sent and the env decides (its refusal teaches
-            the edge as any other): low over a floor hole every way can look like leaving.
+        max_held_moves: after this many moves in a row held back at one spot by the
+            panorama (a surface in the way, or leaving an open scan), the next is sent and
+            the env decides (its refusal teaches the map as any other): low over a floor
+            hole every way can look like leaving, and in a tight spot (under a table, 7 cm
+            from a leg) every way can come within the margin of a surface.
         escape_radius_m: how far the agent may look for free space when the map puts it
             inside a surface's clearance (0 switches the escape off).
         arrival_tolerance_m: a moving agent farther than this from its commanded node was
@@ -644,27 +646,37 @@ class NarutoPolicy(Policy):
             return True
         radius = self.context.agent_radius_m + self.config.panorama_margin_m
         contact = first_contact(panorama, end - start, radius)
-        if contact is None:
+        if contact is None or not self._hold_here(start):
             return True
         self.blocked.add(start + contact)
         self._blocked_space_changed(goal_failed=False)
         return False
 
+    def _hold_here(self, start: np.ndarray) -> bool:
+        """Count a move held back by the panorama at ``start``; False (send it, the env
+        decides) after ``max_held_moves`` moves in a row were held at this spot, and the
+        count starts again (a move the env refuses teaches the map, and the next ones are
+        checked again)."""
+        held_here = self._held is not None and np.linalg.norm(start - self._held[0]) <= 1e-3
+        count = self._held[1] + 1 if held_here else 1
+        if count > self.config.max_held_moves:
+            self._held = (start.copy(), 0)
+            return False
+        self._held = (start.copy(), count)
+        return True
+
     def _panorama_keeps_to_scan(self, start: np.ndarray, end: np.ndarray) -> bool:
         """On an open scan, the env's cone test read from the panorama where the move starts
         (``check_moves_on_panorama``, :func:`move_leaves_scan`): a move that leaves the
         scanned space there is refused, and the space past it blocked, as after an escape
-        refusal; after ``max_held_moves`` such refusals in a row at one spot the move passes
-        and the env decides."""
+        refusal; after ``max_held_moves`` moves held in a row at one spot (:meth:`_hold_here`)
+        the next passes and the env decides."""
         panorama = self._panorama_from(start)
         radius = self.context.agent_radius_m
         if panorama is None or not move_leaves_scan(panorama, end - start, radius):
             return True
-        held_here = self._held is not None and np.linalg.norm(start - self._held[0]) <= 1e-3
-        count = self._held[1] + 1 if held_here else 1
-        if count > self.config.max_held_moves:
+        if not self._hold_here(start):
             return True  # the env decides
-        self._held = (start.copy(), count)
         # Held before the env saw it: the goal may still be reached another way.
         self._block_past_edge(start, end, goal_failed=False)
         return False

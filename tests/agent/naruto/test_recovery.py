@@ -475,6 +475,20 @@ def test_on_an_open_scan_a_climb_above_the_scans_top_is_refused_and_lowers_the_c
     assert policy._stays_below_top(above, below)
 
 
+def test_in_a_tight_spot_a_move_held_for_a_surface_goes_to_the_env_after_max_held_moves():
+    """7 cm from a wall, within the panorama's margin of it: moves towards it are held
+    (the surface blocked in the map, the goal kept), but after ``max_held_moves`` holds in a
+    row at one spot the next is sent and the env decides, then the count starts again."""
+    agent = np.array([1.5, 1.5, 1.0])
+    policy = _agent_on_a_free_map(wall_panorama(-0.07), agent)
+    towards_wall = agent + [0.06, -0.05, 0.07]
+    for _ in range(policy.config.max_held_moves):
+        assert not policy._move_is_free(agent, towards_wall)
+    assert len(policy.blocked.points) == policy.config.max_held_moves
+    assert policy._move_is_free(agent, towards_wall)
+    assert not policy._move_is_free(agent, towards_wall)
+
+
 def test_naruto_hands_a_move_to_the_env_after_max_held_moves_holds_at_one_spot() -> None:
     """Low over a floor hole every way out can look like leaving the scan on the panorama:
     after ``max_held_moves`` moves held back in a row at one spot the next is sent (the env
@@ -492,6 +506,8 @@ def test_naruto_hands_a_move_to_the_env_after_max_held_moves_holds_at_one_spot()
     assert policy._panorama_keeps_to_scan(agent, towards_edge)
     assert len(policy.blocked.points) == policy.config.max_held_moves
     assert failed == []
+    # The count starts again: the next move from here is checked (and held) again.
+    assert not policy._panorama_keeps_to_scan(agent, towards_edge)
     elsewhere = agent + [0.0, 0.05, 0.0]
     policy._panorama = (floor_panorama(edge_x_m=0.3), elsewhere)
     assert not policy._panorama_keeps_to_scan(elsewhere, elsewhere + [0.25, 0.0, 0.0])
