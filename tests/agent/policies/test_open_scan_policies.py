@@ -191,6 +191,9 @@ def test_frontier_under_an_open_top_does_not_count_the_sky():
     policy.scan_open = False  # a closed scan: the unknown above is a ceiling still to see
     _, kept = policy._frontier_clusters(position)
     assert (centres[kept][:, 2] > top - 0.1).any()
+    policy.support_on_closed_scans = True  # held to the test on closed scans too
+    _, kept = policy._frontier_clusters(position)
+    assert np.linalg.norm(centres[kept] - [2.5, 2.5, 1.2], axis=1).max() < 0.6
     assert (grid.frontier(unknown_below_z=top) <= grid.frontier()).all()
 
 
