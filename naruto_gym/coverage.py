@@ -129,7 +129,9 @@ def mark_visible_samples(
     tolerance_m: float,
 ) -> int:
     """Compiled :func:`visible_samples` that only visits unseen samples: sets ``seen[i]`` for
-    every sample the frame sees and returns how many were newly seen.
+    every sample the frame sees and returns how many were newly seen. The envs use
+    :func:`mark_visible_in_cells` (the same marks, fewer samples visited); this plain loop is
+    its reference.
 
     Args:
         samples_world: (N, 3) float64 surface samples.
