@@ -61,8 +61,8 @@ def run_both(
     vector = NarutoReconVectorEnv(
         num_envs, max_episode_steps=budget, autoreset_mode=autoreset, **settings
     )
-    if split:  # each step in two shares, one per thread, however few the agents
-        vector._threads, vector._min_agents_per_part = 2, 1
+    if split:  # each step in two shares, one per thread, however few the agents and frames
+        vector._threads, vector._min_agents_per_part, vector._split_steps = 2, 1, True
     sync = gym.vector.SyncVectorEnv(
         [lambda: gym.make("NarutoRecon-v0", max_episode_steps=budget, **settings)] * num_envs,
         autoreset_mode=autoreset,
