@@ -660,7 +660,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         ``escape``; returns the agents whose move the escape check refuses.
 
         With the rasterizing pinhole backend the frames are rasterized (the single env's
-        renderer) and the cast carries only the panorama rays.
+        renderer) and the cast carries only the panorama rays. ``part``: as for
+        :meth:`_observe` (the frames are drawn in the calling thread with that share's
+        rasterizer).
         """
         env = self._scenes[members[0]]
         camera = self.camera
