@@ -118,45 +118,6 @@ def _sees_sample(
     return rendered > 0 and z <= rendered + tolerance + share * rendered
 
 
-@numba.njit(cache=True, nogil=True)
-def mark_visible_samples(
-    samples_world: np.ndarray,
-    seen: np.ndarray,
-    camera_to_world: np.ndarray,
-    intrinsics: np.ndarray,
-    depth: np.ndarray,
-    max_range_m: float,
-    tolerance_m: float,
-) -> int:
-    """Compiled :func:`visible_samples` that only visits unseen samples: sets ``seen[i]`` for
-    every sample the frame sees and returns how many were newly seen. The envs use
-    :func:`mark_visible_in_cells` (the same marks, fewer samples visited); this plain loop is
-    its reference.
-
-    Args:
-        samples_world: (N, 3) float64 surface samples.
-        seen: (N,) bool, updated in place.
-        camera_to_world: 4x4 float64 pose.
-        intrinsics: (6,) float64 ``(width, height, fx, fy, cx, cy)``.
-        depth: (H, W) float32 z-depth, 0 where nothing was hit.
-        max_range_m: samples farther (in z) than this are not counted.
-        tolerance_m: as in :func:`visible_samples`.
-    """
-    width, height = int(intrinsics[0]), int(intrinsics[1])
-    fx, fy, cx, cy = intrinsics[2], intrinsics[3], intrinsics[4], intrinsics[5]
-    tx, ty, tz = camera_to_world[0, 3], camera_to_world[1, 3], camera_to_world[2, 3]
-    tolerance, share = np.float32(tolerance_m), np.float32(0.01)
-    added = 0
-    for i in range(samples_world.shape[0]):
-        if not seen[i] and _sees_sample(
-            samples_world, i, camera_to_world, tx, ty, tz, width, height, fx, fy, cx, cy, depth,
-            max_range_m, tolerance, share,
-        ):
-            seen[i] = True
-            added += 1
-    return added
-
-
 @numba.njit(cache=True, nogil=True, inline="always")
 def _outside_plane(x, z, slope, reach):
     """Whether a ball (centre x, z in the plane's cut, ``reach`` its radius plus a margin)
@@ -179,8 +140,19 @@ def mark_visible_in_cells(
     max_range_m: float,
     tolerance_m: float,
 ) -> int:
-    """:func:`mark_visible_samples` that skips the cells (:func:`sample_cells`) whose bounding
-    sphere lies wholly outside the frame's view volume: the same samples are marked.
+    """Compiled :func:`visible_samples` that only visits unseen samples, and skips the cells
+    (:func:`sample_cells`) whose bounding sphere lies wholly outside the frame's view volume:
+    sets ``seen[i]`` for every sample the frame sees and returns how many were newly seen.
+
+    Args:
+        samples_world: (N, 3) float64 surface samples.
+        order, starts, centres, radii: their :class:`SampleCells`.
+        seen: (N,) bool, updated in place.
+        camera_to_world: 4x4 float64 pose.
+        intrinsics: (6,) float64 ``(width, height, fx, fy, cx, cy)``.
+        depth: (H, W) float32 z-depth, 0 where nothing was hit.
+        max_range_m: samples farther (in z) than this are not counted.
+        tolerance_m: as in :func:`visible_samples`.
 
     A pixel (u, v) is in the image when ``u = floor(fx * x / z + cx + 0.5)`` lies in
     ``[0, width)``: for z > 0 that is ``lo * z <= x < hi * z`` with ``lo = -(cx + 0.5) / fx``

@@ -1,4 +1,4 @@
-"""The coverage kernels: culling by sample cells marks the same samples as the plain loop."""
+"""The coverage kernel: culling by sample cells marks the samples the numpy reference sees."""
 
 from __future__ import annotations
 
@@ -11,7 +11,6 @@ import naruto_gym  # noqa: F401  (registers the ids)
 from naruto_gym.coverage import (
     COVERAGE_TOLERANCE_M,
     mark_visible_in_cells,
-    mark_visible_samples,
     sample_cells,
     visible_samples,
 )
@@ -37,13 +36,12 @@ def test_sample_cells_hold_every_sample_once_within_their_radius():
 @pytest.mark.parametrize("scene", ["replica_like_room", "apartment"])
 @pytest.mark.parametrize("camera", [PinholeCamera(64, 64, 32, 32, 31.5, 31.5),
                                     PinholeCamera(40, 24, 30, 30, 19.5, 11.5)])
-def test_culling_by_cells_marks_what_every_sample_would(scene, camera):
+def test_culling_by_cells_marks_what_the_numpy_reference_sees(scene, camera):
     env = gym.make("NarutoRecon-v0", scene=scene, camera=camera, panorama_shape=None,
                    coverage_samples=4000).unwrapped
     coverage = env.coverage
     rng = np.random.default_rng(1)
-    seen_cells = np.zeros(len(coverage.samples_world), bool)
-    seen_plain = seen_cells.copy()
+    seen = np.zeros(len(coverage.samples_world), bool)
     for episode in range(25):
         env.reset(seed=int(rng.integers(1 << 30)))
         pose = env.unwrapped._pose.copy()
@@ -52,19 +50,17 @@ def test_culling_by_cells_marks_what_every_sample_would(scene, camera):
         _, depth = env.renderer.render(pose)
         expected = visible_samples(coverage.samples_world, pose, camera, depth,
                                    coverage.max_range_m, COVERAGE_TOLERANCE_M)
-        fresh = np.zeros_like(seen_cells)
+        fresh = np.zeros_like(seen)
         added = mark_visible_in_cells(coverage.samples_world, *coverage.cells, fresh, pose,
                                       coverage.intrinsics, depth, coverage.max_range_m,
                                       COVERAGE_TOLERANCE_M)
         assert np.array_equal(fresh, expected) and added == expected.sum()
-        # With samples already seen: only the new ones count, as in the plain loop.
-        added_cells = mark_visible_in_cells(
-            coverage.samples_world, *coverage.cells, seen_cells, pose, coverage.intrinsics,
+        # With samples already seen: only the new ones count.
+        before = seen.copy()
+        added = mark_visible_in_cells(
+            coverage.samples_world, *coverage.cells, seen, pose, coverage.intrinsics,
             depth, coverage.max_range_m, COVERAGE_TOLERANCE_M)
-        added_plain = mark_visible_samples(
-            coverage.samples_world, seen_plain, pose, coverage.intrinsics, depth,
-            coverage.max_range_m, COVERAGE_TOLERANCE_M)
-        assert added_cells == added_plain
-        assert np.array_equal(seen_cells, seen_plain)
-    assert 0 < seen_cells.sum() < len(seen_cells)
+        assert added == (expected & ~before).sum()
+        assert np.array_equal(seen, before | expected)
+    assert 0 < seen.sum() < len(seen)
     env.close()
