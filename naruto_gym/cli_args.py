@@ -52,7 +52,8 @@ def dataclass_parser(
         default: Any = (
             item.default if item.default is not dataclasses.MISSING else item.default_factory()
         )
-        help_text = docs.get(item.name, "")
+        # argparse expands %-formats in help strings: a doc's "10 %" must stay text.
+        help_text = docs.get(item.name, "").replace("%", "%%")
         if kind is bool:
             parser.add_argument(
                 flag, action=argparse.BooleanOptionalAction, default=default, help=help_text
