@@ -165,6 +165,53 @@ def first_contact(panorama: np.ndarray, move: np.ndarray, radius_m: float) -> np
     return points[int(np.argmin(np.where(touching, along, np.inf)))]
 
 
+def clear_part_of_move(
+    panorama: np.ndarray, move: np.ndarray, radius_m: float, min_length_m: float = 0.01
+) -> np.ndarray | None:
+    """The part of a blocked move the panorama shows clear, or None when none is worth sending.
+
+    Two candidates: the move slid along the surface it would touch (its component towards
+    the surface removed, as a robot slides along a wall), and the move cut short a
+    centimetre before the contact. Of those clear (:func:`first_contact`) and at least
+    ``min_length_m`` long, the one that goes furthest along the move.
+
+    Args:
+        panorama: (H, W) radial distances from the agent, 0 where nothing was hit.
+        move: (3,) displacement of the move.
+        radius_m: the clearance the move must keep.
+        min_length_m: shortest part worth sending.
+
+    Returns:
+        (3,) the clear displacement (the move itself when it is clear), or None.
+    """
+    move = np.asarray(move, np.float64)
+    contact = first_contact(panorama, move, radius_m)
+    if contact is None:
+        return move
+    length = float(np.linalg.norm(move))
+    direction = move / length
+    # How far the sphere goes before it first touches a surface point the panorama shows.
+    points, distance = _surface_points(panorama)
+    threshold = min(radius_m, float(distance.min()) - 1e-3)
+    along = points @ direction
+    gap = np.linalg.norm(points - along[:, None] * direction, axis=1)
+    touching = (gap < threshold) & (along > 0.0)
+    reach = along[touching] - np.sqrt(threshold * threshold - gap[touching] ** 2)
+    touch = max(float(reach.min()), 0.0) if len(reach) else length
+    # The surface's normal there: towards the surface point nearest the sphere's centre.
+    centre = touch * direction
+    nearest = points[int(np.argmin(np.linalg.norm(points - centre, axis=1)))] - centre
+    normal = nearest / max(float(np.linalg.norm(nearest)), 1e-9)
+    slide = move - max(float(move @ normal), 0.0) * normal
+    short = direction * min(max(touch - 0.01, 0.0), length)
+    clear = [part for part in (slide, short)
+             if np.linalg.norm(part) >= min_length_m
+             and first_contact(panorama, part, radius_m) is None]
+    if not clear:
+        return None
+    return max(clear, key=lambda part: float(part @ direction))  # the most progress
+
+
 def cone_supported(panorama: np.ndarray, points: np.ndarray) -> np.ndarray:
     """The env's scanned-space test (:mod:`naruto_gym.motion.scanned_space`) below each point,
     read from the panorama's surface points instead of rays cast in the mesh.

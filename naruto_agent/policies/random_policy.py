@@ -8,6 +8,13 @@ the open) or when the run's random length is used up. A climb the env refuses as
 bounds' top does. It never keeps pushing against a wall,
 which is what ``action_space.sample()`` would do. All randomness comes from its own seeded
 generator, so one seed gives one trajectory.
+
+Where the observation has the depth panorama, the walk reads each move's way from it first,
+as a robot reads its range sensor (``panorama_check``): a move whose sphere would touch a
+surface the panorama shows, or that would leave the scanned space as the env judges it
+(:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`), starts a new random run
+instead of being sent. Without it about one move in sixteen was refused (17.9 per 300-step
+episode on ``replica_like_room``), and on an open scan the scan's edge added its own.
 """
 
 from __future__ import annotations
@@ -15,7 +22,11 @@ from __future__ import annotations
 import numpy as np
 
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
-from naruto_agent.policies.panorama_clearance import RefusedMoves
+from naruto_agent.policies.panorama_clearance import (
+    RefusedMoves,
+    first_contact,
+    move_leaves_scan,
+)
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 
 
@@ -31,6 +42,12 @@ class RandomPolicy(Policy):
             floor and ceiling.
         avoid_blocked_deg: a new direction after a block is at least this far from the
             blocked one.
+        panorama_check: read each move's way from the observation's depth panorama (when
+            it has one) and start a new run instead of a move that would bump or leave the
+            scan (see above).
+        panorama_margin_m: clearance kept beyond the env's agent radius in that check.
+        max_redraws: new runs drawn at one step for ``panorama_check`` before the move is
+            sent anyway and the env decides (a tight spot where every way looks blocked).
     """
 
     def __init__(
@@ -42,6 +59,9 @@ class RandomPolicy(Policy):
         max_pitch_deg: float = 30.0,
         height_margin_m: float = 0.3,
         avoid_blocked_deg: float = 60.0,
+        panorama_check: bool = True,
+        panorama_margin_m: float = 0.01,
+        max_redraws: int = 8,
     ) -> None:
         super().__init__()
         if not 1 <= min_run_steps <= max_run_steps:
@@ -55,12 +75,17 @@ class RandomPolicy(Policy):
         self.max_pitch_rad = float(np.deg2rad(max_pitch_deg))
         self.height_margin_m = height_margin_m
         self.cos_avoid = float(np.cos(np.deg2rad(avoid_blocked_deg)))
+        self.panorama_check = panorama_check
+        self.panorama_margin_m = panorama_margin_m
+        self.max_redraws = max_redraws
         self.rng = np.random.default_rng(seed)
         self.direction = np.array([1.0, 0.0, 0.0])
         self.pitch = 0.0
         self.steps_left = 0
         #: Number of new directions drawn because a move was blocked (for tests and logs).
         self.turns_after_block = 0
+        #: Number of new runs drawn because the panorama showed a move's way blocked.
+        self.turns_before_block = 0
         self.refused = RefusedMoves()
 
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
@@ -69,6 +94,7 @@ class RandomPolicy(Policy):
             self.seed = seed
             self.rng = np.random.default_rng(seed)
         self.turns_after_block = 0
+        self.turns_before_block = 0
         self.refused.reset()
         self._new_run(np.asarray(observation["pose"], np.float64), blocked=None)
 
@@ -102,9 +128,24 @@ class RandomPolicy(Policy):
             self._new_run(pose, blocked=None)
         self.steps_left -= 1
         position = pose[:3, 3]
+        panorama = observation.get("panorama") if self.panorama_check else None
         target = position + self.direction * self.context.max_translation_m
+        for _ in range(self.max_redraws if panorama is not None else 0):
+            if not self._way_blocked(panorama, target - position):
+                break
+            self.turns_before_block += 1
+            self._new_run(pose, blocked=self.direction)
+            self.steps_left -= 1
+            target = position + self.direction * self.context.max_translation_m
         heading = np.array([self.direction[0], self.direction[1], 0.0])
         heading /= max(np.linalg.norm(heading), 1e-9)
         look = heading * np.cos(self.pitch) + np.array([0.0, 0.0, np.sin(self.pitch)])
         rotation = look_at_rotation(target, target + look)
         return clip_pose_action(pose_action(make_pose(rotation, target)), self.context.action_space)
+
+    def _way_blocked(self, panorama: np.ndarray, move: np.ndarray) -> bool:
+        """Whether the panorama shows the move bumping into a surface or leaving the scan."""
+        radius = self.context.agent_radius_m
+        if first_contact(panorama, move, radius + self.panorama_margin_m) is not None:
+            return True
+        return move_leaves_scan(panorama, move, radius, margin_start_passes=True)

@@ -188,12 +188,12 @@ def test_frontier_under_an_open_top_does_not_count_the_sky():
     _, kept = policy._frontier_clusters(position)
     assert kept.any()
     assert np.linalg.norm(centres[kept] - [2.5, 2.5, 1.2], axis=1).max() < 0.6  # the pocket only
-    policy.scan_open = False  # a closed scan: the unknown above is a ceiling still to see
-    _, kept = policy._frontier_clusters(position)
-    assert (centres[kept][:, 2] > top - 0.1).any()
-    policy.support_on_closed_scans = True  # held to the test on closed scans too
+    policy.scan_open = False  # a closed scan, held to the test too (the default)
     _, kept = policy._frontier_clusters(position)
     assert np.linalg.norm(centres[kept] - [2.5, 2.5, 1.2], axis=1).max() < 0.6
+    policy.support_on_closed_scans = False  # the unknown above is a ceiling still to see
+    _, kept = policy._frontier_clusters(position)
+    assert (centres[kept][:, 2] > top - 0.1).any()
     assert (grid.frontier(unknown_below_z=top) <= grid.frontier()).all()
 
 
@@ -323,6 +323,27 @@ def test_first_contact_reads_the_way_ahead_from_the_panorama():
     assert first_contact(np.zeros((64, 128), np.float32), np.array([0.1, 0, 0]), 0.06) is None
 
 
+def test_clear_part_of_move_slides_along_a_surface_or_stops_short_of_it():
+    """A wall 7 cm beside the agent (-y): a move into it at an angle slides along it (its
+    component towards the wall removed); a move straight at a wall 0.2 m ahead stops a
+    centimetre short of touching it; a clear move is returned as it is, and one with no clear
+    part worth sending gives None."""
+    from naruto_agent.policies.panorama_clearance import clear_part_of_move, first_contact
+
+    beside = wall_panorama(-0.07)
+    move = np.array([0.06, -0.05, 0.0])
+    slide = clear_part_of_move(beside, move, 0.06)
+    assert slide is not None and first_contact(beside, slide, 0.06) is None
+    assert slide[0] == pytest.approx(0.06, abs=0.02) and abs(slide[1]) < 0.01
+    ahead = wall_panorama(-0.2)  # the wall 0.2 m away along -y: walk straight at it
+    short = clear_part_of_move(ahead, np.array([0.0, -0.18, 0.0]), 0.06)
+    assert short is not None and first_contact(ahead, short, 0.06) is None
+    assert -0.14 < short[1] < -0.08 and abs(short[0]) < 1e-9
+    clear = np.array([0.1, 0.0, 0.0])
+    assert clear_part_of_move(beside, clear, 0.06) is clear
+    assert clear_part_of_move(wall_panorama(-0.065), np.array([0.0, -0.05, 0.0]), 0.06) is None
+
+
 def test_cone_supported_reads_the_envs_cone_test_from_the_panorama():
     """A floor 1 m below that ends 0.8 m away towards +x: points well inside are supported,
     points at or past the edge are not (a sector of their cone sees nothing); a closed floor
@@ -368,9 +389,26 @@ def test_frontier_holds_back_a_move_the_panorama_shows_blocked_and_marks_the_sur
     for _ in range(policy.max_held_moves - 1):
         assert policy._panorama_shows_surface(position, towards, panorama)
     assert not policy._panorama_shows_surface(position, towards, panorama)  # the env decides
-    policy._held_moves = 0
+    policy._held_for_surface = 0
     policy.panorama_move_check = False
     assert not policy._panorama_shows_surface(position, towards, panorama)
+
+
+def test_frontier_edge_holds_do_not_let_a_move_into_a_surface():
+    """Each panorama check keeps its own hold count: after ``max_held_moves`` moves held at
+    one spot for leaving the scan (a window's opening on a closed scan), the edge check lets
+    the next move through, but the surface check still reads it (with one shared count,
+    the move let through bumped into the sill)."""
+    policy = _open_frontier_over_floor(floor_x_max=3.5)
+    position = np.array([2.0, 2.0, 1.0])
+    towards = position + [0.06, -0.05, 0.0]
+    policy._held_for_edge = policy.max_held_moves
+    assert policy._panorama_shows_surface(position, towards, wall_panorama(-0.07))
+    assert policy._held_for_surface == 1
+    edge = floor_panorama(edge_x_m=0.3)
+    assert not policy._probe_refuses(np.zeros(3), np.array([0.25, 0.0, 0.0]), edge)
+    policy._held_for_edge = 0
+    assert policy._probe_refuses(np.zeros(3), np.array([0.25, 0.0, 0.0]), edge)
 
 
 def test_frontier_leaves_a_move_from_the_scans_margin_to_the_env():

@@ -147,6 +147,23 @@ def test_random_walk_does_not_push_against_walls_and_is_seeded():
     env.close()
 
 
+def test_random_walk_reads_its_way_from_the_panorama_and_bumps_far_less():
+    """With the depth panorama the walk draws a new run instead of a move it shows blocked
+    (a surface in the way, or leaving the scan): far fewer refused moves than the same walk
+    without the check, on the closed scene and with its ceiling and part of its floor gone."""
+    for scene in ("two_rooms", "two_rooms:no_ceiling+holes"):
+        env = make_env(scene=scene, steps=150, panorama_shape=(32, 64))
+        refused = {}
+        for check in (True, False):
+            policy = RandomPolicy(panorama_check=check)
+            _, infos = rollout(env, policy, 150, seed=4)
+            refused[check] = sum(bool(info["collided"]) for info in infos[1:])
+            assert (policy.turns_before_block > 0) == check
+        env.close()
+        assert refused[False] >= 5, refused
+        assert refused[True] <= refused[False] / 3, (scene, refused)
+
+
 # -- passive -----------------------------------------------------------------------------
 def test_subsample_poses_keeps_ends_and_fits_the_budget():
     poses = np.repeat(np.eye(4)[None], 101, axis=0)
