@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from naruto_gym.geometry.sweep_kernels import fraction_inside_box
 from naruto_gym.motion.scanned_space import ScannedSpace, ScannedSpaceConfig
 from naruto_gym.observability import inside_free_space_many, is_inside_free_space
 from naruto_gym.scenes.mesh_scene import face_normals_of
@@ -52,15 +53,12 @@ def points_close(a: np.ndarray, b: np.ndarray) -> bool:
 def segment_fraction_inside_box(
     start: np.ndarray, end: np.ndarray, box_min: np.ndarray, box_max: np.ndarray
 ) -> float:
-    """Largest t in [0, 1] with start + t (end - start) inside the box (start assumed inside)."""
-    delta = end - start
-    fraction = 1.0
-    for axis in range(3):
-        if delta[axis] > 0 and end[axis] > box_max[axis]:
-            fraction = min(fraction, (box_max[axis] - start[axis]) / delta[axis])
-        elif delta[axis] < 0 and end[axis] < box_min[axis]:
-            fraction = min(fraction, (box_min[axis] - start[axis]) / delta[axis])
-    return float(np.clip(fraction, 0.0, 1.0))
+    """Largest t in [0, 1] with start + t (end - start) inside the box (start assumed inside;
+    :func:`~naruto_gym.geometry.sweep_kernels.fraction_inside_box`)."""
+    return float(fraction_inside_box(
+        np.asarray(start, np.float64), np.asarray(end, np.float64),
+        np.asarray(box_min, np.float64), np.asarray(box_max, np.float64),
+    ))
 
 
 class CollisionChecker:

@@ -24,6 +24,8 @@ from typing import Literal
 
 import numpy as np
 
+from naruto_gym.geometry.sweep_kernels import first_blocked_sample, sweep_step_count
+
 RayCasterBackend = Literal["open3d", "embreex"]
 
 
@@ -231,9 +233,7 @@ def segment_samples(
     """
     delta = end - start
     length = float(np.linalg.norm(delta))
-    step = max(clearance / 4.0, 1e-3)
-    count = max(int(np.ceil(length / step)), 1)
-    fractions = np.linspace(0.0, 1.0, count + 1)
+    fractions = np.linspace(0.0, 1.0, sweep_step_count(length, clearance) + 1)
     samples = start[None, :] + fractions[:, None] * delta[None, :]
     return fractions, samples, length
 
@@ -272,12 +272,15 @@ def free_fraction_from_distances(
             zero-length segment).
         clearance: the sphere's radius.
     """
-    clear = surface_distance >= clearance
-    if length > 0:
-        clear &= fractions * length < wall_distance - clearance
-    if clear.all():
+    distance = np.asarray(surface_distance)
+    if not np.issubdtype(distance.dtype, np.floating):
+        distance = distance.astype(np.float64)
+    first_blocked = first_blocked_sample(
+        np.asarray(fractions, np.float64), float(length), distance, float(wall_distance),
+        float(clearance), distance.dtype.type(clearance),
+    )
+    if first_blocked < 0:
         return 1.0
-    first_blocked = int(np.argmin(clear))
     if first_blocked == 0:
         return 0.0
     return float(fractions[first_blocked - 1])

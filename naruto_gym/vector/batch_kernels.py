@@ -1,7 +1,7 @@
-"""Compiled loops over the agents of a batch: ray buffers and coverage.
+"""Compiled loops over the agents of a batch: ray buffers, coverage and move sweeps.
 
 Each loop calls the single agent's kernel (the one the single env uses), so a batch of agents
-gets bit-identical rays and coverage to the same agents stepped one by one.
+gets bit-identical rays, coverage and moves to the same agents stepped one by one.
 """
 
 from __future__ import annotations
@@ -10,6 +10,11 @@ import numba
 import numpy as np
 
 from naruto_gym.coverage import mark_visible_in_cells
+from naruto_gym.geometry.sweep_kernels import (
+    first_blocked_sample,
+    fraction_inside_box,
+    sweep_step_count,
+)
 from naruto_gym.sensors.kernels import fill_world_rays
 
 
@@ -125,7 +130,7 @@ def plan_sweeps(
     radius_m: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The box clip and sweep samples of N moves, as the single env's checker makes them
-    (:func:`~naruto_gym.motion.collision.segment_fraction_inside_box`, then
+    (:func:`~naruto_gym.geometry.sweep_kernels.fraction_inside_box`, then the samples of
     :func:`~naruto_gym.sensors.raycaster.segment_samples` with the clearance the checker
     gives a start closer than its radius), the same numbers for every move.
 
@@ -142,14 +147,7 @@ def plan_sweeps(
     offsets = np.zeros(count + 1, np.int64)
     steps = np.empty(count, np.int64)
     for i in range(count):
-        fraction = 1.0
-        for axis in range(3):
-            delta = targets[i, axis] - starts[i, axis]
-            if delta > 0 and targets[i, axis] > box_max[axis]:
-                fraction = min(fraction, (box_max[axis] - starts[i, axis]) / delta)
-            elif delta < 0 and targets[i, axis] < box_min[axis]:
-                fraction = min(fraction, (box_min[axis] - starts[i, axis]) / delta)
-        box[i] = min(max(fraction, 0.0), 1.0)
+        box[i] = fraction_inside_box(starts[i], targets[i], box_min, box_max)
         squared = 0.0
         for axis in range(3):
             ends[i, axis] = starts[i, axis] + box[i] * (targets[i, axis] - starts[i, axis])
@@ -157,8 +155,7 @@ def plan_sweeps(
             squared += delta * delta
         lengths[i] = np.sqrt(squared)
         clearances[i] = max(min(radius_m, start_clearances[i] - 1e-4), 0.0)
-        step = max(clearances[i] / 4.0, 1e-3)
-        steps[i] = max(int(np.ceil(lengths[i] / step)), 1)
+        steps[i] = sweep_step_count(lengths[i], clearances[i])
         offsets[i + 1] = offsets[i] + steps[i] + 1
     fractions = np.empty(offsets[count])
     points = np.empty((offsets[count], 3))
@@ -185,21 +182,19 @@ def sweep_stops(
     clearances: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Where each of N sweeps (:func:`plan_sweeps`) stops and the surface distance there:
-    :func:`~naruto_gym.sensors.raycaster.sweep_stop_from_distances` move by move (the last
-    free sample's fraction, 1 when all are free; nan as the clearance of a stop at 0)."""
+    :func:`~naruto_gym.sensors.raycaster.sweep_stop_from_distances` move by move, with the
+    same :func:`~naruto_gym.geometry.sweep_kernels.first_blocked_sample` (the last free
+    sample's fraction, 1 when all are free; nan as the clearance of a stop at 0)."""
     count = lengths.shape[0]
     stops = np.empty(count)
     stop_clearances = np.empty(count)
     for i in range(count):
-        first_blocked = -1
-        for sample in range(offsets[i], offsets[i + 1]):
-            # The distances are float32 and numpy compares them with a float in float32.
-            clear = distances[sample] >= np.float32(clearances[i])
-            if lengths[i] > 0:
-                clear = clear and fractions[sample] * lengths[i] < walls[i] - clearances[i]
-            if not clear:
-                first_blocked = sample - offsets[i]
-                break
+        begin, end = offsets[i], offsets[i + 1]
+        # The distances are float32, and numpy compares them with a float in float32.
+        first_blocked = first_blocked_sample(
+            fractions[begin:end], lengths[i], distances[begin:end], walls[i], clearances[i],
+            np.float32(clearances[i]),
+        )
         last_free = offsets[i + 1] - 1 if first_blocked == -1 else offsets[i] + first_blocked - 1
         stops[i] = 0.0 if first_blocked == 0 else fractions[last_free]
         # A sweep that cannot leave its start (stop 0) has no stop clearance.
