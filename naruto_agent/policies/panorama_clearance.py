@@ -130,6 +130,25 @@ def _surface_points(panorama: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _panorama_rays(*panorama.shape)[hit] * distance[hit, None], distance[hit]
 
 
+def surface_top(panorama: np.ndarray, quantile: float = 0.99) -> float:
+    """Height (relative to the panorama's centre) under which ``quantile`` of the surface
+    area the panorama shows lies; -inf when it shows none. Each hit pixel stands for the
+    patch it sees (its solid angle times its distance squared). Indoors that is the ceiling;
+    without one, the wall tops: the env refuses a climb above the scan's own such height
+    (:mod:`naruto_gym.motion.scanned_space`), which small stray fragments high above a scan
+    do not raise, nor do they raise this one."""
+    points, distance = _surface_points(panorama)
+    if len(points) == 0:
+        return float("-inf")
+    # An equirectangular pixel's solid angle goes with the cosine of its elevation.
+    horizontal = np.hypot(points[:, 0], points[:, 1]) / np.maximum(distance, 1e-9)
+    area = distance * distance * horizontal
+    order = np.argsort(points[:, 2])
+    cumulative = np.cumsum(area[order])
+    index = int(np.searchsorted(cumulative, quantile * cumulative[-1]))
+    return float(points[order[min(index, len(order) - 1)], 2])
+
+
 def first_contact(panorama: np.ndarray, move: np.ndarray, radius_m: float) -> np.ndarray | None:
     """The surface point the panorama shows in a move's way, or None when the way is clear.
 

@@ -11,7 +11,9 @@ generator, so one seed gives one trajectory.
 
 Where the observation has the depth panorama, the walk reads each move's way from it first,
 as a robot reads its range sensor (``panorama_check``): a move whose sphere would touch a
-surface the panorama shows, or that would leave the scanned space as the env judges it
+surface the panorama shows, that would climb above the surfaces it shows (the open top of a
+scan without a ceiling, :func:`~naruto_agent.policies.panorama_clearance.surface_top`), or
+that would leave the scanned space as the env judges it
 (:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`), starts a new random run
 instead of being sent. Without it about one move in sixteen was refused (17.9 per 300-step
 episode on ``replica_like_room``), and on an open scan the scan's edge added its own.
@@ -26,6 +28,7 @@ from naruto_agent.policies.panorama_clearance import (
     RefusedMoves,
     first_contact,
     move_leaves_scan,
+    surface_top,
 )
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 
@@ -121,7 +124,9 @@ class RandomPolicy(Policy):
         pose = np.asarray(observation["pose"], np.float64)
         if info is not None and info.get("collided", False):
             if info.get("collision_reason") == "escape":
-                self.refused.record(pose[:3, 3], pose[:3, 3] + self.direction)
+                # The panorama tells a refused climb at the open top from the floor's edge.
+                panorama = observation.get("panorama") if self.panorama_check else None
+                self.refused.record(pose[:3, 3], pose[:3, 3] + self.direction, panorama)
             self.turns_after_block += 1
             self._new_run(pose, blocked=self.direction)
         elif self.steps_left <= 0:
@@ -144,8 +149,11 @@ class RandomPolicy(Policy):
         return clip_pose_action(pose_action(make_pose(rotation, target)), self.context.action_space)
 
     def _way_blocked(self, panorama: np.ndarray, move: np.ndarray) -> bool:
-        """Whether the panorama shows the move bumping into a surface or leaving the scan."""
+        """Whether the panorama shows the move bumping into a surface, climbing above the
+        surfaces it shows (the open top of a scan without a ceiling), or leaving the scan."""
         radius = self.context.agent_radius_m
         if first_contact(panorama, move, radius + self.panorama_margin_m) is not None:
+            return True
+        if move[2] > 0.0 and move[2] > surface_top(panorama):
             return True
         return move_leaves_scan(panorama, move, radius, margin_start_passes=True)

@@ -20,6 +20,7 @@ from naruto_agent.policies import (
     pose_action,
     subsample_poses,
 )
+from tests.agent.synthetic_panoramas import floor_panorama
 
 CHEAP = {"image_scale": 0.1, "panorama_shape": (16, 32), "coverage_samples": 3000}
 
@@ -162,6 +163,32 @@ def test_random_walk_reads_its_way_from_the_panorama_and_bumps_far_less():
         env.close()
         assert refused[False] >= 5, refused
         assert refused[True] <= refused[False] / 3, (scene, refused)
+
+
+def test_surface_top_is_the_height_under_most_of_the_surface_area_shown():
+    """A floor 1 m below: its height. A small patch 3 m up (a stray fragment) barely raises
+    the quantile; the highest point it shows would."""
+    from naruto_agent.policies.panorama_clearance import surface_top
+
+    panorama = floor_panorama()
+    assert surface_top(panorama) == pytest.approx(-1.0, abs=1e-3)
+    panorama[0, :4] = 3.0  # straight up, a few pixels
+    assert surface_top(panorama) == pytest.approx(-1.0, abs=1e-3)
+    assert surface_top(panorama, quantile=1.0) > 2.9
+    assert surface_top(np.zeros((8, 16), np.float32)) == -np.inf
+
+
+def test_random_walk_turns_back_under_an_open_top_before_the_env_refuses():
+    """The single room without a ceiling, seed 9: the walk's climbs reached the wall tops and
+    the env refused 12 of them as escapes; read from the panorama, none."""
+    env = make_env(scene="replica_like_room:no_ceiling", steps=300, image_scale=0.25,
+                   panorama_shape=(64, 128))
+    refused = {}
+    for check in (True, False):
+        _, infos = rollout(env, RandomPolicy(panorama_check=check), 300, seed=9)
+        refused[check] = sum(info.get("collision_reason") == "escape" for info in infos[1:])
+    env.close()
+    assert refused[False] >= 3 and refused[True] == 0, refused
 
 
 # -- passive -----------------------------------------------------------------------------
