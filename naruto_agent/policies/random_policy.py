@@ -156,4 +156,6 @@ class RandomPolicy(Policy):
             return True
         if move[2] > 0.0 and move[2] > surface_top(panorama):
             return True
-        return move_leaves_scan(panorama, move, radius, margin_start_passes=True)
+        # Strict in the scan's margin too: a walk has no goal to give up, only a new run to
+        # draw (a move from the margin back in still passes).
+        return move_leaves_scan(panorama, move, radius)
