@@ -27,6 +27,7 @@ from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_acti
 from naruto_agent.policies.panorama_clearance import (
     RefusedMoves,
     first_contact,
+    floor_edge_profile,
     move_leaves_scan,
     surface_top,
 )
@@ -156,6 +157,10 @@ class RandomPolicy(Policy):
             return True
         if move[2] > 0.0 and move[2] > surface_top(panorama):
             return True
+        # The full test is costly (tens of ms); where the panorama shows scanned surface all
+        # around below, out to 70 degrees from straight down, no move of a step can leave.
+        if not np.isfinite(floor_edge_profile(panorama, max_polar_deg=70.0)).any():
+            return False
         # Strict in the scan's margin too: a walk has no goal to give up, only a new run to
         # draw (a move from the margin back in still passes).
         return move_leaves_scan(panorama, move, radius)
