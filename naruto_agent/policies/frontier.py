@@ -204,6 +204,7 @@ class FrontierPolicy(Policy):
         self.max_held_moves = max_held_moves
         self._held_for_surface = 0  # moves held back in a row at one spot, per check
         self._held_for_edge = 0
+        self._closed_scan_held_done = False  # see _release_closed_scan
         self.scan_open = False  # an escape refusal or the sky: the scan is open
         self.scan_top_quantile = scan_top_quantile
         self.scan_top_margin_m = scan_top_margin_m
@@ -253,6 +254,7 @@ class FrontierPolicy(Policy):
         self.refused.reset()
         self._last_target = None
         self.scan_open = False
+        self._closed_scan_held_done = False
         self._held_for_surface = 0
         self._held_for_edge = 0
         pose = np.asarray(observation["pose"], np.float64)
@@ -269,7 +271,18 @@ class FrontierPolicy(Policy):
 
     @property
     def _held_to_scan(self) -> bool:
-        return self.scanned_space_support and (self.scan_open or self.support_on_closed_scans)
+        if not self.scanned_space_support:
+            return False
+        return self.scan_open or (self.support_on_closed_scans and not self._closed_scan_held_done)
+
+    def _release_closed_scan(self) -> bool:
+        """On a closed scan held to the test, once no frontier it keeps can be reached, let
+        the rest go (the unknown above the measured top there is a ceiling still to see, and
+        chasing it finishes the map): True when that changed the policy's hold."""
+        if self.scan_open or not self._held_to_scan:
+            return False
+        self._closed_scan_held_done = True
+        return True
 
     @property
     def _probes_edges(self) -> bool:
@@ -396,19 +409,21 @@ class FrontierPolicy(Policy):
         When no cluster can be reached that way, the agent may be boxed in by its own
         inflation (it went low under furniture, and later frames closed the way it came in)
         or by floor it has not measured below it: it then plans once more without inflation,
-        and then once more without the test (goals still pass it)."""
+        and then once more without the test (goals still pass it). On a closed scan, when
+        nothing is left that way, the test is let go for the rest of the episode
+        (:meth:`_release_closed_scan`)."""
         assert self.grid is not None
         self.plans += 1
         self._steps_since_plan = 0
         labels, kept = self._frontier_clusters(position)
         if not kept.any():
-            return False
+            return self._release_closed_scan() and self._plan(position)
         held = self._held_to_scan
         attempts = [(self.inflation_voxels, held), (0, held), (self.inflation_voxels, False)]
         for inflation, inside_scan in dict.fromkeys(attempts):
             if self._plan_through(position, labels, kept, inflation, inside_scan):
                 return True
-        return False
+        return self._release_closed_scan() and self._plan(position)
 
     def _plan_through(
         self, position: np.ndarray, labels: np.ndarray, kept: np.ndarray, inflation: int,

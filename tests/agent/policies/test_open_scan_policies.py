@@ -197,6 +197,32 @@ def test_frontier_under_an_open_top_does_not_count_the_sky():
     assert (grid.frontier(unknown_below_z=top) <= grid.frontier()).all()
 
 
+def test_frontier_lets_the_closed_scan_test_go_when_nothing_it_keeps_is_left():
+    """A closed scan held to the scanned-space test (the default): once no frontier passes
+    it, the rest (here the unseen space above the walls' measured top, a ceiling still to
+    see) is planned to, and the test stays off for the episode; at the published budgets
+    frontier had stopped exploring early without this (the Replica sample, 2000 steps:
+    98.7 % against 99.4 %)."""
+    policy = FrontierPolicy()
+    env = _env("replica_like_room", policy)
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    centres = _free_grid_with_floor(policy, floor_x_max=10.0)
+    grid = policy.grid
+    grid.observed[:] = True
+    grid.log_odds[(centres[..., 0] < 0.15) & (centres[..., 2] < 2.0)] = 3.0  # a wall, 2 m
+    grid.observed[centres[..., 2] > 2.2] = False  # unseen above it
+    position = np.array([2.0, 2.0, 1.2])
+    assert not policy.scan_open and policy._held_to_scan
+    _, kept = policy._frontier_clusters(position)
+    assert not kept.any()  # nothing below the measured top is unknown
+    assert policy._plan(position)
+    assert not policy._held_to_scan
+    assert policy._goal_focus[2] > 2.0
+    policy.reset(observation, info, seed=0)
+    assert policy._held_to_scan  # a new episode holds to the test again
+
+
 def test_frontier_plans_without_inflation_when_its_map_boxes_it_in():
     """Seen in replica_like_room, seed 2: low under furniture, later frames closed the way in
     by a voxel; with its inflated map the policy found no goal and turned on the spot for
