@@ -43,7 +43,10 @@ most of these refusals came in the last few steps before a goal). The policy hol
 test on closed scans too (``support_on_closed_scans``): there it keeps the agent from the
 many small clusters around furniture low in a room, which held it for most of a 300-step
 episode on closed ``two_rooms`` (84.4 % coverage against 71.7 % without, 10 seeds), and
-makes closed and open scans of one building explored alike.
+makes closed and open scans of one building explored alike. Once nothing it keeps is left
+there, the test is let go for the rest of the episode: on a closed scan the unknown above
+the measured top is a ceiling still to see, and held to the end frontier stopped exploring
+early at the published budgets.
 
 Before a move is sent the policy reads its way from the depth panorama taken where it stands
 (``panorama_move_check``), as a robot reads its range sensor: a surface the agent's sphere
