@@ -56,6 +56,16 @@ def _env(scene: str, policy) -> gym.Env:
     return env
 
 
+def _reset_frontier(scene: str, **settings) -> tuple[FrontierPolicy, gym.Env, dict, dict]:
+    """A frontier policy (``settings`` its arguments) bound to ``scene`` and reset there, seed 0;
+    returns the policy, the env, and the reset's observation and info."""
+    policy = FrontierPolicy(**settings)
+    env = _env(scene, policy)
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    return policy, env, observation, info
+
+
 def _rollout(scene: str, name: str, seed: int, steps: int) -> Counter:
     policy = make_policy(name)
     env = _env(scene, policy)
@@ -97,10 +107,7 @@ def test_floor_edge_profile_finds_where_the_floor_ends():
 
 
 def test_frontier_learns_the_ceiling_and_blocks_what_is_ahead_only():
-    policy = FrontierPolicy()
-    env = _env("replica_like_room:no_ceiling", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
+    policy, _, observation, _ = _reset_frontier("replica_like_room:no_ceiling")
     position = np.array([2.5, 2.5, 2.9])
     policy._last_target = position + [0.0, 0.0, 0.1]
     policy._learn_edge(position, observation["panorama"])
@@ -131,20 +138,16 @@ def _free_grid_with_floor(policy: FrontierPolicy, floor_x_max: float) -> np.ndar
 def _open_frontier_over_floor(floor_x_max: float) -> FrontierPolicy:
     """A frontier policy reset on the single room without a ceiling, its map as in
     :func:`_free_grid_with_floor`, that knows the scan is open."""
-    policy = FrontierPolicy()
-    env = _env("replica_like_room:no_ceiling", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
+    policy, *_ = _reset_frontier("replica_like_room:no_ceiling")
     _free_grid_with_floor(policy, floor_x_max=floor_x_max)
     policy.scan_open = True
     return policy
 
 
 def test_frontier_counts_only_frontier_inside_the_scan():
-    policy = FrontierPolicy(scanned_space_support=False)
-    env = _env("replica_like_room:no_ceiling", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
+    policy, *_ = _reset_frontier(
+        "replica_like_room:no_ceiling", scanned_space_support=False
+    )
     centres = _free_grid_with_floor(policy, floor_x_max=3.5)  # the scan's floor ends there
     inside_pocket = (np.abs(centres[..., 0] - 2.5) < 0.25) & (np.abs(centres[..., 1] - 2.5) < 0.25)
     inside_pocket &= np.abs(centres[..., 2] - 1.2) < 0.25
@@ -168,10 +171,7 @@ def test_frontier_under_an_open_top_does_not_count_the_sky():
     """Seen on ``replica_like_room:no_ceiling+missing_wall``, seed 0: the policy climbed to
     2.65 m for free space next to the unknown above the wall tops, which no view resolves
     (nothing is there to measure), and gained no coverage for 70 steps."""
-    policy = FrontierPolicy()
-    env = _env("replica_like_room:no_ceiling", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
+    policy, *_ = _reset_frontier("replica_like_room:no_ceiling")
     centres = _free_grid_with_floor(policy, floor_x_max=10.0)
     grid = policy.grid
     grid.observed[:] = True  # all measured, but for the sky and the pocket below
@@ -203,10 +203,7 @@ def test_frontier_lets_the_closed_scan_test_go_when_nothing_it_keeps_is_left():
     see) is planned to, and the test stays off for the episode; at the published budgets
     frontier had stopped exploring early without this (the Replica sample, 2000 steps:
     98.7 % against 99.4 %)."""
-    policy = FrontierPolicy()
-    env = _env("replica_like_room", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
+    policy, _, observation, info = _reset_frontier("replica_like_room")
     centres = _free_grid_with_floor(policy, floor_x_max=10.0)
     grid = policy.grid
     grid.observed[:] = True
@@ -227,10 +224,10 @@ def test_frontier_plans_without_inflation_when_its_map_boxes_it_in():
     """Seen in replica_like_room, seed 2: low under furniture, later frames closed the way in
     by a voxel; with its inflated map the policy found no goal and turned on the spot for
     the last 120 steps of the episode."""
-    policy = FrontierPolicy(scanned_space_support=False)  # the map below has no floor
-    env = _env("replica_like_room", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
+    # The map below has no floor.
+    policy, *_ = _reset_frontier(
+        "replica_like_room", scanned_space_support=False
+    )
     grid = policy.grid
     grid.observed[:] = True
     grid.log_odds[:] = -1.0
@@ -255,10 +252,7 @@ def test_frontier_over_a_bare_floor_still_has_somewhere_to_go():
     """Seen on habitat-sim's open sample room (seed 0): only the floor measured, so no
     frontier voxel had measured surface in every sector below it, and the policy turned on
     the spot for 280 steps. It then takes the frontier over measured surface."""
-    policy = FrontierPolicy()
-    env = _env("replica_like_room:no_ceiling", policy)
-    observation, info = env.reset(seed=0)
-    policy.reset(observation, info, seed=0)
+    policy, *_ = _reset_frontier("replica_like_room:no_ceiling")
     grid = policy.grid
     grid.observed[:] = False
     grid.log_odds[:] = 0.0
@@ -283,10 +277,7 @@ def test_frontier_holds_to_the_scan_only_once_it_sees_that_the_scan_is_open():
     a closed room never shows it, and there the policy plans as the classic one."""
     for scene, expected in (("replica_like_room:no_ceiling", True),
                             ("replica_like_room:fragments", False)):
-        policy = FrontierPolicy()
-        env = _env(scene, policy)
-        observation, info = env.reset(seed=0)
-        policy.reset(observation, info, seed=0)
+        policy, env, observation, info = _reset_frontier(scene)
         for _ in range(12):
             observation, _, _, _, info = env.step(policy.act(observation, info))
         assert policy.scan_open == expected
