@@ -123,10 +123,10 @@ class RandomPolicy(Policy):
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         pose = np.asarray(observation["pose"], np.float64)
+        panorama = observation.get("panorama") if self.panorama_check else None
         if info is not None and info.get("collided", False):
             if info.get("collision_reason") == "escape":
                 # The panorama tells a refused climb at the open top from the floor's edge.
-                panorama = observation.get("panorama") if self.panorama_check else None
                 self.refused.record(pose[:3, 3], pose[:3, 3] + self.direction, panorama)
             self.turns_after_block += 1
             self._new_run(pose, blocked=self.direction)
@@ -134,7 +134,6 @@ class RandomPolicy(Policy):
             self._new_run(pose, blocked=None)
         self.steps_left -= 1
         position = pose[:3, 3]
-        panorama = observation.get("panorama") if self.panorama_check else None
         target = position + self.direction * self.context.max_translation_m
         for _ in range(self.max_redraws if panorama is not None else 0):
             if not self._way_blocked(panorama, target - position):
