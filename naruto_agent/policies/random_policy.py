@@ -16,7 +16,10 @@ scan without a ceiling, :func:`~naruto_agent.policies.panorama_clearance.surface
 that would leave the scanned space as the env judges it
 (:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`), starts a new random run
 instead of being sent. Without it about one move in sixteen was refused (17.9 per 300-step
-episode on ``replica_like_room``), and on an open scan the scan's edge added its own.
+episode on ``replica_like_room``), and on an open scan the scan's edge added its own. In a tight
+spot where every redrawn run looks blocked, the walk turns in place for up to
+``max_held_steps`` steps (new runs are drawn at each), then sends the part of the move the
+panorama shows clear, or the move itself, and the env decides: it never stays put for good.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
 from naruto_agent.policies.panorama_clearance import (
     RefusedMoves,
+    clear_part_of_move,
     first_contact,
     floor_edge_profile,
     move_leaves_scan,
@@ -50,8 +54,15 @@ class RandomPolicy(Policy):
             it has one) and start a new run instead of a move that would bump or leave the
             scan (see above).
         panorama_margin_m: clearance kept beyond the env's agent radius in that check.
-        max_redraws: new runs drawn at one step for ``panorama_check`` before the move is
-            sent anyway and the env decides (a tight spot where every way looks blocked).
+        scan_edge_margin_m: added to the agent radius where the check probes the scan's edge
+            (:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`): the
+            panorama's pixels place an edge below to a few centimetres, and a walk has no
+            goal that a wider berth would cost.
+        max_redraws: new runs drawn at one step for ``panorama_check`` before the walk
+            gives the step up (a tight spot where every way looks blocked).
+        max_held_steps: steps in a row the walk turns in place in such a spot before it sends
+            the clear part of the move (slid along or cut short of the surface it would
+            touch), or the move itself, and the env decides.
     """
 
     def __init__(
@@ -65,7 +76,9 @@ class RandomPolicy(Policy):
         avoid_blocked_deg: float = 60.0,
         panorama_check: bool = True,
         panorama_margin_m: float = 0.01,
+        scan_edge_margin_m: float = 0.05,
         max_redraws: int = 8,
+        max_held_steps: int = 3,
     ) -> None:
         super().__init__()
         if not 1 <= min_run_steps <= max_run_steps:
@@ -81,7 +94,9 @@ class RandomPolicy(Policy):
         self.cos_avoid = float(np.cos(np.deg2rad(avoid_blocked_deg)))
         self.panorama_check = panorama_check
         self.panorama_margin_m = panorama_margin_m
+        self.scan_edge_margin_m = scan_edge_margin_m
         self.max_redraws = max_redraws
+        self.max_held_steps = max_held_steps
         self.rng = np.random.default_rng(seed)
         self.direction = np.array([1.0, 0.0, 0.0])
         self.pitch = 0.0
@@ -90,6 +105,8 @@ class RandomPolicy(Policy):
         self.turns_after_block = 0
         #: Number of new runs drawn because the panorama showed a move's way blocked.
         self.turns_before_block = 0
+        #: Steps in a row turned in place because every redrawn run looked blocked.
+        self.held_steps = 0
         self.refused = RefusedMoves()
 
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
@@ -99,6 +116,7 @@ class RandomPolicy(Policy):
             self.rng = np.random.default_rng(seed)
         self.turns_after_block = 0
         self.turns_before_block = 0
+        self.held_steps = 0
         self.refused.reset()
         self._new_run(np.asarray(observation["pose"], np.float64), blocked=None)
 
@@ -135,18 +153,38 @@ class RandomPolicy(Policy):
         self.steps_left -= 1
         position = pose[:3, 3]
         target = position + self.direction * self.context.max_translation_m
-        for _ in range(self.max_redraws if panorama is not None else 0):
-            if not self._way_blocked(panorama, target - position):
-                break
-            self.turns_before_block += 1
-            self._new_run(pose, blocked=self.direction)
-            self.steps_left -= 1
-            target = position + self.direction * self.context.max_translation_m
+        if panorama is not None:
+            target = self._checked_target(pose, panorama, target)
         heading = np.array([self.direction[0], self.direction[1], 0.0])
         heading /= max(np.linalg.norm(heading), 1e-9)
         look = heading * np.cos(self.pitch) + np.array([0.0, 0.0, np.sin(self.pitch)])
         rotation = look_at_rotation(target, target + look)
         return clip_pose_action(pose_action(make_pose(rotation, target)), self.context.action_space)
+
+    def _checked_target(self, pose: np.ndarray, panorama: np.ndarray, target: np.ndarray
+                        ) -> np.ndarray:
+        """The run's next target once the panorama has passed it: new runs are drawn while
+        the way looks blocked; when none of ``max_redraws`` is clear the walk turns in place
+        (its position as target), and after ``max_held_steps`` such steps in a row it sends
+        the clear part of the move, or the move."""
+        position = pose[:3, 3]
+        for redraw in range(self.max_redraws + 1):
+            if not self._way_blocked(panorama, target - position):
+                self.held_steps = 0
+                return target
+            if redraw == self.max_redraws:
+                break
+            self.turns_before_block += 1
+            self._new_run(pose, blocked=self.direction)
+            self.steps_left -= 1
+            target = position + self.direction * self.context.max_translation_m
+        if self.held_steps < self.max_held_steps:
+            self.held_steps += 1
+            return position.copy()
+        self.held_steps = 0
+        part = clear_part_of_move(panorama, target - position,
+                                  self.context.agent_radius_m + self.panorama_margin_m)
+        return target if part is None else position + part
 
     def _way_blocked(self, panorama: np.ndarray, move: np.ndarray) -> bool:
         """Whether the panorama shows the move bumping into a surface, climbing above the
@@ -162,4 +200,4 @@ class RandomPolicy(Policy):
             return False
         # Strict in the scan's margin too: a walk has no goal to give up, only a new run to
         # draw (a move from the margin back in still passes).
-        return move_leaves_scan(panorama, move, radius)
+        return move_leaves_scan(panorama, move, radius + self.scan_edge_margin_m)

@@ -165,6 +165,28 @@ def test_random_walk_reads_its_way_from_the_panorama_and_bumps_far_less():
         assert refused[True] <= refused[False] / 3, (scene, refused)
 
 
+def test_random_walk_turns_in_place_where_every_way_looks_blocked_then_lets_the_env_decide():
+    """Surfaces all around, closer than a step: no redrawn run is clear. The walk turns in
+    place for ``max_held_steps`` steps (drawing new runs at each), then sends a move."""
+    policy = RandomPolicy(seed=3, max_held_steps=2)
+    context = _context()
+    policy.bind(context)
+    pose = np.eye(4)
+    pose[:3, 3] = (2.5, 2.5, 1.5)
+    panorama = np.full((16, 32), context.agent_radius_m + 0.005, np.float32)
+    observation = {"pose": pose.astype(np.float32), "panorama": panorama}
+    policy.reset(observation, {}, seed=3)
+    targets = [policy.act(observation, {"collided": False})[:3] for _ in range(3)]
+    np.testing.assert_allclose(targets[0], pose[:3, 3], atol=1e-6)
+    np.testing.assert_allclose(targets[1], pose[:3, 3], atol=1e-6)
+    assert np.linalg.norm(targets[2] - pose[:3, 3]) > 0.5 * context.max_translation_m
+    assert policy.turns_before_block == 3 * policy.max_redraws
+    assert policy.held_steps == 0  # the count starts again after the move is sent
+    # Without the panorama the walk never holds.
+    policy.reset({"pose": pose.astype(np.float32)}, {}, seed=3)
+    assert np.linalg.norm(policy.act({"pose": pose.astype(np.float32)})[:3] - pose[:3, 3]) > 0
+
+
 def test_surface_top_is_the_height_under_most_of_the_surface_area_shown():
     """A floor 1 m below: its height. A small patch 3 m up (a stray fragment) barely raises
     the quantile; the highest point it shows would."""
