@@ -17,9 +17,10 @@ that would leave the scanned space as the env judges it
 (:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`), starts a new random run
 instead of being sent. Without it about one move in sixteen was refused (17.9 per 300-step
 episode on ``replica_like_room``), and on an open scan the scan's edge added its own. In a tight
-spot where every redrawn run looks blocked, the walk turns in place for up to
-``max_held_steps`` steps (new runs are drawn at each), then sends the part of the move the
-panorama shows clear, or the move itself, and the env decides: it never stays put for good.
+spot where every redrawn run looks blocked, the walk sweeps the headings all around it for
+a clear way; where none is, it turns in place for up to ``max_held_steps`` steps, then sends
+the part of the move the panorama shows clear, or the move itself, and the env decides: it
+never stays put for good.
 """
 
 from __future__ import annotations
@@ -54,12 +55,15 @@ class RandomPolicy(Policy):
             it has one) and start a new run instead of a move that would bump or leave the
             scan (see above).
         panorama_margin_m: clearance kept beyond the env's agent radius in that check.
-        scan_edge_margin_m: added to the agent radius where the check probes the scan's edge
-            (:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`): the
-            panorama's pixels place an edge below to a few centimetres, and a walk has no
-            goal that a wider berth would cost.
+        scan_edge_margin_m: the scan's edge is probed
+            (:func:`~naruto_agent.policies.panorama_clearance.move_leaves_scan`) at the agent
+            radius and again at the radius plus this: the panorama's pixels place an edge
+            below to a few centimetres, and a walk has no goal that a wider berth would cost.
         max_redraws: new runs drawn at one step for ``panorama_check`` before the walk
             gives the step up (a tight spot where every way looks blocked).
+        sweep_headings: when all of them look blocked the walk sweeps this many headings
+            around it (level, then climbing and sinking) for a clear way before it holds
+            (0: no sweep).
         max_held_steps: steps in a row the walk turns in place in such a spot before it sends
             the clear part of the move (slid along or cut short of the surface it would
             touch), or the move itself, and the env decides.
@@ -78,6 +82,7 @@ class RandomPolicy(Policy):
         panorama_margin_m: float = 0.01,
         scan_edge_margin_m: float = 0.05,
         max_redraws: int = 8,
+        sweep_headings: int = 16,
         max_held_steps: int = 3,
     ) -> None:
         super().__init__()
@@ -96,6 +101,7 @@ class RandomPolicy(Policy):
         self.panorama_margin_m = panorama_margin_m
         self.scan_edge_margin_m = scan_edge_margin_m
         self.max_redraws = max_redraws
+        self.sweep_headings = sweep_headings
         self.max_held_steps = max_held_steps
         self.rng = np.random.default_rng(seed)
         self.direction = np.array([1.0, 0.0, 0.0])
@@ -164,9 +170,10 @@ class RandomPolicy(Policy):
     def _checked_target(self, pose: np.ndarray, panorama: np.ndarray, target: np.ndarray
                         ) -> np.ndarray:
         """The run's next target once the panorama has passed it: new runs are drawn while
-        the way looks blocked; when none of ``max_redraws`` is clear the walk turns in place
-        (its position as target), and after ``max_held_steps`` such steps in a row it sends
-        the clear part of the move, or the move."""
+        the way looks blocked; when none of ``max_redraws`` is clear a sweep of headings
+        looks for one; when that finds none either the walk turns in place (its position as
+        target), and after ``max_held_steps`` such steps in a row it sends the clear part of
+        the move, or the move."""
         position = pose[:3, 3]
         for redraw in range(self.max_redraws + 1):
             if not self._way_blocked(panorama, target - position):
@@ -178,6 +185,14 @@ class RandomPolicy(Policy):
             self._new_run(pose, blocked=self.direction)
             self.steps_left -= 1
             target = position + self.direction * self.context.max_translation_m
+        # Every random draw looked blocked: look all around for a clear way before holding
+        # (turning in place shows the panorama nothing new, so a held step only waits, and
+        # a sweep that found nothing is not repeated at the same spot).
+        direction = None if self.held_steps else self._clear_direction(pose, panorama)
+        if direction is not None:
+            self.held_steps = 0
+            self.direction = direction
+            return position + direction * self.context.max_translation_m
         if self.held_steps < self.max_held_steps:
             self.held_steps += 1
             return position.copy()
@@ -185,6 +200,31 @@ class RandomPolicy(Policy):
         part = clear_part_of_move(panorama, target - position,
                                   self.context.agent_radius_m + self.panorama_margin_m)
         return target if part is None else position + part
+
+    def _clear_direction(self, pose: np.ndarray, panorama: np.ndarray) -> np.ndarray | None:
+        """The first run direction of a sweep around the agent (``sweep_headings`` headings
+        from a random one, level first, then climbing and sinking within the height margins)
+        whose move the panorama shows clear, or None."""
+        if self.sweep_headings <= 0:
+            return None
+        bounds = self.context.bounds
+        z = pose[2, 3]
+        climbs = [0.0]
+        if z > bounds[0, 2] + self.height_margin_m:
+            climbs.append(-self.max_climb)
+        if z < min(bounds[1, 2], self.refused.ceiling_z) - self.height_margin_m:
+            climbs.insert(1, self.max_climb)
+        start = self.rng.uniform(-np.pi, np.pi)
+        headings = start + np.arange(self.sweep_headings) * (2.0 * np.pi / self.sweep_headings)
+        step = self.context.max_translation_m
+        for climb in climbs:
+            for heading in headings:
+                direction = np.array([np.cos(heading), np.sin(heading), 0.0])
+                direction *= np.sqrt(1.0 - climb**2)
+                direction[2] = climb
+                if not self._way_blocked(panorama, direction * step):
+                    return direction
+        return None
 
     def _way_blocked(self, panorama: np.ndarray, move: np.ndarray) -> bool:
         """Whether the panorama shows the move bumping into a surface, climbing above the
@@ -200,4 +240,7 @@ class RandomPolicy(Policy):
             return False
         # Strict in the scan's margin too: a walk has no goal to give up, only a new run to
         # draw (a move from the margin back in still passes).
-        return move_leaves_scan(panorama, move, radius + self.scan_edge_margin_m)
+        # Both radii: the wider one sees an edge a pixel off, but its cube test drops out
+        # nearer a wall (the cube's corners must lie within the free ball).
+        return any(move_leaves_scan(panorama, move, probe)
+                   for probe in (radius, radius + self.scan_edge_margin_m))

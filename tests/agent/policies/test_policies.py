@@ -187,6 +187,46 @@ def test_random_walk_turns_in_place_where_every_way_looks_blocked_then_lets_the_
     assert np.linalg.norm(policy.act({"pose": pose.astype(np.float32)})[:3] - pose[:3, 3]) > 0
 
 
+def _panorama_with_one_opening(opening_half_deg: float = 60.0) -> np.ndarray:
+    """A 16 x 32 panorama: floor 0.3 m below, surfaces 9 cm away on every side but one
+    opening towards +x (``opening_half_deg`` either side, from the floor's edge up)."""
+    from naruto_gym.sensors.panorama import EquirectangularCamera
+
+    rays = EquirectangularCamera(16, 32).ray_directions.astype(np.float64).reshape(-1, 3)
+    azimuth = np.degrees(np.arctan2(rays[:, 1], rays[:, 0]))
+    distance = np.full(len(rays), 0.09)
+    down = rays[:, 2] <= -0.3
+    distance[down] = 0.3 / -rays[down, 2]
+    distance[~down & (np.abs(azimuth) < opening_half_deg)] = 3.0
+    return distance.reshape(16, 32).astype(np.float32)
+
+
+def test_random_walk_sweeps_all_around_for_the_one_clear_way_before_it_holds():
+    """One narrow way out: where the random draws all miss it, the sweep of headings finds
+    it and the walk moves through it at once (without the sweep it would turn in place)."""
+    context = _context()
+    pose = np.eye(4)
+    pose[:3, 3] = (2.5, 2.5, 1.5)
+    observation = {"pose": pose.astype(np.float32), "panorama": _panorama_with_one_opening()}
+    swept = 0
+    for seed in range(8):
+        policy = RandomPolicy(seed=seed)
+        policy.bind(context)
+        policy.reset(observation, {}, seed=seed)
+        move = policy.act(observation, {"collided": False})[:3] - pose[:3, 3]
+        assert np.linalg.norm(move) > 0.5 * context.max_translation_m, seed
+        assert abs(np.degrees(np.arctan2(move[1], move[0]))) < 20.0, (seed, move)
+        assert policy.held_steps == 0
+        if policy.turns_before_block == policy.max_redraws:
+            swept += 1
+            unswept = RandomPolicy(seed=seed, sweep_headings=0)
+            unswept.bind(context)
+            unswept.reset(observation, {}, seed=seed)
+            held = unswept.act(observation, {"collided": False})[:3]
+            np.testing.assert_allclose(held, pose[:3, 3], atol=1e-6)
+    assert swept >= 1  # some seeds' random draws all missed the opening
+
+
 def test_surface_top_is_the_height_under_most_of_the_surface_area_shown():
     """A floor 1 m below: its height. A small patch 3 m up (a stray fragment) barely raises
     the quantile; the highest point it shows would."""
