@@ -60,7 +60,10 @@ Choices of this implementation beyond the published description (all switchable)
   top, everything above the agent), goals that
   failed are not tried again for a while, and when plans keep failing or the agent neither
   moves nor measures anything new it looks around, moves to reachable space away from where
-  it has been, or retreats along its own trajectory.
+  it has been, or retreats along its own trajectory. Space blocked on the agent's own
+  reading of an open scan's edge (a move the panorama or its map held back, which the env
+  never refused) is forgotten when a plan fails, and near the agent when it leaves no way
+  out: beside a floor hole's rim those guesses can hem the agent in.
 
 What the agent knows: the observations (RGB-D, pose, panorama), the env's step info
 (``collided``, ``collision_reason``) and the scene's bounding box from the
@@ -517,23 +520,49 @@ class NarutoPolicy(Policy):
         return refused_at_top(position, target, bool(supported))
 
     def _block_past_edge(
-        self, position: np.ndarray, target: np.ndarray, goal_failed: bool = True
+        self, position: np.ndarray, target: np.ndarray, goal_failed: bool = True,
+        guessed: bool = False,
     ) -> None:
         """The scan ends at ``target``: block the space beyond it, in a ball that touches
         the target and leaves the agent's side alone (the plan's goal failed unless
-        ``goal_failed`` is False)."""
+        ``goal_failed`` is False; ``guessed``: the agent's own reading, not the env's
+        refusal, see :meth:`_forget_guesses_around`)."""
         radius = self.config.recovery.escape_blocked_radius_m
         if radius <= 0:
-            self._block(target, None, goal_failed)
+            self._block(target, None, goal_failed, guessed)
             return
         direction = target - position
-        self._block(target + radius * direction / np.linalg.norm(direction), radius, goal_failed)
+        self._block(target + radius * direction / np.linalg.norm(direction), radius, goal_failed,
+                    guessed)
 
-    def _block(self, centre: np.ndarray, radius: float | None, goal_failed: bool = True) -> None:
+    def _block(self, centre: np.ndarray, radius: float | None, goal_failed: bool = True,
+               guessed: bool = False) -> None:
         """Block a ball in the agent's map (the blocked space's own radius when None); the
         plan's goal failed (unless ``goal_failed`` is False)."""
-        self.blocked.add(centre, radius)
+        self.blocked.add(centre, radius, guessed)
         self._blocked_space_changed(goal_failed)
+
+    def _forget_guesses(self, position: np.ndarray, reach_m: float = math.inf) -> bool:
+        """Unblock the space the agent blocked on its own readings within ``reach_m`` of
+        ``position`` (everywhere by default) and read the planner view again; False when
+        there was none. Beside a floor hole's rim the panorama's edge test can hold moves
+        that the env would let pass, and the balls blocked past them can hem the agent in
+        until no plan starts or reaches a goal (``replica_like_room:no_ceiling+holes``,
+        seed 6: 0.4 m in 300 steps). Without them the next plan may try the same way, and
+        after ``max_held_moves`` holds the env decides: what it refuses stays blocked."""
+        if not self.blocked.forget_guesses_near(position, reach_m):
+            return False
+        self._view_stale = True
+        self._read_view()
+        return True
+
+    def _plan_failed(self, position: np.ndarray, record: dict[str, Any], outcome: str) -> None:
+        """A plan that found no goal or no path: the monitor counts it, and the agent's own
+        guesses of the scan's edge are forgotten for the next plan (:meth:`_forget_guesses`)."""
+        record["outcome"] = outcome
+        self.monitor.plan_failed()
+        if self._forget_guesses(position):
+            record["forgot_guesses"] = True
 
     def _blocked_space_changed(self, goal_failed: bool = True) -> None:
         """Apply the blocked space to the agent's map; the plan's goal failed (unless
@@ -678,7 +707,7 @@ class NarutoPolicy(Policy):
         if not self._hold_here(start):
             return True  # the env decides
         # Held before the env saw it: the goal may still be reached another way.
-        self._block_past_edge(start, end, goal_failed=False)
+        self._block_past_edge(start, end, goal_failed=False, guessed=True)
         return False
 
     def _stays_in_scan(self, start: np.ndarray, end: np.ndarray) -> bool:
@@ -689,7 +718,7 @@ class NarutoPolicy(Policy):
         next plan goes elsewhere."""
         grid = self.mapper.observed_space.grid
         if grid.move_leaves_support(start, end, self.config.edge_probe_m):
-            self._block_past_edge(start, end)
+            self._block_past_edge(start, end, guessed=True)
             return False
         return True
 
@@ -778,10 +807,16 @@ class NarutoPolicy(Policy):
         start = position
         if sdf.sample(position)[0] <= self._clearance:
             escape = self._escape(position)
+            reach = self._clearance + self.config.escape_radius_m
+            if escape is None and self._forget_guesses(position, reach):
+                # Hemmed in by its own guesses: try again without those around it.
+                sdf, uncertainty = self.sdf, self.uncertainty
+                record["forgot_guesses"] = True
+                escape = (position[None].copy() if sdf.sample(position)[0] > self._clearance
+                          else self._escape(position))
             record["escape"] = escape is not None
             if escape is None:
-                record["outcome"] = "start not free"
-                self.monitor.plan_failed()
+                self._plan_failed(position, record, "start not free")
                 return None
             prefix, start = escape, escape[-1]
         if self._components is None:
@@ -807,8 +842,7 @@ class NarutoPolicy(Policy):
             goal_scores=[round(float(s), 4) for s in search.goal_scores],
         )
         if not search.found:
-            record["outcome"] = "no goal sees a target"
-            self.monitor.plan_failed()
+            self._plan_failed(position, record, "no goal sees a target")
             return None
         clock = time.perf_counter()
         try:
@@ -826,8 +860,7 @@ class NarutoPolicy(Policy):
                     self._visit = (goal.copy(), search.goal_visible[rank])
                     return Plan(path, views, goal.copy(), record)
                 self.monitor.goal_failed(goal)
-            record["outcome"] = f"no goal reachable ({result.reason})"
-            self.monitor.plan_failed()
+            self._plan_failed(position, record, f"no goal reachable ({result.reason})")
             return None
         finally:
             self.timings["rrt"] += time.perf_counter() - clock

@@ -216,6 +216,9 @@ class BlockedSpace:
         self.radius_m = float(radius_m)
         self.points: list[np.ndarray] = []
         self.radii: list[float] = []
+        #: Per point: blocked on the agent's own reading (its panorama or map said the move
+        #: would leave the scan) rather than on a move the env refused.
+        self.guessed: list[bool] = []
         #: Space above this height is blocked (the top of an open scan, learned from a
         #: refused climb); +inf: no ceiling.
         self.ceiling_z = float("inf")
@@ -224,10 +227,27 @@ class BlockedSpace:
         """Block everything above height ``z`` (voxel centres higher than it)."""
         self.ceiling_z = min(self.ceiling_z, float(z))
 
-    def add(self, point: np.ndarray, radius_m: float | None = None) -> None:
-        """Block ``point``, ``radius_m`` around it (default: the space's ``radius_m``)."""
+    def add(self, point: np.ndarray, radius_m: float | None = None, guessed: bool = False) -> None:
+        """Block ``point``, ``radius_m`` around it (default: the space's ``radius_m``);
+        ``guessed``: on the agent's own reading, not on a move the env refused."""
         self.points.append(np.asarray(point, np.float64).copy())
         self.radii.append(self.radius_m if radius_m is None else float(radius_m))
+        self.guessed.append(bool(guessed))
+
+    def forget_guesses_near(self, position: np.ndarray, reach_m: float) -> int:
+        """Drop the guessed balls that come within ``reach_m`` of ``position``; returns how
+        many were dropped (what the env refused stays blocked)."""
+        position = np.asarray(position, np.float64)
+        keep = [
+            not guessed or float(np.linalg.norm(point - position)) - radius > reach_m
+            for point, radius, guessed in zip(self.points, self.radii, self.guessed, strict=True)
+        ]
+        dropped = len(keep) - sum(keep)
+        if dropped:
+            self.points = [p for p, k in zip(self.points, keep, strict=True) if k]
+            self.radii = [r for r, k in zip(self.radii, keep, strict=True) if k]
+            self.guessed = [g for g, k in zip(self.guessed, keep, strict=True) if k]
+        return dropped
 
     def apply(self, sdf: SdfVolume) -> SdfVolume:
         """The SDF with every voxel within a point's radius + half a voxel of it, and every

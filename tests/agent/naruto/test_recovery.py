@@ -116,6 +116,22 @@ def test_blocked_points_read_as_obstacles() -> None:
     assert np.all(sdf.values == 0.5)  # the input is left alone
 
 
+def test_blocked_space_forgets_only_guesses_near_a_point() -> None:
+    """What the agent blocked on its own readings can be forgotten near a point; what the
+    env refused, and guesses farther away, stay."""
+    blocked = BlockedSpace(radius_m=0.05)
+    here = np.array([1.0, 1.0, 1.0])
+    blocked.add(here + [0.6, 0.0, 0.0], 0.5, guessed=True)  # surface 0.1 m away
+    blocked.add(here + [0.0, 0.6, 0.0], 0.5)  # the env refused it
+    blocked.add(here + [2.0, 0.0, 0.0], 0.5, guessed=True)  # surface 1.5 m away
+    assert blocked.forget_guesses_near(here, 0.4) == 1
+    assert blocked.guessed == [False, True]
+    assert np.allclose(blocked.points[0], here + [0.0, 0.6, 0.0])
+    assert blocked.forget_guesses_near(here, 0.4) == 0
+    assert blocked.forget_guesses_near(here, np.inf) == 1
+    assert blocked.guessed == [False] and len(blocked.radii) == 1
+
+
 def _first_move(reason: str, offset: np.ndarray | None = None):
     """An agent on two_rooms, its first move (or, with ``offset``, a move by that much from
     where it stands), and the agent after the env refused it."""
@@ -166,6 +182,25 @@ def test_an_escape_refusal_blocks_the_space_beyond_the_refused_point() -> None:
     for _ in range(40):
         action = policy.act(observation, info)
         assert np.linalg.norm(action[:3] - target) > 0.02
+
+
+def test_an_agent_hemmed_in_by_its_own_edge_guesses_forgets_them_and_plans_again() -> None:
+    """Seen on ``replica_like_room:no_ceiling+holes``, seed 6: beside the floor hole's rim
+    the panorama held move after move, and the balls blocked past them put the agent within
+    its clearance with no way out, so no plan started again (0.4 m in 300 steps). The next
+    plan forgets the guesses around it (what the env refused stays) and goes on."""
+    policy, observation, info, position, _ = _first_move("surface")
+    refused = len(policy.blocked.points)
+    for way in np.vstack([np.eye(3), -np.eye(3)]):
+        policy._block_past_edge(position, position + 0.05 * way, goal_failed=False,
+                                guessed=True)
+    assert policy.sdf.sample(position[None])[0] <= policy.config.planner.clearance_m
+    assert policy._escape(position) is None  # hemmed in, as the agent was
+    plan = policy._plan(position, np.asarray(observation["pose"])[:3, :3])
+    assert policy.plans[-1].get("forgot_guesses")
+    assert policy.plans[-1]["outcome"] != "start not free"
+    assert plan is not None
+    assert len(policy.blocked.points) == refused and not any(policy.blocked.guessed)
 
 
 def test_a_refused_climb_sets_a_ceiling_above_the_agent() -> None:
