@@ -18,6 +18,7 @@ env can be sent to a ``spawn`` worker.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 from typing import Literal
@@ -232,7 +233,10 @@ def segment_samples(
     both ends included), the (K, 3) points at those fractions and the segment's length.
     """
     delta = end - start
-    length = float(np.linalg.norm(delta))
+    dx, dy, dz = (float(value) for value in delta)
+    # Summed axis by axis, as the batched env's compiled kernel does, so both agree to the
+    # bit: np.linalg.norm goes through BLAS, whose rounding differs between CPUs.
+    length = math.sqrt(dx * dx + dy * dy + dz * dz)
     fractions = np.linspace(0.0, 1.0, sweep_step_count(length, clearance) + 1)
     samples = start[None, :] + fractions[:, None] * delta[None, :]
     return fractions, samples, length
