@@ -526,7 +526,7 @@ class NarutoPolicy(Policy):
         """The scan ends at ``target``: block the space beyond it, in a ball that touches
         the target and leaves the agent's side alone (the plan's goal failed unless
         ``goal_failed`` is False; ``guessed``: the agent's own reading, not the env's
-        refusal, see :meth:`_forget_guesses_around`)."""
+        refusal, see :meth:`_forget_guesses`)."""
         radius = self.config.recovery.escape_blocked_radius_m
         if radius <= 0:
             self._block(target, None, goal_failed, guessed)

@@ -126,19 +126,25 @@ class RandomPolicy(Policy):
         self.refused.reset()
         self._new_run(np.asarray(observation["pose"], np.float64), blocked=None)
 
-    def _new_run(self, pose: np.ndarray, blocked: np.ndarray | None) -> None:
+    def _near_floor_and_top(self, z: float) -> tuple[bool, bool]:
+        """Whether height ``z`` is within the height margin of the bounds' floor, and of the
+        bounds' top or the flight ceiling a refused climb set."""
         bounds = self.context.bounds
-        z = pose[2, 3]
+        near_floor = z < bounds[0, 2] + self.height_margin_m
+        near_top = z > min(bounds[1, 2], self.refused.ceiling_z) - self.height_margin_m
+        return near_floor, near_top
+
+    def _new_run(self, pose: np.ndarray, blocked: np.ndarray | None) -> None:
+        near_floor, near_top = self._near_floor_and_top(pose[2, 3])
         for _ in range(100):
             heading = self.rng.uniform(-np.pi, np.pi)
             climb = self.rng.uniform(-self.max_climb, self.max_climb)
             # Turn back vertically near the floor or the ceiling.
-            if z < bounds[0, 2] + self.height_margin_m:
+            if near_floor:
                 climb = abs(climb)
-            elif z > min(bounds[1, 2], self.refused.ceiling_z) - self.height_margin_m:
+            elif near_top:
                 climb = -abs(climb)
-            direction = np.array([np.cos(heading), np.sin(heading), 0.0]) * np.sqrt(1 - climb**2)
-            direction[2] = climb
+            direction = run_direction(heading, climb)
             if blocked is None or float(direction @ blocked) < self.cos_avoid:
                 break
         self.direction = direction
@@ -207,21 +213,18 @@ class RandomPolicy(Policy):
         whose move the panorama shows clear, or None."""
         if self.sweep_headings <= 0:
             return None
-        bounds = self.context.bounds
-        z = pose[2, 3]
+        near_floor, near_top = self._near_floor_and_top(pose[2, 3])
         climbs = [0.0]
-        if z > bounds[0, 2] + self.height_margin_m:
+        if not near_top:
+            climbs.append(self.max_climb)
+        if not near_floor:
             climbs.append(-self.max_climb)
-        if z < min(bounds[1, 2], self.refused.ceiling_z) - self.height_margin_m:
-            climbs.insert(1, self.max_climb)
         start = self.rng.uniform(-np.pi, np.pi)
         headings = start + np.arange(self.sweep_headings) * (2.0 * np.pi / self.sweep_headings)
         step = self.context.max_translation_m
         for climb in climbs:
             for heading in headings:
-                direction = np.array([np.cos(heading), np.sin(heading), 0.0])
-                direction *= np.sqrt(1.0 - climb**2)
-                direction[2] = climb
+                direction = run_direction(heading, climb)
                 if not self._way_blocked(panorama, direction * step):
                     return direction
         return None
@@ -244,3 +247,11 @@ class RandomPolicy(Policy):
         # nearer a wall (the cube's corners must lie within the free ball).
         return any(move_leaves_scan(panorama, move, probe)
                    for probe in (radius, radius + self.scan_edge_margin_m))
+
+
+def run_direction(heading: float, climb: float) -> np.ndarray:
+    """The unit direction of a run: ``heading`` (radians) around the vertical, ``climb`` its
+    vertical component."""
+    direction = np.array([np.cos(heading), np.sin(heading), 0.0]) * np.sqrt(1 - climb**2)
+    direction[2] = climb
+    return direction
