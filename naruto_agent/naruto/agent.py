@@ -115,6 +115,7 @@ from naruto_agent.policies.base import (
     pose_action,
 )
 from naruto_agent.policies.panorama_clearance import (
+    clear_part_of_move,
     first_contact,
     move_leaves_scan,
     refused_at_top,
@@ -122,6 +123,7 @@ from naruto_agent.policies.panorama_clearance import (
 )
 
 MAPPERS = ("tsdf", "neural")
+_MIN_CLIMB_M = 0.02  # a climb out of an open scan's margin shorter than this is not worth it
 
 
 @dataclass
@@ -182,6 +184,16 @@ class NarutoConfig:
             the env decides (its refusal teaches the map as any other): low over a floor
             hole every way can look like leaving, and in a tight spot (under a table, 7 cm
             from a leg) every way can come within the margin of a surface.
+        margin_climb_m: when the count runs out on a move the panorama reads as leaving an
+            open scan, the agent climbs this far straight up instead of sending the move (0.3
+            m; less where the scan's top, ``scan_top_margin_m`` below the measured surfaces'
+            top, or the panorama's surfaces come first; not under 2 cm), then looks around
+            and plans again. Low beside a floor hole's rim the env's support cone (60 degrees
+            down) reaches past the hole from higher up, so a climb takes the agent further
+            in, where level moves leave the scan: on ``replica_like_room:no_ceiling+holes``,
+            seed 6, the panorama had flagged every move from a spot 0.8 m high, the env
+            accepted the two climbs among them and refused the level moves sent after the
+            count ran out (2 escape refusals). 0: send the move, the env decides.
         escape_radius_m: how far the agent may look for free space when the map puts it
             inside a surface's clearance (0 switches the escape off).
         arrival_tolerance_m: a moving agent farther than this from its commanded node was
@@ -268,6 +280,7 @@ class NarutoConfig:
     check_moves_on_panorama: bool = True
     panorama_margin_m: float = 0.01
     max_held_moves: int = 3
+    margin_climb_m: float = 0.3
     escape_radius_m: float = 0.3
     arrival_tolerance_m: float = 0.01
     use_panorama: bool = True
@@ -304,9 +317,10 @@ class NarutoConfig:
                              f"{self.max_rotation_step_deg}")
         if (self.escape_radius_m < 0 or self.arrival_tolerance_m < 0
                 or self.unresolved_visit_looks < 0 or self.scan_top_margin_m < 0
-                or self.shortcut_margin_m < 0):
+                or self.shortcut_margin_m < 0 or self.margin_climb_m < 0):
             raise ValueError("escape_radius_m, arrival_tolerance_m, unresolved_visit_looks, "
-                             "scan_top_margin_m and shortcut_margin_m must be >= 0")
+                             "scan_top_margin_m, shortcut_margin_m and margin_climb_m must "
+                             "be >= 0")
         if self.open_sky_share is not None and not 0 < self.open_sky_share <= 1:
             raise ValueError(f"open_sky_share must be in (0, 1] or None, got "
                              f"{self.open_sky_share}")
@@ -410,6 +424,7 @@ class NarutoPolicy(Policy):
         self._scan_open = False  # an escape refusal or the sky: the scan is open
         self._panorama: tuple[np.ndarray, np.ndarray] | None = None  # (panorama, where)
         self._held: tuple[np.ndarray, int] | None = None  # where moves were held, how many
+        self._climb: np.ndarray | None = None  # a climb out of an open scan's margin, next
 
     # -- mapping -----------------------------------------------------------------------------
     def bind(self, context: EnvContext) -> None:
@@ -492,6 +507,7 @@ class NarutoPolicy(Policy):
         self._scan_open = False  # an escape refusal or the sky: the scan is open
         self._panorama = None
         self._held = None
+        self._climb = None
         self._integrate(observation)
 
     def _note_refused_move(self, position: np.ndarray, info: Info) -> None:
@@ -699,16 +715,42 @@ class NarutoPolicy(Policy):
         (``check_moves_on_panorama``, :func:`move_leaves_scan`): a move that leaves the
         scanned space there is refused, and the space past it blocked, as after an escape
         refusal; after ``max_held_moves`` moves held in a row at one spot (:meth:`_hold_here`)
-        the next passes and the env decides."""
+        the agent climbs out of the margin instead (:meth:`_margin_climb`), or when it cannot
+        the move passes and the env decides."""
         panorama = self._panorama_from(start)
         radius = self.context.agent_radius_m
         if panorama is None or not move_leaves_scan(panorama, end - start, radius):
             return True
         if not self._hold_here(start):
-            return True  # the env decides
+            self._climb = self._margin_climb(start, panorama)
+            if self._climb is None:
+                return True  # the env decides
+            return False  # the next plan is the climb
         # Held before the env saw it: the goal may still be reached another way.
         self._block_past_edge(start, end, goal_failed=False, guessed=True)
         return False
+
+    def _margin_climb(self, start: np.ndarray, panorama: np.ndarray) -> np.ndarray | None:
+        """Nodes (a planner step apart) of a climb of up to ``margin_climb_m`` straight up
+        from ``start``: below the scan's top (``scan_top_margin_m`` under the measured
+        surfaces' top, and the flight ceiling refused climbs taught) and as far as the
+        panorama shows it clear of surfaces; None when less than 2 cm is left."""
+        height = self.config.margin_climb_m
+        if height <= 0:
+            return None
+        top = min(self.mapper.observed_space.scan_top_z() - self.config.scan_top_margin_m,
+                  self.blocked.ceiling_z)
+        rise = min(height, top - float(start[2]))
+        if rise < _MIN_CLIMB_M:
+            return None
+        radius = self.context.agent_radius_m + self.config.panorama_margin_m
+        part = clear_part_of_move(panorama, np.array([0.0, 0.0, rise]), radius)
+        if part is None or part[2] < _MIN_CLIMB_M:
+            return None
+        rise = float(part[2])  # cut short below a surface (a slide sideways is not a climb)
+        steps = max(1, math.ceil(rise / self.config.planner.step_m - 1e-9))
+        heights = np.arange(0, steps + 1) / steps * rise
+        return start + heights[:, None] * np.array([0.0, 0.0, 1.0])
 
     def _stays_in_scan(self, start: np.ndarray, end: np.ndarray) -> bool:
         """On an open scan a path may cross a floor hole's edge or a wall's opening where
@@ -801,6 +843,13 @@ class NarutoPolicy(Policy):
             record.update(outcome="initial look-around", path_nodes=1)
             return Plan(position[None].copy(), self._look_around(position), position.copy(),
                         {"recovery": "look_around"})
+        climb, self._climb = self._climb, None
+        if climb is not None and np.linalg.norm(climb[0] - position) <= 1e-3:
+            # Checked on the panorama already; the edge test held every way from here.
+            record.update(outcome="climb out of the scan's margin", path_nodes=int(len(climb)))
+            self.recoveries.append((self._frame_index, "climb"))
+            return Plan(climb, self._look_around(climb[-1]), climb[-1].copy(),
+                        {"recovery": "climb", "trusted": True})
         if self.monitor.needs_recovery():
             return self._recover(position, record)
         prefix = position[None]

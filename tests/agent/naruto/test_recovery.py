@@ -435,6 +435,8 @@ def test_config_rejects_bad_open_scan_settings() -> None:
         NarutoConfig(open_sky_share=0.0)
     with pytest.raises(ValueError, match="edge_probe_m"):
         NarutoConfig(edge_probe_m=-0.1)
+    with pytest.raises(ValueError, match="margin_climb_m"):
+        NarutoConfig(margin_climb_m=-0.1)
 
 
 def _agent_on_a_free_map(panorama: np.ndarray, agent: np.ndarray) -> NarutoPolicy:
@@ -527,10 +529,12 @@ def test_in_a_tight_spot_a_move_held_for_a_surface_goes_to_the_env_after_max_hel
 def test_naruto_hands_a_move_to_the_env_after_max_held_moves_holds_at_one_spot() -> None:
     """Low over a floor hole every way out can look like leaving the scan on the panorama:
     after ``max_held_moves`` moves held back in a row at one spot the next is sent (the env
-    decides), and a new spot starts counting again. A held move blocks the space past the
-    edge but keeps the plan's goal (the env never refused it)."""
+    decides) when the agent cannot climb out of the margin (``margin_climb_m=0`` here), and
+    a new spot starts counting again. A held move blocks the space past the edge but keeps
+    the plan's goal (the env never refused it)."""
     agent = np.array([1.5, 1.5, 1.0])
     policy = _agent_on_a_free_map(floor_panorama(edge_x_m=0.3), agent)
+    policy.config = replace(policy.config, margin_climb_m=0.0)
     policy._scan_open = True
     failed: list[np.ndarray] = []
     policy.monitor.goal_failed = failed.append
@@ -546,3 +550,60 @@ def test_naruto_hands_a_move_to_the_env_after_max_held_moves_holds_at_one_spot()
     elsewhere = agent + [0.0, 0.05, 0.0]
     policy._panorama = (floor_panorama(edge_x_m=0.3), elsewhere)
     assert not policy._panorama_keeps_to_scan(elsewhere, elsewhere + [0.25, 0.0, 0.0])
+
+
+def _agent_under_walls_to(top_m: float, panorama: np.ndarray, agent: np.ndarray) -> NarutoPolicy:
+    """:func:`_agent_on_a_free_map` on an open scan whose measured walls reach ``top_m``."""
+    space = ObservedSpace(np.array([[0.0, 0.0, 0.0], [3.0, 3.0, 3.0]]))
+    space.grid.mark_occupied(np.array([[x, 0.05, z] for x in np.arange(0.05, 3.0, 0.1)
+                                       for z in np.arange(0.05, top_m, 0.1)]))
+    policy = _agent_on_a_free_map(panorama, agent)
+    policy.mapper = SimpleNamespace(observed_space=space)
+    policy._scan_open = True
+    policy.plans.append({})  # past the first plan's look-around
+    return policy
+
+
+def test_when_the_holds_run_out_at_the_scans_edge_naruto_climbs_instead_of_leaving() -> None:
+    """Every way from a spot 1 m over a floor whose edge is 0.3 m ahead reads as leaving
+    the scan: after ``max_held_moves`` holds the flagged move is not sent; the next plan is
+    a climb of ``margin_climb_m`` straight up (the env's support cone reaches further from
+    higher up), trusted, then a look around. Under the scan's top the climb is cut short,
+    and with less than 2 cm left the move goes to the env as before."""
+    agent = np.array([1.5, 1.5, 1.0])
+    towards_edge = agent + [0.25, 0.0, 0.0]
+    policy = _agent_under_walls_to(2.6, floor_panorama(edge_x_m=0.3), agent)
+    for _ in range(policy.config.max_held_moves + 1):
+        assert not policy._panorama_keeps_to_scan(agent, towards_edge)
+    plan = policy._plan(agent, np.eye(3))
+    assert plan.info == {"recovery": "climb", "trusted": True}
+    np.testing.assert_allclose(plan.path[0], agent)
+    np.testing.assert_allclose(plan.path[-1], agent + [0.0, 0.0, policy.config.margin_climb_m])
+    assert np.all(np.diff(plan.path[:, 2]) > 0) and np.allclose(plan.path[:, :2], agent[:2])
+    policy.machine.plan = plan
+    assert policy._move_is_free(plan.path[0], plan.path[1])  # trusted: checked already
+    assert policy._climb is None  # used once
+
+    # A surface 0.2 m overhead (under a table): the climb stops short of it.
+    floor = floor_panorama(edge_x_m=0.3)
+    overhead = np.flipud(floor_panorama(height_m=0.2))
+    policy = _agent_under_walls_to(2.6, np.where(overhead > 0, overhead, floor), agent)
+    for _ in range(policy.config.max_held_moves + 1):
+        assert not policy._panorama_keeps_to_scan(agent, towards_edge)
+    assert 0.1 < policy._climb[-1][2] - agent[2] < 0.2 - policy.context.agent_radius_m
+
+    # The scan's top (measured top 2.6 m less scan_top_margin_m) leaves 0.12 m: cut short.
+    high = np.array([1.5, 1.5, 2.18])
+    policy = _agent_under_walls_to(2.6, floor_panorama(height_m=2.18, edge_x_m=0.3), high)
+    top = policy.mapper.observed_space.scan_top_z() - policy.config.scan_top_margin_m
+    for _ in range(policy.config.max_held_moves + 1):
+        assert not policy._panorama_keeps_to_scan(high, high + [0.25, 0.0, 0.0])
+    assert policy._climb[-1][2] == pytest.approx(top)
+    # No room left to climb: the move is sent and the env decides.
+    policy = _agent_under_walls_to(2.6, floor_panorama(height_m=top - 0.01, edge_x_m=0.3),
+                                   np.array([1.5, 1.5, top - 0.01]))
+    start = np.array([1.5, 1.5, top - 0.01])
+    for _ in range(policy.config.max_held_moves):
+        assert not policy._panorama_keeps_to_scan(start, start + [0.25, 0.0, 0.0])
+    assert policy._panorama_keeps_to_scan(start, start + [0.25, 0.0, 0.0])
+    assert policy._climb is None
