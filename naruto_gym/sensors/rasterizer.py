@@ -13,6 +13,12 @@ camera fail the sign test), and the depth is that of the ray-plane intersection 
 
 A frame is made in four passes:
 
+0. culling (small frames, drawn in one thread): consecutive triangles are grouped in clusters
+   of ``CLUSTER_FACES`` with a bounding sphere each, and a cluster whose sphere lies wholly
+   outside a side of the view volume is skipped, vertices and triangles: every corner of its
+   triangles would get that side's outcode bit, so the frame is the same (only a share of
+   a room is in view of a 90-degree camera, and the passes below cost per vertex and per
+   triangle);
 1. vertices (split between the threads): an outcode per vertex, one bit per side of the view
    volume it lies outside of;
 2. setup (triangles split between the threads): triangles whose corners share an outcode bit
@@ -59,6 +65,14 @@ _BOX_MARGIN_PX = 1e-6
 
 # Image rows drawn together: a band's z-buffer (16 x 1200 x 12 bytes) stays in the L2 cache.
 BAND_ROWS = 16
+
+# Consecutive triangles culled together against the view volume (pass 0).
+CLUSTER_FACES = 64
+
+# A cluster is culled only when its sphere lies this much (relative, plus 1 um) outside a
+# side: the vertices' own outcodes are computed another way, and rounding must not cull a
+# triangle they would keep.
+_CULL_SLACK = 1e-6
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -121,23 +135,106 @@ def vertex_outcodes(
         projections: (V, 2) float64 output, the pixel (u, v) of each vertex in front of the
             near plane (anything for the others).
     """
-    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
     for index in range(first, stop):
-        x, y, z = _to_camera(vertices, index, rotation, origin)
-        scale = 1.0 / max(z, NEAR_PLANE_M)
-        projections[index, 0] = fx * x * scale + cx
-        projections[index, 1] = fy * y * scale + cy
-        # Planes through the camera centre bounding u in [-1, width], v in [-1, height]; their
-        # intersection lies in front of the camera, so sharing a bit means unseen.
-        # Sums of comparisons, not branches: which bits are set is unpredictable.
-        outcodes[index] = (
-            (fx * x + (cx + 1.0) * z < 0.0) * 1
-            + ((width - cx) * z - fx * x < 0.0) * 2
-            + (fy * y + (cy + 1.0) * z < 0.0) * 4
-            + ((height - cy) * z - fy * y < 0.0) * 8
-            + (z < NEAR_PLANE_M) * 16
-            + (z > far_cut) * 32
-        )
+        _classify_vertex(vertices, index, rotation, origin, intrinsics, width, height, far_cut,
+                         outcodes, projections)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _classify_vertex(
+    vertices, index, rotation, origin, intrinsics, width, height, far_cut, outcodes, projections
+):
+    """Outcode and image position of one vertex (see :func:`vertex_outcodes`)."""
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    x, y, z = _to_camera(vertices, index, rotation, origin)
+    scale = 1.0 / max(z, NEAR_PLANE_M)
+    projections[index, 0] = fx * x * scale + cx
+    projections[index, 1] = fy * y * scale + cy
+    # Planes through the camera centre bounding u in [-1, width], v in [-1, height]; their
+    # intersection lies in front of the camera, so sharing a bit means unseen.
+    # Sums of comparisons, not branches: which bits are set is unpredictable.
+    outcodes[index] = (
+        (fx * x + (cx + 1.0) * z < 0.0) * 1
+        + ((width - cx) * z - fx * x < 0.0) * 2
+        + (fy * y + (cy + 1.0) * z < 0.0) * 4
+        + ((height - cy) * z - fy * y < 0.0) * 8
+        + (z < NEAR_PLANE_M) * 16
+        + (z > far_cut) * 32
+    )
+
+
+def morton_order(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """Indices that sort (N, 3) points along a Z-order curve over their bounding box
+    (``bits`` per axis): points close in the order lie close in space."""
+    points = np.asarray(points, np.float64)
+    low, high = points.min(axis=0), points.max(axis=0)
+    scale = (2**bits - 1) / np.maximum(high - low, 1e-12)
+    cells = np.clip(np.rint((points - low) * scale), 0, 2**bits - 1).astype(np.int64)
+    codes = np.zeros(len(points), np.int64)
+    for bit in range(bits):
+        for axis in range(3):
+            codes |= ((cells[:, axis] >> bit) & 1) << (3 * bit + axis)
+    return np.argsort(codes, kind="stable")
+
+
+def triangle_clusters(
+    vertices: np.ndarray, faces: np.ndarray, size: int = CLUSTER_FACES
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Triangles in clusters of ``size`` neighbours (Z-order of their centroids), with a
+    bounding sphere and the distinct vertices of each.
+
+    Args:
+        vertices: (V, 3) positions; faces: (F, 3) corner indices.
+        size: triangles per cluster (the last may hold fewer).
+
+    Returns:
+        ``order`` ((F,) int32: cluster ``c`` holds triangles
+        ``order[c * size:(c + 1) * size]``), ``spheres`` ((C, 4) float64: centre, radius),
+        ``vertex_starts`` ((C + 1,) int64) and ``vertex_list`` (int32): cluster ``c`` uses
+        the vertices ``vertex_list[vertex_starts[c]:vertex_starts[c + 1]]``.
+    """
+    points = np.asarray(vertices, np.float64)
+    faces = np.asarray(faces)
+    order = morton_order(points[faces].mean(axis=1)).astype(np.int32)
+    count = -(-len(faces) // size)
+    spheres = np.empty((count, 4))
+    lists = []
+    for cluster in range(count):
+        used = np.unique(faces[order[cluster * size:(cluster + 1) * size]])
+        corners = points[used]
+        centre = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
+        spheres[cluster, :3] = centre
+        spheres[cluster, 3] = np.sqrt(((corners - centre) ** 2).sum(axis=1).max())
+        lists.append(used.astype(np.int32))
+    starts = np.zeros(count + 1, np.int64)
+    starts[1:] = np.cumsum([len(used) for used in lists])
+    return order, spheres, starts, np.concatenate(lists)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def cluster_may_be_seen(
+    spheres: np.ndarray, cluster: int, rotation: np.ndarray, origin: np.ndarray,
+    intrinsics: np.ndarray, width: int, height: int, far_cut: float,
+) -> bool:
+    """False when the cluster's bounding sphere lies wholly outside one side of the view
+    volume (the outcode planes of :func:`vertex_outcodes`): every corner of its triangles
+    then has that side's bit, and the setup pass would drop every one of them."""
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    dx = spheres[cluster, 0] - origin[0]
+    dy = spheres[cluster, 1] - origin[1]
+    dz = spheres[cluster, 2] - origin[2]
+    x = rotation[0, 0] * dx + rotation[1, 0] * dy + rotation[2, 0] * dz
+    y = rotation[0, 1] * dx + rotation[1, 1] * dy + rotation[2, 1] * dz
+    z = rotation[0, 2] * dx + rotation[1, 2] * dy + rotation[2, 2] * dz
+    reach = spheres[cluster, 3] * (1.0 + _CULL_SLACK) + _CULL_SLACK
+    if z + reach < NEAR_PLANE_M or z - reach > far_cut:
+        return False
+    # Signed distances to the side planes (unit normals pointing into the view volume).
+    left = (fx * x + (cx + 1.0) * z) / np.sqrt(fx * fx + (cx + 1.0) * (cx + 1.0))
+    right = ((width - cx) * z - fx * x) / np.sqrt(fx * fx + (width - cx) * (width - cx))
+    top = (fy * y + (cy + 1.0) * z) / np.sqrt(fy * fy + (cy + 1.0) * (cy + 1.0))
+    bottom = ((height - cy) * z - fy * y) / np.sqrt(fy * fy + (height - cy) * (height - cy))
+    return min(min(left, right), min(top, bottom)) >= -reach
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -364,7 +461,13 @@ def rasterize_band(
             line = row - row_first_band
             for column in range(first_column, last_column + 1):
                 q = qa * column + kq
-                if q > inverse_depth[line, column]:
+                current = inverse_depth[line, column]
+                # An exact tie goes to the lower triangle id, whatever the records' order
+                # (culling clusters draws them in spatial order).
+                if q > current or (
+                    q == current and winners[line, column] >= 0
+                    and record_rows[record, 0] < record_rows[winners[line, column], 0]
+                ):
                     inverse_depth[line, column] = q
                     winners[line, column] = record
 
@@ -463,6 +566,11 @@ def render_frames(
     nearest: float,
     max_depth: float,
     want_barycentrics: bool,
+    cluster_faces: np.ndarray,
+    cluster_order: np.ndarray,
+    spheres: np.ndarray,
+    cluster_vertex_starts: np.ndarray,
+    cluster_vertices: np.ndarray,
     scratch_outcodes: np.ndarray,
     scratch_projections: np.ndarray,
     scratch_records: np.ndarray,
@@ -474,13 +582,16 @@ def render_frames(
     triangle_ids: np.ndarray,
     barycentric_uv: np.ndarray,
 ) -> None:
-    """All four passes of frames ``0 .. K - 1`` in one thread, frame after frame.
+    """All passes of frames ``0 .. K - 1`` in one thread, frame after frame.
 
     A batch of small frames is drawn a whole frame per thread: calling the passes from Python
     once per frame costs about as much as a 64 x 64 frame's drawing.
 
     Args:
         poses: (K, 4, 4) float64 camera-to-world poses (already rounded to float32).
+        cluster_faces: ``faces[cluster_order]``, the triangles cluster after cluster.
+        cluster_order, spheres, cluster_vertex_starts, cluster_vertices:
+            :func:`triangle_clusters` of the mesh, ``CLUSTER_FACES`` triangles per cluster.
         scratch_*: the single-frame buffers of :class:`PinholeRasterizer`.
         inverse_depth, winners: one band's z-buffer.
         depth: (K, H, W) float32; triangle_ids: (K * H * W,) int32; barycentric_uv:
@@ -489,20 +600,34 @@ def render_frames(
     pixels = width * height
     band_rows = inverse_depth.shape[0]
     band_count = (height + band_rows - 1) // band_rows
-    segments = np.zeros((1, 2), np.int64)
+    clusters = spheres.shape[0]
+    segments = np.zeros((clusters, 2), np.int64)
     for frame in range(poses.shape[0]):
         rotation = np.ascontiguousarray(poses[frame, :3, :3])
         origin = np.ascontiguousarray(poses[frame, :3, 3])
-        vertex_outcodes(
-            vertices, 0, vertices.shape[0], rotation, origin, intrinsics, width, height,
-            far_cut, scratch_outcodes, scratch_projections,
-        )
-        segments[0, 1] = setup_triangles(
-            vertices, scratch_outcodes, scratch_projections, faces, 0, faces.shape[0], rotation,
-            origin, intrinsics, width, height, scratch_records, scratch_hit_planes,
-            scratch_record_rows,
-        )
-        band_starts, entries = bin_records(scratch_record_rows, segments, band_rows, band_count)
+        used = 0
+        for cluster in range(clusters):
+            if not cluster_may_be_seen(spheres, cluster, rotation, origin, intrinsics, width,
+                                       height, far_cut):
+                continue
+            for entry in range(cluster_vertex_starts[cluster],
+                               cluster_vertex_starts[cluster + 1]):
+                _classify_vertex(vertices, cluster_vertices[entry], rotation, origin,
+                                 intrinsics, width, height, far_cut, scratch_outcodes,
+                                 scratch_projections)
+            first = cluster * CLUSTER_FACES
+            count = setup_triangles(
+                vertices, scratch_outcodes, scratch_projections, cluster_faces, first,
+                min(first + CLUSTER_FACES, faces.shape[0]), rotation, origin, intrinsics,
+                width, height, scratch_records, scratch_hit_planes, scratch_record_rows,
+            )
+            for slot in range(first, first + count):  # the mesh's own triangle ids
+                scratch_record_rows[slot, 0] = cluster_order[scratch_record_rows[slot, 0]]
+            segments[used, 0] = first
+            segments[used, 1] = first + count
+            used += 1
+        band_starts, entries = bin_records(scratch_record_rows, segments[:used], band_rows,
+                                           band_count)
         first = frame * pixels
         draw_bands(
             scratch_records, scratch_hit_planes, scratch_record_rows, band_starts, entries, 0, 1,
@@ -632,6 +757,7 @@ class PinholeRasterizer:
         self.intrinsics = np.array([fx, fy, cx, cy], dtype=np.float64)
         self._buffers: tuple[np.ndarray, ...] | None = None
         self._splits: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._cluster_arrays: tuple[np.ndarray, ...] | None = None
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
@@ -648,6 +774,14 @@ class PinholeRasterizer:
                 np.linspace(0, len(self.vertices), vertex_groups + 1).astype(np.int64),
             )
         return self._splits[key]
+
+    def _clusters(self) -> tuple[np.ndarray, ...]:
+        """The faces in cluster order and the mesh's culling clusters
+        (:func:`triangle_clusters`), made on first use."""
+        if self._cluster_arrays is None:
+            order, *clusters = triangle_clusters(self.vertices, self.faces)
+            self._cluster_arrays = (np.ascontiguousarray(self.faces[order]), order, *clusters)
+        return self._cluster_arrays
 
     def _scratch(self) -> tuple[np.ndarray, ...]:
         if self._buffers is None:
@@ -687,9 +821,20 @@ class PinholeRasterizer:
             outcodes, projections, records, hit_planes, record_rows, inverse_depth, winners
         ) = self._scratch()
         max_depth, far_cut, nearest = _depth_limits(max_depth_m)
-        # Handing work to another thread costs more than it saves on small frames.
-        small = self.width * self.height + len(self.faces) < PARALLEL_MIN_WORK
-        groups = 1 if small else self.threads
+        # Handing work to another thread costs more than it saves on small frames: those are
+        # drawn in this thread, with the clusters culled (pass 0).
+        if self.width * self.height + len(self.faces) < PARALLEL_MIN_WORK:
+            depth = np.empty((1, self.height, self.width), np.float32)
+            triangle_ids = np.empty(self.height * self.width, np.int32)
+            uv = np.empty((self.height * self.width, 2), np.float32)
+            render_frames(
+                self.vertices, self.faces, pose[None], self.intrinsics, self.width,
+                self.height, far_cut, nearest, max_depth, barycentrics, *self._clusters(),
+                outcodes, projections, records, hit_planes, record_rows, inverse_depth[0],
+                winners[0], depth, triangle_ids, uv,
+            )
+            return depth[0], triangle_ids, (uv if barycentrics else None)
+        groups = self.threads
         # Classifying a vertex is cheap: split only long vertex lists between the threads.
         vertex_groups = groups if len(self.vertices) >= PARALLEL_MIN_WORK else 1
         bounds, vertex_bounds = self._split(groups, vertex_groups)
@@ -760,8 +905,9 @@ class PinholeRasterizer:
         )
         render_frames(
             self.vertices, self.faces, poses, self.intrinsics, self.width, self.height,
-            far_cut, nearest, max_depth, True, outcodes, projections, records, hit_planes,
-            record_rows, inverse_depth[0], winners[0], depth, triangle_ids, barycentric_uv,
+            far_cut, nearest, max_depth, True, *self._clusters(), outcodes, projections,
+            records, hit_planes, record_rows, inverse_depth[0], winners[0], depth,
+            triangle_ids, barycentric_uv,
         )
 
 

@@ -18,8 +18,9 @@ from scipy.spatial.transform import Rotation
 
 import naruto_gym  # noqa: F401
 from naruto_gym.scenes import Scene, make_random_scene, resolve_scene
+from naruto_gym.sensors import rasterizer as rasterizer_module
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
-from naruto_gym.sensors.rasterizer import PinholeRasterizer
+from naruto_gym.sensors.rasterizer import PinholeRasterizer, cluster_may_be_seen
 from tests.conftest import REPLICA_DIR
 
 QUARTER = PinholeCamera().scaled(0.25)  # 170 x 300, same field of view
@@ -314,15 +315,20 @@ def test_camera_inside_a_triangle_plane_and_degenerate_triangles():
     assert raster.render_depth(tilted).any()
 
 
-def test_thread_counts_give_identical_frames():
+def test_thread_counts_give_identical_frames(monkeypatch):
+    """Large frames are drawn by 1, 2 or 3 threads (their passes split), small ones in one
+    thread with the clusters culled: the same pixels all ways."""
     scene = resolve_scene("replica_like_room")
     pose = random_poses(scene, 1, 0)[0]
-    frames = [
-        PinholeRasterizer(
+
+    def draw(threads: int) -> tuple:
+        return PinholeRasterizer(
             scene.vertices, scene.faces, 300, 170, 150.0, 150.0, 149.75, 84.75, threads=threads
         ).render(pose, 10.0)
-        for threads in (1, 2, 3)
-    ]
+
+    frames = [draw(1)]  # small: one thread, culled
+    monkeypatch.setattr(rasterizer_module, "PARALLEL_MIN_WORK", 0)  # every frame is large
+    frames += [draw(threads) for threads in (1, 2, 3)]
     for depth, triangle_ids, uv in frames[1:]:
         np.testing.assert_array_equal(depth, frames[0][0])
         np.testing.assert_array_equal(triangle_ids, frames[0][1])
@@ -413,3 +419,38 @@ def test_frames_drawn_in_one_call_need_outputs_of_their_size():
     rasterizer.render_many_into(poses, 10.0, depth, ids, np.empty((3 * 192, 2), np.float32))
     for k, pose in enumerate(poses):
         np.testing.assert_array_equal(depth[k], rasterizer.render(pose, 10.0)[0])
+
+
+@pytest.mark.parametrize("name", ["replica_like_room", "apartment", "procedural_room_3"])
+def test_culling_clusters_changes_no_pixel(name):
+    """Clusters of triangles culled against the view volume before any vertex is projected
+    change nothing: the frames are those drawn with no cluster culled, bit for bit, from
+    free poses, poses millimetres off a surface and grazing ones; and culling does skip
+    clusters."""
+    scene = _scene(name)
+    rasterizer = PinholeRasterizer(scene.vertices, scene.faces, 64, 64, 31.5, 31.5, 32.0, 32.0,
+                                   threads=1)
+    poses = np.stack(random_poses(scene, 30, 11))
+    pixels = 64 * 64
+
+    def draw() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        depth = np.empty((len(poses), 64, 64), np.float32)
+        triangle_ids = np.empty(len(poses) * pixels, np.int32)
+        uv = np.empty((len(poses) * pixels, 2), np.float32)
+        rasterizer.render_many_into(poses, 10.0, depth, triangle_ids, uv)
+        return depth, triangle_ids, uv
+
+    culled = draw()
+    faces, order, spheres, starts, members = rasterizer._clusters()
+    seen = [cluster_may_be_seen(spheres, c, pose[:3, :3].copy(), pose[:3, 3].copy(),
+                                rasterizer.intrinsics, 64, 64, np.inf)
+            for pose in poses for c in range(len(spheres))]
+    assert 0.0 < np.mean(seen) < 0.8
+    never = np.concatenate([spheres[:, :3], np.full((len(spheres), 1), np.inf)], axis=1)
+    rasterizer._cluster_arrays = (faces, order, never, starts, members)
+    whole = draw()
+    np.testing.assert_array_equal(culled[0], whole[0])
+    np.testing.assert_array_equal(culled[1], whole[1])
+    hit = whole[1] >= 0
+    np.testing.assert_array_equal(culled[2][hit], whole[2][hit])
+    assert hit.mean() > 0.5
