@@ -17,7 +17,12 @@ Reported, all in one run and process (load average printed beside every figure):
 * at 64 envs, 64 pixels: the published escape rule (whole-sphere panorama per move) and the
   ray-cast pinhole frames beside the defaults;
 * rays per second the batched env casts, against the bare Open3D cast rate of the same pinhole
-  rays in one call.
+  rays in one call;
+* the batched env on a scene stream (``scene="procedural:room"``, a new generated room for
+  every agent at every reset, as ``benchmarks/train_ppo.py`` trains) with 16 and 64 envs and
+  episodes of ``stream_episode_steps``, timed over ``stream_episodes`` whole episodes (one
+  reset of every agent per episode) so that the resets' scene generation is in the figure, beside the same number of agents sharing one
+  generated room (``procedural:room:3``).
 
     flock /tmp/naruto_timing.lock python benchmarks/vector_throughput.py
     python benchmarks/vector_throughput.py --seconds 1 --counts 1 64   # quick look
@@ -59,6 +64,12 @@ class Args:
     """worker counts of the AsyncVectorEnv reference"""
     episode_steps: int = 500
     """episode budget (autoresets are part of the timing)"""
+    stream_counts: list[int] = field(default_factory=lambda: [16, 64])
+    """numbers of envs of the scene-stream rows (empty: none)"""
+    stream_episode_steps: int = 200
+    """episode budget of the scene-stream rows (``train_ppo.py``'s default)"""
+    stream_episodes: int = 2
+    """whole episodes timed per scene-stream row (each agent resets once per episode)"""
     output: str = "benchmarks/results/vector_throughput.json"
     """where the JSON goes"""
 
@@ -76,8 +87,11 @@ def env_kwargs(size: int, panorama: bool, **extra: Any) -> dict[str, Any]:
     }
 
 
-def time_vector(env: Any, seconds: float, seed: int = 0) -> dict[str, float]:
-    """Random discrete steps of a (batched, sync or async) vector env for ``seconds``."""
+def time_vector(
+    env: Any, seconds: float, seed: int = 0, min_steps: int = 2
+) -> dict[str, float]:
+    """Random discrete steps of a (batched, sync or async) vector env for ``seconds`` and at
+    least ``min_steps`` steps."""
     rng = np.random.default_rng(seed)
     n = env.num_envs
     env.reset(seed=seed)
@@ -85,7 +99,7 @@ def time_vector(env: Any, seconds: float, seed: int = 0) -> dict[str, float]:
         env.step(rng.integers(0, 10, n))
     rays_before = getattr(env, "rays_cast", 0)
     steps, started = 0, time.perf_counter()
-    while time.perf_counter() - started < seconds or steps < 2:
+    while time.perf_counter() - started < seconds or steps < min_steps:
         env.step(rng.integers(0, 10, n))
         steps += 1
     elapsed = time.perf_counter() - started
@@ -179,6 +193,18 @@ def main(args: Args) -> dict[str, Any]:
         row = results["variants_64_envs_64_px"][name]
         print(f"batched 64 envs, 64 px, {name}: {row['steps_per_s']:.0f} steps/s, "
               f"{row['rays_per_s'] / 1e6:.2f} Mrays/s (load {row['load']})")
+    results["streams"] = {}
+    stream_steps = args.stream_episodes * args.stream_episode_steps
+    for count in args.stream_counts:
+        for name, scene in (("stream", "procedural:room"), ("one_scene", "procedural:room:3")):
+            env = NarutoReconVectorEnv(count, scene=scene,
+                                       max_episode_steps=args.stream_episode_steps,
+                                       **env_kwargs(64, False))
+            row = time_vector(env, 0.0, min_steps=stream_steps)
+            results["streams"][f"{name}_{count}"] = row
+            print(f"batched {count} envs, 64 px, {scene} ({args.stream_episode_steps}-step "
+                  f"episodes, {stream_steps} steps): {row['steps_per_s']:.0f} steps/s "
+                  f"(load {row['load']})")
     results["bare_cast_64_envs"] = {size: bare_cast_rate(64, size, args.seconds)
                                     for size in args.sizes}
     for size, row in results["bare_cast_64_envs"].items():

@@ -190,7 +190,7 @@ class ScannedSpace:
         )
         # Per corner: -1 not evaluated yet, else the number of empty support sectors.
         self._empty = np.full(self.shape, -1, np.int8)
-        self.support_directions, self._sectors = support_directions(self.config)
+        self.support_directions = support_directions(self.config)[0]
         self.facing_directions = cap_directions(
             self.config.facing_rays, 180.0, np.array([0, 0, 1.0])
         )
@@ -218,7 +218,7 @@ class ScannedSpace:
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
         hits = self._cast_from(positions, self.support_directions)
         hit = hits.hit_mask.reshape(len(positions), -1)
-        empty = self.config.support_sectors - self._seen_sectors(hit, self._sectors).sum(axis=1)
+        empty = self.config.support_sectors - self._seen_sectors(hit).sum(axis=1)
         missed = 1.0 - hit.mean(axis=1)
         nearest = hits.distance.reshape(hit.shape).min(axis=1)
         return empty, np.stack([missed, nearest], axis=1)
@@ -230,13 +230,14 @@ class ScannedSpace:
             np.tile(directions, (len(positions), 1)),
         )
 
-    def _seen_sectors(self, hit: np.ndarray, sectors: np.ndarray) -> np.ndarray:
-        """(N, sectors) bool: which sectors some ray of ``hit`` ((N, R), rays of ``sectors``)
-        found surface in."""
-        seen = np.zeros((len(hit), self.config.support_sectors), bool)
-        for sector in range(self.config.support_sectors):
-            seen[:, sector] = hit[:, sectors == sector].any(axis=1)
-        return seen
+    def _seen_sectors(self, hit: np.ndarray) -> np.ndarray:
+        """(N, sectors) bool: which sectors some ray of ``hit`` found surface in; ``hit``
+        is (N, R) over whole rings of :func:`support_directions` (sector after sector in
+        each ring, ``rays_per_sector`` rays each)."""
+        config = self.config
+        return hit.reshape(len(hit), -1, config.support_sectors, config.rays_per_sector).any(
+            axis=(1, 3)
+        )
 
     def empty_sectors(self, positions: np.ndarray) -> np.ndarray:
         """Empty support sectors below (N, 3) points: :meth:`probe`'s first answer, casting
@@ -250,13 +251,11 @@ class ScannedSpace:
         per_ring = self.config.support_sectors * self.config.rays_per_sector
         first, rest = self.support_directions[:per_ring], self.support_directions[per_ring:]
         hit = self._cast_from(positions, first).hit_mask.reshape(len(positions), per_ring)
-        seen = self._seen_sectors(hit, self._sectors[:per_ring])
+        seen = self._seen_sectors(hit)
         undecided = np.flatnonzero(~seen.all(axis=1))
         if len(undecided) and len(rest):
             more = self._cast_from(positions[undecided], rest).hit_mask
-            seen[undecided] |= self._seen_sectors(
-                more.reshape(len(undecided), len(rest)), self._sectors[per_ring:]
-            )
+            seen[undecided] |= self._seen_sectors(more.reshape(len(undecided), len(rest)))
         return self.config.support_sectors - seen.sum(axis=1)
 
     def front_facing_share(self, position: np.ndarray) -> float:
@@ -319,7 +318,9 @@ class ScannedSpace:
         """Evaluate the lattice corners (K, 3) not evaluated yet."""
         unknown = self._empty[tuple(index.T)] < 0
         if unknown.any():
-            todo = np.unique(index[unknown], axis=0)
+            # Distinct corners through their flat index (np.unique over rows is much slower).
+            flat = np.unique(np.ravel_multi_index(tuple(index[unknown].T), self._empty.shape))
+            todo = np.stack(np.unravel_index(flat, self._empty.shape), axis=1)
             self._empty[tuple(todo.T)] = self.empty_sectors(self._corner_points(todo))
 
     def fill(self, batch: int = 4096) -> None:

@@ -286,8 +286,10 @@ def setup_triangles(
     records: np.ndarray,
     hit_planes: np.ndarray,
     record_rows: np.ndarray,
+    slot_base: int,
 ) -> int:
-    """Set up triangles ``first .. stop - 1``; pack the drawable ones from ``records[first]``.
+    """Set up triangles ``first .. stop - 1``; pack the drawable ones from
+    ``records[slot_base]``.
 
     Args:
         vertices: (V, 3) float32 world positions.
@@ -303,7 +305,7 @@ def setup_triangles(
         record_rows: (F, 3) int64 output: triangle id, first row, last row.
 
     Returns:
-        The number of records written from index ``first``.
+        The number of records written from index ``slot_base``.
     """
     fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
     inverse_fx, inverse_fy = 1.0 / fx, 1.0 / fy
@@ -340,7 +342,7 @@ def setup_triangles(
         if det == 0.0:
             continue  # the plane passes through the camera centre: seen edge-on
         sign = 1.0 if det > 0.0 else -1.0
-        slot = first + count
+        slot = slot_base + count
         for edge in range(3):
             a, b = (edge + 1) % 3, (edge + 2) % 3
             px, py, pz = _cross(xs[a], ys[a], zs[a], xs[b], ys[b], zs[b])
@@ -601,10 +603,12 @@ def render_frames(
     band_rows = inverse_depth.shape[0]
     band_count = (height + band_rows - 1) // band_rows
     clusters = spheres.shape[0]
-    segments = np.zeros((clusters, 2), np.int64)
+    segments = np.zeros((1, 2), np.int64)
     for frame in range(poses.shape[0]):
         rotation = np.ascontiguousarray(poses[frame, :3, :3])
         origin = np.ascontiguousarray(poses[frame, :3, 3])
+        # Records packed from slot 0 (a frame touches only as much scratch as it draws: with
+        # a batched env's many scenes the scratch of each stays small in the cache).
         used = 0
         for cluster in range(clusters):
             if not cluster_may_be_seen(spheres, cluster, rotation, origin, intrinsics, width,
@@ -619,15 +623,13 @@ def render_frames(
             count = setup_triangles(
                 vertices, scratch_outcodes, scratch_projections, cluster_faces, first,
                 min(first + CLUSTER_FACES, faces.shape[0]), rotation, origin, intrinsics,
-                width, height, scratch_records, scratch_hit_planes, scratch_record_rows,
+                width, height, scratch_records, scratch_hit_planes, scratch_record_rows, used,
             )
-            for slot in range(first, first + count):  # the mesh's own triangle ids
+            for slot in range(used, used + count):  # the mesh's own triangle ids
                 scratch_record_rows[slot, 0] = cluster_order[scratch_record_rows[slot, 0]]
-            segments[used, 0] = first
-            segments[used, 1] = first + count
-            used += 1
-        band_starts, entries = bin_records(scratch_record_rows, segments[:used], band_rows,
-                                           band_count)
+            used += count
+        segments[0, 1] = used
+        band_starts, entries = bin_records(scratch_record_rows, segments, band_rows, band_count)
         first = frame * pixels
         draw_bands(
             scratch_records, scratch_hit_planes, scratch_record_rows, band_starts, entries, 0, 1,
@@ -849,7 +851,7 @@ class PinholeRasterizer:
             return setup_triangles(
                 self.vertices, outcodes, projections, self.faces, bounds[group],
                 bounds[group + 1], rotation, origin, self.intrinsics, self.width, self.height,
-                records, hit_planes, record_rows,
+                records, hit_planes, record_rows, bounds[group],
             )
 
         run_parallel(classify, vertex_groups)

@@ -83,6 +83,9 @@ def _in_threads(work: Any, count: int, threads: int) -> None:
     """``work(part)`` over ``count`` agents split in up to ``threads`` contiguous slices,
     run in parallel (the compiled kernels release the GIL)."""
     parts = max(1, min(threads, count // 8))
+    if parts == 1:  # one agent's scene at a time with scene streams: no per-call set-up
+        work(slice(0, count))
+        return
     bounds = np.linspace(0, count, parts + 1).astype(int)
     run_parallel(lambda k: work(slice(int(bounds[k]), int(bounds[k + 1]))), parts)
 
