@@ -19,9 +19,10 @@ Reported, all in one run and process (load average printed beside every figure):
 * rays per second the batched env casts, against the bare Open3D cast rate of the same pinhole
   rays in one call;
 * the batched env on a scene stream (``scene="procedural:room"``, a new generated room for
-  every agent at every reset, as ``benchmarks/train_ppo.py`` trains) with 16 and 64 envs and
-  episodes of ``stream_episode_steps``, timed over ``stream_episodes`` whole episodes (one
-  reset of every agent per episode) so that the resets' scene generation is in the figure, beside the same number of agents sharing one
+  every agent at every reset, as ``benchmarks/train_ppo.py`` trains, with its 5,000 coverage
+  samples) with 16 and 64 envs and episodes of ``stream_episode_steps``, timed over
+  ``stream_episodes`` whole episodes (one reset of every agent per episode) so that the
+  resets' scene generation is in the figure, beside the same number of agents sharing one
   generated room (``procedural:room:3``).
 
     flock /tmp/naruto_timing.lock python benchmarks/vector_throughput.py
@@ -68,6 +69,9 @@ class Args:
     """numbers of envs of the scene-stream rows (empty: none)"""
     stream_episode_steps: int = 200
     """episode budget of the scene-stream rows (``train_ppo.py``'s default)"""
+    stream_coverage_samples: int = 5000
+    """coverage samples per scene of the scene-stream rows (``train_ppo.py``'s default; the
+    env's is 20,000, and a new scene's build cost grows with them)"""
     stream_episodes: int = 2
     """whole episodes timed per scene-stream row (each agent resets once per episode)"""
     output: str = "benchmarks/results/vector_throughput.json"
@@ -199,12 +203,13 @@ def main(args: Args) -> dict[str, Any]:
         for name, scene in (("stream", "procedural:room"), ("one_scene", "procedural:room:3")):
             env = NarutoReconVectorEnv(count, scene=scene,
                                        max_episode_steps=args.stream_episode_steps,
-                                       **env_kwargs(64, False))
+                                       **env_kwargs(64, False,
+                                                    coverage_samples=args.stream_coverage_samples))
             row = time_vector(env, 0.0, min_steps=stream_steps)
             results["streams"][f"{name}_{count}"] = row
             print(f"batched {count} envs, 64 px, {scene} ({args.stream_episode_steps}-step "
-                  f"episodes, {stream_steps} steps): {row['steps_per_s']:.0f} steps/s "
-                  f"(load {row['load']})")
+                  f"episodes, {args.stream_coverage_samples} coverage samples, {stream_steps} "
+                  f"steps): {row['steps_per_s']:.0f} steps/s (load {row['load']})")
     results["bare_cast_64_envs"] = {size: bare_cast_rate(64, size, args.seconds)
                                     for size in args.sizes}
     for size, row in results["bare_cast_64_envs"].items():
