@@ -11,6 +11,7 @@ from naruto_gym.motion.scanned_space import (
     ScannedSpace,
     ScannedSpaceConfig,
     cap_directions,
+    support_directions,
     surface_top,
 )
 from naruto_gym.scenes.mesh_scene import face_normals_of
@@ -282,3 +283,19 @@ def test_start_test_of_many_points_answers_as_one_by_one():
                                  escape_rule="published")
     one_by_one = np.array([published.start_test()(p) for p in points])
     np.testing.assert_array_equal(published.start_test_many()(points), one_by_one)
+
+
+def test_sectors_seen_are_those_of_the_rays_that_hit():
+    """A sector is seen when any of its rays hit, ring by ring: the reshape that reads them
+    agrees with the sector labels of ``support_directions``, for the first ring alone, the
+    other rings, and all of them."""
+    space = _space(_open_top_room(floor_hole=True))
+    _, sectors = support_directions(space.config)
+    per_ring = space.config.support_sectors * space.config.rays_per_sector
+    rng = np.random.default_rng(4)
+    for labels in (sectors[:per_ring], sectors[per_ring:], sectors):
+        hit = rng.random((50, len(labels))) < 0.03
+        expected = np.stack([hit[:, labels == s].any(axis=1)
+                             for s in range(space.config.support_sectors)], axis=1)
+        np.testing.assert_array_equal(space._seen_sectors(hit), expected)
+        assert expected.any() and not expected.all()
