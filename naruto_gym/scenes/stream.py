@@ -126,3 +126,6 @@ class LruCache(Generic[Value]):
 
     def __len__(self) -> int:
         return len(self._entries)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._entries

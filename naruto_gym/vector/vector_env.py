@@ -295,8 +295,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             )
         indices = np.flatnonzero(mask)
         self._validate_reset_options(options, indices)
-        for i in indices:
-            self._reset_state(int(i), seeds[i], options)
+        self._reset_agents(indices, [seeds[i] for i in indices], options)
         gains = np.zeros(self.num_envs)
         gains[indices] = self._observe(indices, None)
         self._autoreset[indices] = False
@@ -318,8 +317,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             self.autoreset_mode == AutoresetMode.NEXT_STEP
         ) else everyone[:0]
         stepping = everyone[~np.isin(everyone, resetting)]
-        for i in resetting:
-            self._reset_state(int(i), None, {})
+        self._reset_agents(resetting, [None] * len(resetting), {})
         moves, gains = self._move_and_observe(stepping, discrete, continuous)
         collided = np.zeros(n, bool)
         reasons = np.full(n, "", dtype=object)
@@ -348,8 +346,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             for i in done:
                 final_obs[i] = {key: value[i] for key, value in observations.items()}
                 final_infos = self._add_info(final_infos, agent_info(infos, int(i)), int(i))
-            for i in done:
-                self._reset_state(int(i), None, {})
+            self._reset_agents(done, [None] * len(done), {})
             reset_gains = np.zeros(n)
             reset_gains[done] = self._observe(done, None)
             reset_infos = self._infos(done, reset_gains, np.zeros(n, bool),
@@ -391,14 +388,46 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                         f"scene bounds {bounds.tolist()}"
                     )
 
-    def _reset_state(self, i: int, seed: int | None, options: dict[str, Any]) -> None:
-        if seed is not None or self._rngs[i] is None:
-            self._rngs[i], _ = seeding.np_random(seed)
+    def _reset_agents(
+        self, agents: np.ndarray, seeds: list[int | None], options: dict[str, Any]
+    ) -> None:
+        """Reset ``agents`` (with their ``seeds``). On a scene stream every agent's new scene
+        is drawn first, and the scenes not cached yet are built two or more at a time (one
+        per thread of :func:`run_parallel`; the ray casts and compiled loops of a build
+        release the GIL): agents that start their episodes together, as in RL training,
+        need a new scene each. Each scene is a function of its draw alone, so the result is
+        the one-by-one reset's."""
+        keys: list[tuple | None] = []
+        for i, seed in zip(agents, seeds, strict=True):
+            if seed is not None or self._rngs[i] is None:
+                self._rngs[i], _ = seeding.np_random(seed)
+            stream = self._streams[i]
+            keys.append(None if stream is None else (stream.kind, stream.draw_seed(self._rngs[i])))
+        missing = {key: stream for key, stream in zip(keys, (self._streams[i] for i in agents),
+                                                       strict=True)
+                   if key is not None and key not in self._scene_cache}
+        built: dict[tuple, NarutoReconEnv] = {}
+        if len(missing) > 1 and self._threads > 1:
+            order = iter(list(missing))  # claimed one key at a time by whichever thread is free
+
+            def build(_: int) -> None:
+                for key in order:
+                    built[key] = self._make_scene_env(missing[key].scene(key[1]))
+
+            run_parallel(build, min(self._threads, len(missing)))
+        for i, key in zip(agents, keys, strict=True):
+            if key is not None:
+                stream = self._streams[i]
+                self._scenes[i] = self._scene_cache.get(
+                    key, lambda key=key, stream=stream: built.pop(key, None)
+                    or self._make_scene_env(stream.scene(key[1]))
+                )
+            self._reset_state(int(i), options)
+
+    def _reset_state(self, i: int, options: dict[str, Any]) -> None:
+        """Start agent ``i``'s episode in its scene (its generator and, on a stream, its new
+        scene are set by :meth:`_reset_agents`)."""
         rng = self._rngs[i]
-        stream = self._streams[i]
-        if stream is not None:
-            scene_seed = stream.draw_seed(rng)
-            self._scenes[i] = self._scene_env((stream.kind, scene_seed), stream)
         env = self._scenes[i]
         if "pose" in options:
             pose = np.array(options["pose"], dtype=np.float64)

@@ -63,3 +63,31 @@ def test_memory_stays_bounded_with_a_new_scene_every_reset():
     assert len(env._scene_cache) <= 2
     # Peak resident memory (MiB) may grow while allocators warm up, then levels off.
     assert rss[-1] - rss[1] < 40, rss
+
+
+def test_a_reset_wave_builds_its_new_scenes_in_threads_with_the_one_by_one_result():
+    """Agents that start their episodes together each need a new scene. Built in two threads
+    (the default) they are the scenes, start poses and frames of a one-thread build, at the
+    first reset and at the autoreset, and each is built once."""
+
+    def run(threads: int) -> tuple[list[list[str]], list[dict], int]:
+        env = NarutoReconVectorEnv(4, scene="procedural:room", max_episode_steps=2, **STREAM)
+        env._threads = threads
+        builds = []
+        make = env._make_scene_env
+        env._make_scene_env = lambda scene: builds.append(scene.name) or make(scene)
+        observation, _ = env.reset(seed=3)
+        names = [[scene.scene.name for scene in env.scene_envs]]
+        observations = [observation]
+        for _ in range(3):  # the episodes end after 2 steps; the third step starts new ones
+            observations.append(env.step(np.array([6, 6, 2, 2]))[0])
+        names.append([scene.scene.name for scene in env.scene_envs])
+        return names, observations, len(builds)
+
+    one_names, one, one_builds = run(1)
+    two_names, two, two_builds = run(2)
+    assert two_names == one_names and one_names[0] != one_names[1]
+    assert two_builds == one_builds == 8
+    for a, b in zip(one, two, strict=True):
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key])
