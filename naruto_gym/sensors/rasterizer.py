@@ -11,10 +11,11 @@ parameter of the exact pixel ray, as the ray caster reports it. Nothing is inter
 space, so triangles that cross the camera plane need no geometric clipping (points behind the
 camera fail the sign test), and the depth is that of the ray-plane intersection in float64.
 
-A frame is made in four passes:
+A frame is made in these passes:
 
-0. culling (small frames, drawn in one thread): consecutive triangles are grouped in clusters
-   of ``CLUSTER_FACES`` with a bounding sphere each, and a cluster whose sphere lies wholly
+0. culling (small frames, drawn in one thread): triangles are grouped in clusters of
+   ``CLUSTER_FACES`` neighbours (Z-order of their centroids, :func:`triangle_clusters`) with a
+   bounding sphere each, and a cluster whose sphere lies wholly
    outside a side of the view volume is skipped, vertices and triangles: every corner of its
    triangles would get that side's outcode bit, so the frame is the same (only a share of
    a room is in view of a 90-degree camera, and the passes below cost per vertex and per
@@ -66,7 +67,7 @@ _BOX_MARGIN_PX = 1e-6
 # Image rows drawn together: a band's z-buffer (16 x 1200 x 12 bytes) stays in the L2 cache.
 BAND_ROWS = 16
 
-# Consecutive triangles culled together against the view volume (pass 0).
+# Neighbouring triangles culled together against the view volume (pass 0).
 CLUSTER_FACES = 64
 
 # A cluster is culled only when its sphere lies this much (relative, plus 1 um) outside a
@@ -559,7 +560,6 @@ def draw_bands(
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def render_frames(
     vertices: np.ndarray,
-    faces: np.ndarray,
     poses: np.ndarray,
     intrinsics: np.ndarray,
     width: int,
@@ -622,7 +622,7 @@ def render_frames(
             first = cluster * CLUSTER_FACES
             count = setup_triangles(
                 vertices, scratch_outcodes, scratch_projections, cluster_faces, first,
-                min(first + CLUSTER_FACES, faces.shape[0]), rotation, origin, intrinsics,
+                min(first + CLUSTER_FACES, cluster_faces.shape[0]), rotation, origin, intrinsics,
                 width, height, scratch_records, scratch_hit_planes, scratch_record_rows, used,
             )
             for slot in range(used, used + count):  # the mesh's own triangle ids
@@ -830,7 +830,7 @@ class PinholeRasterizer:
             triangle_ids = np.empty(self.height * self.width, np.int32)
             uv = np.empty((self.height * self.width, 2), np.float32)
             render_frames(
-                self.vertices, self.faces, pose[None], self.intrinsics, self.width,
+                self.vertices, pose[None], self.intrinsics, self.width,
                 self.height, far_cut, nearest, max_depth, barycentrics, *self._clusters(),
                 outcodes, projections, records, hit_planes, record_rows, inverse_depth[0],
                 winners[0], depth, triangle_ids, uv,
@@ -906,7 +906,7 @@ class PinholeRasterizer:
             self._scratch()
         )
         render_frames(
-            self.vertices, self.faces, poses, self.intrinsics, self.width, self.height,
+            self.vertices, poses, self.intrinsics, self.width, self.height,
             far_cut, nearest, max_depth, True, *self._clusters(), outcodes, projections,
             records, hit_planes, record_rows, inverse_depth[0], winners[0], depth,
             triangle_ids, barycentric_uv,

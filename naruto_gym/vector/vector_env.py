@@ -257,10 +257,19 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         env.coverage  # noqa: B018 - builds the samples (and observable surface) now
         return env
 
-    def _scene_env(self, key: tuple, spec: ProceduralSceneSpec | str) -> NarutoReconEnv:
-        if isinstance(spec, str):
-            return self._scene_cache.get(key, lambda: self._make_scene_env(spec))
-        return self._scene_cache.get(key, lambda: self._make_scene_env(spec.scene(key[1])))
+    def _scene_env(
+        self, key: tuple, spec: ProceduralSceneSpec | str,
+        built: dict[tuple, NarutoReconEnv] | None = None,
+    ) -> NarutoReconEnv:
+        """The cached env of scene ``key``, made when missing (taken from ``built`` when it
+        was made there already)."""
+        return self._scene_cache.get(
+            key, lambda: built.pop(key) if built and key in built
+            else self._build_scene_env(key, spec)
+        )
+
+    def _build_scene_env(self, key: tuple, spec: ProceduralSceneSpec | str) -> NarutoReconEnv:
+        return self._make_scene_env(spec if isinstance(spec, str) else spec.scene(key[1]))
 
     @property
     def scene_envs(self) -> list[NarutoReconEnv | None]:
@@ -403,8 +412,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                 self._rngs[i], _ = seeding.np_random(seed)
             stream = self._streams[i]
             keys.append(None if stream is None else (stream.kind, stream.draw_seed(self._rngs[i])))
-        missing = {key: stream for key, stream in zip(keys, (self._streams[i] for i in agents),
-                                                       strict=True)
+        missing = {key: self._streams[i] for i, key in zip(agents, keys, strict=True)
                    if key is not None and key not in self._scene_cache}
         built: dict[tuple, NarutoReconEnv] = {}
         if len(missing) > 1 and self._threads > 1:
@@ -412,16 +420,12 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
 
             def build(_: int) -> None:
                 for key in order:
-                    built[key] = self._make_scene_env(missing[key].scene(key[1]))
+                    built[key] = self._build_scene_env(key, missing[key])
 
             run_parallel(build, min(self._threads, len(missing)))
         for i, key in zip(agents, keys, strict=True):
             if key is not None:
-                stream = self._streams[i]
-                self._scenes[i] = self._scene_cache.get(
-                    key, lambda key=key, stream=stream: built.pop(key, None)
-                    or self._make_scene_env(stream.scene(key[1]))
-                )
+                self._scenes[i] = self._scene_env(key, self._streams[i], built)
             self._reset_state(int(i), options)
 
     def _reset_state(self, i: int, options: dict[str, Any]) -> None:
