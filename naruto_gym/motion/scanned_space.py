@@ -156,8 +156,8 @@ def surface_top(
     vertices: np.ndarray, faces: np.ndarray, quantile: float, samples: int = 100_000
 ) -> float:
     """Height under which ``quantile`` of the mesh's surface area lies (seeded samples)."""
-    points = sample_mesh_surface(vertices, faces, samples, seed=0, what="scene")
-    return float(np.quantile(points[:, 2], quantile))
+    heights = sample_mesh_surface(vertices, faces, samples, seed=0, what="scene", axes=[2])
+    return float(np.quantile(heights[:, 0], quantile))
 
 
 class ScannedSpace:

@@ -7,6 +7,8 @@ import pytest
 import trimesh
 from PIL import Image
 
+from naruto_gym.geometry.sorted_search import searchsorted_right
+from naruto_gym.scenes import make_random_scene
 from naruto_gym.scenes.mesh_scene import load_scene, sample_mesh_surface, scene_from_trimesh
 from tests.conftest import SAMPLE_MESHES
 
@@ -113,3 +115,34 @@ def test_scene_samples_its_surface_with_the_one_area_uniform_sampler():
     flat = scene_from_trimesh(trimesh.Trimesh(np.zeros((3, 3)), [[0, 1, 2]], process=False))
     with pytest.raises(ValueError, match="zero total area"):
         flat.sample_surface(10)
+
+
+def test_heights_alone_are_the_samples_third_coordinate():
+    scene = make_random_scene(3, "room")
+    points = sample_mesh_surface(scene.vertices, scene.faces, 5000, seed=2)
+    heights = sample_mesh_surface(scene.vertices, scene.faces, 5000, seed=2, axes=[2])
+    assert heights.shape == (5000, 1)
+    np.testing.assert_array_equal(heights[:, 0], points[:, 2])
+
+
+@pytest.mark.parametrize("kind", ["uniform", "skewed", "plateaus", "repeated", "tiny"])
+def test_area_draw_search_is_numpys_searchsorted(kind):
+    rng = np.random.default_rng(len(kind))
+    for count in (1, 2, 7, 300, 2500):
+        weights = {
+            "uniform": rng.random(count),
+            "skewed": rng.random(count) ** 8,  # a few huge triangles among many tiny ones
+            "plateaus": np.where(rng.random(count) < 0.9, 0.0, rng.random(count)),
+            "repeated": np.round(rng.random(count) * 3),
+            "tiny": rng.exponential(size=count) * 1e-12,
+        }[kind]
+        values = np.cumsum(weights)
+        keys = np.concatenate([
+            rng.random(4000) * values[-1], values, np.nextafter(values, np.inf),
+            np.nextafter(values, -np.inf), [-1.0, 0.0, np.inf, -np.inf, np.nan, 2 * values[-1]],
+        ])
+        np.testing.assert_array_equal(
+            searchsorted_right(values, keys), np.searchsorted(values, keys, side="right")
+        )
+    with pytest.raises(ValueError, match="non-empty 1-D"):
+        searchsorted_right(np.array([]), np.array([0.5]))
