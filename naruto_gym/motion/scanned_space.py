@@ -394,6 +394,9 @@ class ScannedSpace:
                 them (otherwise one distance query for all).
         """
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
+        if len(positions) == 1:  # one agent per scene (scene streams): no array set-up
+            clearance = None if clearances_m is None else float(np.ravel(clearances_m)[0])
+            return np.array([self.contains(positions[0], clearance)])
         inside = positions[:, 2] <= self.top_m
         if not inside.any():
             return inside

@@ -247,6 +247,11 @@ def test_batched_query_answers_as_the_point_query_with_one_cast_per_batch():
     assert len(calls) <= 4
     np.testing.assert_array_equal(batched.contains_many(points), expected)
     np.testing.assert_array_equal(batched._empty >= 0, one_by_one._empty >= 0)
+    # One point at a time (an agent alone in its scene), with and without its clearance.
+    single = _space(mesh)
+    for point, clearance, answer in zip(points[::7], clearances[::7], expected[::7], strict=True):
+        assert single.contains_many(point[None], np.array([clearance])).tolist() == [answer]
+        assert single.contains_many(point[None]).tolist() == [answer]
 
 
 def test_staged_support_count_equals_the_full_probe():
