@@ -20,7 +20,11 @@ import naruto_gym  # noqa: F401
 from naruto_gym.scenes import Scene, make_random_scene, resolve_scene
 from naruto_gym.sensors import rasterizer as rasterizer_module
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
-from naruto_gym.sensors.rasterizer import PinholeRasterizer, cluster_may_be_seen
+from naruto_gym.sensors.rasterizer import (
+    PinholeRasterizer,
+    closed_solids,
+    cluster_may_be_seen,
+)
 from tests.conftest import REPLICA_DIR
 
 QUARTER = PinholeCamera().scaled(0.25)  # 170 x 300, same field of view
@@ -441,16 +445,88 @@ def test_culling_clusters_changes_no_pixel(name):
         return depth, triangle_ids, uv
 
     culled = draw()
-    faces, order, spheres, starts, members = rasterizer._clusters()
+    faces, order, spheres, starts, members, *solids = rasterizer._clusters()
     seen = [cluster_may_be_seen(spheres, c, pose[:3, :3].copy(), pose[:3, 3].copy(),
                                 rasterizer.intrinsics, 64, 64, np.inf)
             for pose in poses for c in range(len(spheres))]
     assert 0.0 < np.mean(seen) < 0.8
     never = np.concatenate([spheres[:, :3], np.full((len(spheres), 1), np.inf)], axis=1)
-    rasterizer._cluster_arrays = (faces, order, never, starts, members)
+    rasterizer._cluster_arrays = (faces, order, never, starts, members, *solids)
     whole = draw()
     np.testing.assert_array_equal(culled[0], whole[0])
     np.testing.assert_array_equal(culled[1], whole[1])
     hit = whole[1] >= 0
     np.testing.assert_array_equal(culled[2][hit], whole[2][hit])
     assert hit.mean() > 0.5
+
+
+def test_closed_solids_are_the_closed_outward_parts():
+    """Only closed, consistently oriented parts enclosing a volume count as solids: not an
+    open box, an inside-out one, two boxes glued along an edge, a flat double sheet."""
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    far = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    far.apply_translation((5.0, 0.0, 0.0))
+    sheet = np.array([[0.0, 0.0, 9.0], [1.0, 0.0, 9.0], [0.0, 1.0, 9.0]])
+    vertices = np.concatenate([box.vertices, far.vertices, sheet])
+    faces = np.concatenate([
+        box.faces, far.faces[1:] + 8,  # a closed box and an open one
+        [[16, 17, 18], [16, 18, 17]],  # a flat double-sided triangle (zero volume)
+    ])
+    solids, boxes = closed_solids(vertices, faces, 0.01)
+    assert (solids[:12] == 0).all() and (solids[12:] == -1).all()
+    np.testing.assert_allclose(boxes, [[-0.51, -1.01, -1.51, 0.51, 1.01, 1.51]])
+    # Inside out: no solid.
+    assert (closed_solids(box.vertices, box.faces[:, ::-1], 0.01)[0] == -1).all()
+    # Two boxes sharing an edge: its four triangles spoil both parts.
+    glued = box.copy()
+    glued.apply_translation((1.0, 2.0, 0.0))
+    merged = trimesh.util.concatenate([box, glued])
+    merged.merge_vertices()
+    assert (closed_solids(merged.vertices, merged.faces, 0.01)[0] == -1).all()
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_dropping_back_faces_of_solids_changes_no_pixel(name):
+    """Back faces of closed solids seen from outside are not drawn: the frames are those
+    drawn with every triangle, bit for bit, also from cameras inside furniture and
+    millimetres off a surface; and the generated scenes do have solids."""
+    scene = _scene(name)
+    frames = []
+    for cull in (True, False):
+        rasterizer = PinholeRasterizer(scene.vertices, scene.faces, 64, 64, 31.5, 31.5, 32.0,
+                                       32.0, threads=1, cull_back_faces=cull)
+        poses = np.stack(random_poses(scene, 45, 12))
+        pixels = 64 * 64
+        depth = np.empty((len(poses), 64, 64), np.float32)
+        triangle_ids = np.empty(len(poses) * pixels, np.int32)
+        uv = np.empty((len(poses) * pixels, 2), np.float32)
+        rasterizer.render_many_into(poses, 10.0, depth, triangle_ids, uv)
+        single = rasterizer.render(poses[0], 10.0)  # the one-frame path culls alike
+        np.testing.assert_array_equal(single[0], depth[0])
+        frames.append((depth, triangle_ids, uv))
+        if cull and not name.startswith("replica_office"):
+            assert (rasterizer._solids()[0] >= 0).mean() > 0.5
+    for culled, whole in zip(*frames, strict=True):
+        np.testing.assert_array_equal(culled, whole)
+
+
+def test_a_camera_inside_a_solid_sees_its_inside():
+    """From inside a closed box every pixel sees the box's own walls (its back faces), as the
+    ray cast does; from outside, the far walls are dropped and the near ones drawn."""
+    box = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
+    scene = Scene(np.asarray(box.vertices, np.float64), np.asarray(box.faces),
+                  np.full((len(box.faces), 3, 3), 120, np.uint8))
+    camera = PinholeCamera(32, 32, 16.0, 16.0, 15.5, 15.5)
+    raster = RgbdRenderer(scene, camera, 10.0, backend="raster")
+    reference = RgbdRenderer(scene, camera, 10.0, raster.raycaster)
+    for position, looking in (((0.2, -0.1, 0.3), (1.0, 0.0, 0.0)),
+                              ((-1.5, 0.1, 0.2), (1.0, 0.0, 0.0))):
+        forward = np.array(looking)
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        pose = np.eye(4)
+        pose[:3, :3] = np.stack([right, np.cross(forward, right), forward], axis=1)
+        pose[:3, 3] = position
+        drawn, cast = raster.render_hits(pose), reference.render_hits(pose)
+        assert (drawn.depth > 0).all()
+        np.testing.assert_allclose(drawn.depth, cast.depth, rtol=1e-5)
+    assert (raster.rasterizer._solids()[0] == 0).all()  # the box is a solid
