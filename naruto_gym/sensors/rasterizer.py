@@ -226,8 +226,9 @@ def closed_solids(
     directions, and encloses a positive volume (normals by the right-hand rule point out). A
     ray from a camera outside such a solid enters it through a front face before it can leave
     through a back face, so the back face never wins a pixel and need not be drawn. A camera
-    inside (or closer than ``margin_m`` to the solid's box) draws every face. Open parts, parts
-    with an edge used once or more than twice (scans, touching boxes whose corners merged), and
+    inside (or closer than ``margin_m`` to the solid's box) draws every face. Parts join only
+    through edges used twice in the whole mesh, so two boxes touching along an edge stay two
+    solids. Open parts (scans), parts with an edge used once or more than twice in them, and
     inside-out or flat parts are left out: they are always drawn whole.
 
     Args:
@@ -249,17 +250,26 @@ def closed_solids(
     shared = sorted_keys[1:] == sorted_keys[:-1]  # consecutive uses of one edge
     edge_of = np.empty(len(keys), np.int64)
     edge_of[order] = np.cumsum(np.r_[True, ~shared]) - 1
+    forward = directed[:, 0] < directed[:, 1]
     uses = np.bincount(edge_of)
-    forward_uses = np.bincount(edge_of, weights=directed[:, 0] < directed[:, 1])
-    manifold = (uses == 2) & (forward_uses == 1)
-    # Triangles joined through every shared edge (non-manifold ones too, which then spoil
-    # their part).
+    manifold = (uses == 2) & (np.bincount(edge_of, weights=forward) == 1)
+    # Triangles joined through the edges used twice, once each way (two boxes touching along
+    # an edge stay two parts).
     face_of = np.repeat(np.arange(count), 3)
-    first, second = face_of[order[:-1]][shared], face_of[order[1:]][shared]
+    joins = shared & manifold[edge_of[order[1:]]]
+    first, second = face_of[order[:-1]][joins], face_of[order[1:]][joins]
     graph = scipy.sparse.coo_matrix((np.ones(len(first)), (first, second)), shape=(count, count))
     parts, label = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    # A part is closed when each of its edges is used twice in it, once each way.
+    part_edges, part_edge_of = np.unique(
+        label[face_of] * len(uses) + edge_of, return_inverse=True
+    )
+    part_edge_of = part_edge_of.reshape(-1)
+    closed_edge = (np.bincount(part_edge_of) == 2) & (
+        np.bincount(part_edge_of, weights=forward) == 1
+    )
     spoiled = np.zeros(parts, bool)
-    spoiled[label[face_of[~manifold[edge_of]]]] = True
+    spoiled[part_edges[~closed_edge] // len(uses)] = True
     corners = points[faces]
     volume = np.bincount(label, minlength=parts, weights=np.einsum(
         "ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2])) / 6.0)

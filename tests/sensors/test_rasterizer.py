@@ -462,7 +462,8 @@ def test_culling_clusters_changes_no_pixel(name):
 
 def test_closed_solids_are_the_closed_outward_parts():
     """Only closed, consistently oriented parts enclosing a volume count as solids: not an
-    open box, an inside-out one, two boxes glued along an edge, a flat double sheet."""
+    open box, an inside-out one or a flat double sheet; two boxes touching along an edge are
+    two solids, and a flap hung on a box's edge leaves the box a solid."""
     box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
     far = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
     far.apply_translation((5.0, 0.0, 0.0))
@@ -477,12 +478,18 @@ def test_closed_solids_are_the_closed_outward_parts():
     np.testing.assert_allclose(boxes, [[-0.51, -1.01, -1.51, 0.51, 1.01, 1.51]])
     # Inside out: no solid.
     assert (closed_solids(box.vertices, box.faces[:, ::-1], 0.01)[0] == -1).all()
-    # Two boxes sharing an edge: its four triangles spoil both parts.
+    # Two boxes sharing an edge (used four times): two solids, each closed by itself.
     glued = box.copy()
     glued.apply_translation((1.0, 2.0, 0.0))
     merged = trimesh.util.concatenate([box, glued])
     merged.merge_vertices()
-    assert (closed_solids(merged.vertices, merged.faces, 0.01)[0] == -1).all()
+    solids, boxes = closed_solids(merged.vertices, merged.faces, 0.0)
+    assert len(boxes) == 2 and (np.sort(np.unique(solids)) == [0, 1]).all()
+    # A flap on one of the box's edges (used three times): the box stays a solid, the flap not.
+    edge = box.faces[0, :2]
+    flap = np.concatenate([box.vertices, [[3.0, 3.0, 3.0]]])
+    solids = closed_solids(flap, np.concatenate([box.faces, [[edge[0], edge[1], 8]]]), 0.0)[0]
+    assert (solids[:12] == 0).all() and solids[12] == -1
 
 
 @pytest.mark.parametrize("name", SCENES)
