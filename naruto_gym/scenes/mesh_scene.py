@@ -140,6 +140,13 @@ class Scene:
         self.corner_colours = np.asarray(self.corner_colours, dtype=np.uint8)
         # float32 copy used at render time: avoids a uint8 -> float conversion per frame.
         self._corner_colours_f = self.corner_colours.astype(np.float32)
+        # Per triangle: its colour and whether all three corners share it (most triangles of
+        # flat-shaded scenes), whose hits then need no interpolation.
+        self._flat_colours = np.zeros((len(self.corner_colours), 4), np.uint8)
+        self._flat_colours[:, :3] = self.corner_colours[:, 0]
+        self._flat_colours[:, 3] = (self.corner_colours == self.corner_colours[:, :1]).all(
+            axis=(1, 2)
+        )
 
     # -- geometry --------------------------------------------------------------------
     @property
@@ -186,7 +193,9 @@ class Scene:
         triangle_ids = np.ascontiguousarray(triangle_ids)
         barycentric_uv = np.ascontiguousarray(barycentric_uv, dtype=np.float32)
         rgb = np.empty((len(triangle_ids), 3), dtype=np.uint8)
-        interpolate_corner_colours(triangle_ids, barycentric_uv, self._corner_colours_f, rgb)
+        interpolate_corner_colours(
+            triangle_ids, barycentric_uv, self._corner_colours_f, self._flat_colours, rgb
+        )
         if self.face_texture_ids is not None and self.textures:
             texture_ids = np.where(triangle_ids >= 0, self.face_texture_ids[triangle_ids], -1)
             for texture_index in np.unique(texture_ids[texture_ids >= 0]):

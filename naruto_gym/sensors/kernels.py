@@ -17,7 +17,7 @@ import numpy as np
 @numba.njit(cache=True, fastmath=True, nogil=True)
 def interpolate_corner_colours(
     triangle_ids: np.ndarray, barycentric_uv: np.ndarray, corner_colours: np.ndarray,
-    out: np.ndarray,
+    flat_colours: np.ndarray, out: np.ndarray,
 ) -> None:
     """Write the RGB of each hit into ``out`` ((N, 3) uint8); black where triangle id < 0.
 
@@ -25,6 +25,9 @@ def interpolate_corner_colours(
         triangle_ids: (N,) integer triangle index per hit, negative for a miss.
         barycentric_uv: (N, 2) float32 (u, v): point = (1 - u - v) v0 + u v1 + v v2.
         corner_colours: (F, 3, 3) float32 RGB at each triangle corner.
+        flat_colours: (F, 4) uint8: a triangle's first corner colour and 1 where all three
+            corners share it. Its hits get that colour as it is: the interpolation of three
+            equal whole numbers lands within 1e-12 of it, which the rounding below returns.
         out: (N, 3) uint8 output.
     """
     for i in range(triangle_ids.shape[0]):
@@ -33,6 +36,11 @@ def interpolate_corner_colours(
             out[i, 0] = 0
             out[i, 1] = 0
             out[i, 2] = 0
+            continue
+        if flat_colours[triangle, 3]:
+            out[i, 0] = flat_colours[triangle, 0]
+            out[i, 1] = flat_colours[triangle, 1]
+            out[i, 2] = flat_colours[triangle, 2]
             continue
         u = barycentric_uv[i, 0]
         v = barycentric_uv[i, 1]

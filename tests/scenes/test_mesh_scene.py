@@ -8,7 +8,7 @@ import trimesh
 from PIL import Image
 
 from naruto_gym.geometry.sorted_search import searchsorted_right
-from naruto_gym.scenes import make_random_scene
+from naruto_gym.scenes import Scene, make_random_scene
 from naruto_gym.scenes.mesh_scene import load_scene, sample_mesh_surface, scene_from_trimesh
 from tests.conftest import SAMPLE_MESHES
 
@@ -146,3 +146,30 @@ def test_area_draw_search_is_numpys_searchsorted(kind):
         )
     with pytest.raises(ValueError, match="non-empty 1-D"):
         searchsorted_right(np.array([]), np.array([0.5]))
+
+
+def test_flat_triangles_take_their_colour_as_the_interpolation_would():
+    """Hits on a triangle whose corners share a colour get it without interpolating: the
+    same bytes as the interpolation, at corners, edges, just outside and deep inside."""
+    from naruto_gym.sensors.kernels import interpolate_corner_colours
+
+    rng = np.random.default_rng(3)
+    count = 500
+    colours = rng.integers(0, 256, (count, 3, 3)).astype(np.uint8)
+    colours[: count // 2] = colours[: count // 2, :1]  # half of them flat
+    colours[0] = 0
+    colours[1] = 255
+    scene = Scene(rng.normal(size=(count * 3, 3)), np.arange(count * 3).reshape(count, 3), colours)
+    hits = 20000
+    triangle_ids = rng.integers(-1, count, hits).astype(np.int32)
+    uv = rng.uniform(-1e-6, 1.0 + 1e-6, (hits, 2)).astype(np.float32)
+    uv[::7] = rng.choice([0.0, 1.0, 0.5], (len(uv[::7]), 2)).astype(np.float32)
+    rgb = scene.colour_at(triangle_ids, uv)
+    interpolated = np.empty_like(rgb)
+    nothing_flat = np.zeros_like(scene._flat_colours)
+    interpolate_corner_colours(triangle_ids, uv, scene._corner_colours_f, nothing_flat,
+                               interpolated)
+    np.testing.assert_array_equal(rgb, interpolated)
+    flat = (triangle_ids >= 0) & (triangle_ids < count // 2)
+    np.testing.assert_array_equal(rgb[flat], colours[triangle_ids[flat], 0])
+    assert (rgb[triangle_ids < 0] == 0).all()
