@@ -677,6 +677,7 @@ def render_frames(
     scratch_records: np.ndarray,
     scratch_hit_planes: np.ndarray,
     scratch_record_rows: np.ndarray,
+    scratch_stamps: np.ndarray,
     inverse_depth: np.ndarray,
     winners: np.ndarray,
     depth: np.ndarray,
@@ -695,7 +696,9 @@ def render_frames(
             :func:`triangle_clusters` of the mesh, ``CLUSTER_FACES`` triangles per cluster.
         cluster_face_solids, solid_boxes: :func:`closed_solids` of the mesh, the solid of
             each face in cluster order.
-        scratch_*: the single-frame buffers of :class:`PinholeRasterizer`.
+        scratch_*: the single-frame buffers of :class:`PinholeRasterizer`;
+            ``scratch_stamps``: (V + 1,) int64, the frame mark each vertex was last
+            classified for, the last mark at the end.
         inverse_depth, winners: one band's z-buffer.
         depth: (K, H, W) float32; triangle_ids: (K * H * W,) int32; barycentric_uv:
             (K * H * W, 2) float32 outputs, frame after frame.
@@ -711,15 +714,21 @@ def render_frames(
         # Records packed from slot 0 (a frame touches only as much scratch as it draws: with
         # a batched env's many scenes the scratch of each stays small in the cache).
         used = 0
+        # Neighbouring clusters share vertices: each is classified once per frame, when its
+        # stamp is not this frame's mark (the stamps' last entry keeps the last mark).
+        scratch_stamps[-1] += 1
+        mark = scratch_stamps[-1]
         for cluster in range(clusters):
             if not cluster_may_be_seen(spheres, cluster, rotation, origin, intrinsics, width,
                                        height, far_cut):
                 continue
             for entry in range(cluster_vertex_starts[cluster],
                                cluster_vertex_starts[cluster + 1]):
-                _classify_vertex(vertices, cluster_vertices[entry], rotation, origin,
-                                 intrinsics, width, height, far_cut, scratch_outcodes,
-                                 scratch_projections)
+                vertex = cluster_vertices[entry]
+                if scratch_stamps[vertex] != mark:  # not classified for this frame yet
+                    scratch_stamps[vertex] = mark
+                    _classify_vertex(vertices, vertex, rotation, origin, intrinsics, width,
+                                     height, far_cut, scratch_outcodes, scratch_projections)
             first = cluster * CLUSTER_FACES
             count = setup_triangles(
                 vertices, scratch_outcodes, scratch_projections, cluster_faces, first,
@@ -928,6 +937,7 @@ class PinholeRasterizer:
                 np.empty((count, 3), np.int64),
                 np.empty((self.threads, BAND_ROWS, self.width), np.float64),
                 np.empty((self.threads, BAND_ROWS, self.width), np.int32),
+                np.zeros(len(self.vertices) + 1, np.int64),
             )
         return self._buffers
 
@@ -952,7 +962,8 @@ class PinholeRasterizer:
         rotation = np.ascontiguousarray(pose[:3, :3])
         origin = np.ascontiguousarray(pose[:3, 3])
         (
-            outcodes, projections, records, hit_planes, record_rows, inverse_depth, winners
+            outcodes, projections, records, hit_planes, record_rows, inverse_depth, winners,
+            stamps,
         ) = self._scratch()
         max_depth, far_cut, nearest = _depth_limits(max_depth_m)
         # Handing work to another thread costs more than it saves on small frames: those are
@@ -964,7 +975,7 @@ class PinholeRasterizer:
             render_frames(
                 self.vertices, pose[None], self.intrinsics, self.width,
                 self.height, far_cut, nearest, max_depth, barycentrics, *self._clusters(),
-                outcodes, projections, records, hit_planes, record_rows, inverse_depth[0],
+                outcodes, projections, records, hit_planes, record_rows, stamps, inverse_depth[0],
                 winners[0], depth, triangle_ids, uv,
             )
             return depth[0], triangle_ids, (uv if barycentrics else None)
@@ -1036,13 +1047,14 @@ class PinholeRasterizer:
                 f"{depth.shape}, {triangle_ids.shape}, {barycentric_uv.shape}"
             )
         max_depth, far_cut, nearest = _depth_limits(max_depth_m)
-        outcodes, projections, records, hit_planes, record_rows, inverse_depth, winners = (
-            self._scratch()
-        )
+        (
+            outcodes, projections, records, hit_planes, record_rows, inverse_depth, winners,
+            stamps,
+        ) = self._scratch()
         render_frames(
             self.vertices, poses, self.intrinsics, self.width, self.height,
             far_cut, nearest, max_depth, True, *self._clusters(), outcodes, projections,
-            records, hit_planes, record_rows, inverse_depth[0], winners[0], depth,
+            records, hit_planes, record_rows, stamps, inverse_depth[0], winners[0], depth,
             triangle_ids, barycentric_uv,
         )
 
