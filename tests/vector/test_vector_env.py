@@ -14,6 +14,7 @@ from naruto_gym.scenes.catalogue import resolve_scene
 from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.vector import NarutoReconVectorEnv
+from naruto_gym.vector.vector_env import balanced_shares, share_bounds
 from naruto_gym.wrappers import time_limit_ends_this_step
 
 SMALL: dict[str, Any] = {
@@ -195,3 +196,21 @@ def test_env_sees_the_step_its_time_limit_truncates(budget):
     env.reset()
     assert not _CountingEnv().step(0)[4]["last"]  # no TimeLimit around it
     assert gym.spec("NarutoRecon-v0").additional_wrappers == ()
+
+
+def test_split_steps_share_the_agents_so_that_the_parts_finish_together():
+    """The parts of a split step cover every agent once, at least one each, and the next
+    step gives more agents to a part that finished early, never fewer than the minimum."""
+    np.testing.assert_array_equal(share_bounds(np.array([0.5, 0.5]), 64), [0, 32, 64])
+    np.testing.assert_array_equal(share_bounds(np.array([0.6, 0.4]), 64), [0, 38, 64])
+    np.testing.assert_array_equal(share_bounds(np.array([0.98, 0.01, 0.01]), 3), [0, 1, 2, 3])
+    shares = np.array([0.5, 0.5])
+    for _ in range(30):  # part 0 does a third of the work per agent of part 1
+        bounds = share_bounds(shares, 64)
+        work = np.diff(bounds) * np.array([1.0, 3.0])
+        shares = balanced_shares(shares, work, 8 / 64)
+    assert 0.7 < shares[0] < 0.8  # balanced: 0.75
+    np.testing.assert_allclose(shares.sum(), 1.0)
+    assert balanced_shares(np.array([0.5, 0.5]), np.array([1.0, 1e6]), 0.2)[1] >= 0.2 - 1e-12
+    # Unmeasured parts (a part that raised) leave the shares as they were.
+    np.testing.assert_array_equal(balanced_shares(shares, np.array([0.0, 1.0]), 0.1), shares)
