@@ -68,6 +68,8 @@ class _Moves:
         self.collided = np.zeros(len(agents), bool)
         self.reasons = np.full(len(agents), "", dtype=object)
         self.check_escape = np.zeros(len(agents), bool)
+        # Surface distance of each start (float32, as the distance query gives it).
+        self.start_clearances = np.full(len(agents), np.nan, np.float32)
 
     @classmethod
     def joined(cls, shares: list[_Moves]) -> _Moves:
@@ -77,6 +79,7 @@ class _Moves:
         moves.collided = np.concatenate([share.collided for share in shares])
         moves.reasons = np.concatenate([share.reasons for share in shares])
         moves.check_escape = np.concatenate([share.check_escape for share in shares])
+        moves.start_clearances = np.concatenate([share.start_clearances for share in shares])
         return moves
 
 
@@ -260,6 +263,10 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self._seen = np.zeros((n, 0), bool)
         self._seen_counts = np.zeros(n, np.int64)
         self._path_length = np.zeros(n)
+        # Each agent's distance to the nearest surface where it stands (nan: not known yet),
+        # carried over from the sweep that brought it there: that point is one of the
+        # sweep's samples, whose distance was queried, so its next sweep need not ask again.
+        self._clearances = np.full(n, np.nan, np.float32)
         self._steps = np.zeros(n, np.int64)
         self._rngs: list[np.random.Generator | None] = [None] * n
         self._reconstructions: list[EpisodeReconstruction | None] = [None] * n
@@ -479,6 +486,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self._seen[i] = False
         self._seen_counts[i] = 0
         self._path_length[i] = 0.0
+        self._clearances[i] = np.nan
         self._steps[i] = 0
         if self._reconstruct:
             self._reconstructions[i] = EpisodeReconstruction(self.camera)
@@ -614,6 +622,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             env0.max_translation_m, env0.max_rotation_rad, float(MAX_DISCRETE_PITCH_RAD), limited,
         )
         moves.starts = self._poses[agents, :3, 3].copy()
+        moves.start_clearances = self._clearances[agents]
         targets = limited[:, :3, 3].copy()
         positions = moves.starts.copy()
         moving = ~_allclose_rows(moves.starts, targets)
@@ -621,6 +630,10 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         for group in _groups(self._scenes, agents, moving):
             self._sweep(agents[group], group, moves, targets, positions, end_clearances)
         moved = ~_allclose_rows(positions, moves.starts)
+        # Where each agent stands after the sweep: its stop's distance, else its start's.
+        self._clearances[agents] = np.where(
+            np.isnan(end_clearances), moves.start_clearances, end_clearances
+        )
         for group in _groups(self._scenes, agents, moved):
             checker = self._scenes[agents[group[0]]].collision
             rule = _escape_rule(checker)
@@ -640,6 +653,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             for k in group:
                 if checker.refuses_escape(moves.starts[k], positions[k]):
                     positions[k] = moves.starts[k]
+                    self._clearances[agents[k]] = moves.start_clearances[k]
                     moves.collided[k] = True
                     moves.reasons[k] = "escape"
         limited[:, :3, 3] = positions
@@ -659,11 +673,16 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         checker = env.collision
         raycaster = env.raycaster
         start = np.ascontiguousarray(moves.starts[group])
+        start_clearances = moves.start_clearances[group]
+        unknown = np.isnan(start_clearances)
+        if unknown.any():
+            start_clearances[unknown] = raycaster.unsigned_distance(start[unknown])
+            moves.start_clearances[group] = start_clearances
         # From a start closer than the radius (an exact start pose) the sphere may move on as
         # long as it gets no closer than it already is.
         box, end, clearances, lengths, offsets, fractions, points = plan_sweeps(
             start, np.ascontiguousarray(targets[group]), checker.box_min, checker.box_max,
-            raycaster.unsigned_distance(start), float(checker.radius_m),
+            start_clearances, float(checker.radius_m),
         )
         distances = raycaster.unsigned_distance(points)
         walls = np.full(len(group), np.inf)
@@ -705,6 +724,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             for agent in refused:
                 k = lookup[agent]
                 self._poses[agent, :3, 3] = moves.starts[k]
+                self._clearances[agent] = moves.start_clearances[k]
                 moves.collided[k] = True
                 moves.reasons[k] = "escape"
             for group in _groups(self._scenes, np.array(refused), np.ones(len(refused), bool)):

@@ -214,3 +214,26 @@ def test_split_steps_share_the_agents_so_that_the_parts_finish_together():
     assert balanced_shares(np.array([0.5, 0.5]), np.array([1.0, 1e6]), 0.2)[1] >= 0.2 - 1e-12
     # Unmeasured parts (a part that raised) leave the shares as they were.
     np.testing.assert_array_equal(balanced_shares(shares, np.array([0.0, 1.0]), 0.1), shares)
+
+
+@pytest.mark.parametrize("rule", ["scanned_space", "published"])
+def test_the_clearances_carried_between_steps_are_those_a_query_gives(rule):
+    """Each agent's surface distance, kept from the sweep that brought it where it stands
+    (its stop, or its start after a refused or blocked move), is the distance a fresh query
+    gives there, to the bit: the next sweep starts from it instead of asking again."""
+    env = NarutoReconVectorEnv(
+        16, scene=resolve_scene("two_rooms"), camera=PinholeCamera(16, 16, 8.0, 8.0, 7.5, 7.5),
+        panorama_shape=None, action_mode="discrete", max_episode_steps=40, escape_rule=rule,
+    )
+    env.reset(seed=5)
+    rng = np.random.default_rng(0)
+    checked = 0
+    for _ in range(60):
+        env.step(rng.integers(0, env.single_action_space.n, env.num_envs))
+        known = ~np.isnan(env._clearances)
+        positions = env._poses[known, :3, 3]
+        fresh = env._scenes[0].raycaster.unsigned_distance(positions)
+        np.testing.assert_array_equal(env._clearances[known], fresh)
+        checked += int(known.sum())
+    assert checked > 500
+    env.close()
