@@ -183,16 +183,29 @@ class Scene:
         )
 
     # -- colour ----------------------------------------------------------------------
-    def colour_at(self, triangle_ids: np.ndarray, barycentric_uv: np.ndarray) -> np.ndarray:
+    def colour_at(
+        self, triangle_ids: np.ndarray, barycentric_uv: np.ndarray, out: np.ndarray | None = None
+    ) -> np.ndarray:
         """RGB uint8 (N, 3) of hit points given their triangles and barycentric (u, v).
 
-        Misses (triangle id < 0) come back black.
+        Misses (triangle id < 0) come back black. ``out``: a C-contiguous (N, 3) uint8 array
+        to write them into (a batched env's observation rows), returned.
         """
         from naruto_gym.sensors.kernels import interpolate_corner_colours
 
         triangle_ids = np.ascontiguousarray(triangle_ids)
         barycentric_uv = np.ascontiguousarray(barycentric_uv, dtype=np.float32)
-        rgb = np.empty((len(triangle_ids), 3), dtype=np.uint8)
+        if out is None:
+            rgb = np.empty((len(triangle_ids), 3), dtype=np.uint8)
+        elif out.shape != (len(triangle_ids), 3) or out.dtype != np.uint8 or not (
+            out.flags.c_contiguous
+        ):
+            raise ValueError(
+                f"out must be a C-contiguous ({len(triangle_ids)}, 3) uint8 array, got "
+                f"{out.dtype} {out.shape}"
+            )
+        else:
+            rgb = out
         interpolate_corner_colours(
             triangle_ids, barycentric_uv, self._corner_colours_f, self._flat_colours, rgb
         )

@@ -204,7 +204,8 @@ class RgbdRenderer:
         return self._cast_hits(camera_to_world, (self.camera.height, self.camera.width))
 
     def render_hits_many(
-        self, camera_to_world: np.ndarray, worker: int | None = None
+        self, camera_to_world: np.ndarray, worker: int | None = None,
+        depth_out: np.ndarray | None = None,
     ) -> PixelHits:
         """:meth:`render_hits` of K poses (K, 4, 4) at once, the same hits frame by frame.
 
@@ -217,6 +218,9 @@ class RgbdRenderer:
         that index (made beforehand by :meth:`prepare_workers`): for callers that split
         their work between threads themselves, each thread with its own index.
 
+        ``depth_out``: a C-contiguous (K, H, W) float32 array the rasterized depth is drawn
+        into (a batched env's observation rows) and returned as ``depth``.
+
         Returns:
             ``depth`` (K, H, W), ``triangle_ids`` (K * H * W,), ``barycentric_uv``
             (K * H * W, 2), frame after frame.
@@ -225,7 +229,16 @@ class RgbdRenderer:
         count, pixels = len(poses), self.camera.width * self.camera.height
         if self.frame_backend != "raster":
             return self._cast_hits(poses, (count, self.camera.height, self.camera.width))
-        depth = np.empty((count, self.camera.height, self.camera.width), np.float32)
+        shape = (count, self.camera.height, self.camera.width)
+        if depth_out is None:
+            depth = np.empty(shape, np.float32)
+        elif depth_out.shape != shape or depth_out.dtype != np.float32 or not (
+            depth_out.flags.c_contiguous
+        ):
+            raise ValueError(f"depth_out must be a C-contiguous {shape} float32 array, got "
+                             f"{depth_out.dtype} {depth_out.shape}")
+        else:
+            depth = depth_out
         triangle_ids = np.empty(count * pixels, np.int32)
         barycentric_uv = np.empty((count * pixels, 2), np.float32)
         if worker is not None:

@@ -800,8 +800,17 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         hits = env.raycaster.cast_packed(rays) if len(rays) else None
         self._count_rays(len(rays))
 
+        # Agents with consecutive indices (one scene, or a share of a split step) get their
+        # frames drawn and coloured straight into the observation rows.
+        rows = slice(int(members[0]), int(members[0]) + count)
+        in_place = raster and int(members[-1]) - int(members[0]) + 1 == count and bool(
+            np.all(np.diff(members) == 1)
+        )
         if raster:
-            frames = env.renderer.render_hits_many(self._poses[members], worker=part)
+            frames = env.renderer.render_hits_many(
+                self._poses[members], worker=part,
+                depth_out=self._depth[rows] if in_place else None,
+            )
             depth = frames.depth.reshape(-1)
             triangle_ids, barycentric_uv = frames.triangle_ids, frames.barycentric_uv
         else:
@@ -811,16 +820,18 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             depth[~(depth <= self.max_depth_m)] = 0.0
             triangle_ids = np.where(depth > 0, hits.triangle_ids[frame], -1).astype(np.int32)
             barycentric_uv = hits.barycentric_uv[frame]
-        rgb = np.empty((len(triangle_ids), 3), np.uint8)
+        rgb = (self._rgb[rows].reshape(-1, 3) if in_place
+               else np.empty((len(triangle_ids), 3), np.uint8))
 
         def shade(part: slice) -> None:
             pixels_of = slice((part.start or 0) * pixels, part.stop * pixels)
-            rgb[pixels_of] = env.scene.colour_at(triangle_ids[pixels_of],
-                                                 barycentric_uv[pixels_of])
+            env.scene.colour_at(triangle_ids[pixels_of], barycentric_uv[pixels_of],
+                                out=rgb[pixels_of])
 
         _in_threads(shade, count, threads)
-        self._depth[members] = depth.reshape(count, camera.height, camera.width)
-        self._rgb[members] = rgb.reshape(count, camera.height, camera.width, 3)
+        if not in_place:
+            self._depth[members] = depth.reshape(count, camera.height, camera.width)
+            self._rgb[members] = rgb.reshape(count, camera.height, camera.width, 3)
         if panorama is not None:
             distance = hits.distance[count * cast_pixels: escape_offset]
             self._panorama[members] = np.where(np.isfinite(distance), distance, 0.0).astype(

@@ -405,6 +405,21 @@ def test_frames_of_many_poses_at_once_are_the_frames_one_by_one(backend):
         hit = one.triangle_ids >= 0
         np.testing.assert_array_equal(many.barycentric_uv[frame][hit], one.barycentric_uv[hit])
     assert (many.triangle_ids >= 0).mean() > 0.5
+    if backend == "raster":  # drawn into given rows (a batched env's observations)
+        rows = np.zeros((9, 48, 64), np.float32)
+        into = renderer.render_hits_many(poses, depth_out=rows[1:8])
+        assert np.shares_memory(into.depth, rows)
+        np.testing.assert_array_equal(rows[1:8], many.depth)
+        assert not rows[0].any() and not rows[8].any()
+        with pytest.raises(ValueError, match="depth_out must be a C-contiguous"):
+            renderer.render_hits_many(poses, depth_out=rows[:7, :, ::2])
+        rgb = np.zeros((len(many.triangle_ids), 3), np.uint8)
+        colours = scene.colour_at(many.triangle_ids, many.barycentric_uv, out=rgb)
+        assert colours is rgb
+        np.testing.assert_array_equal(rgb, scene.colour_at(many.triangle_ids,
+                                                           many.barycentric_uv))
+        with pytest.raises(ValueError, match="out must be a C-contiguous"):
+            scene.colour_at(many.triangle_ids, many.barycentric_uv, out=rgb[:10])
 
 
 def test_frames_drawn_in_one_call_need_outputs_of_their_size():
