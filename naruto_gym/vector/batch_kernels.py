@@ -172,6 +172,45 @@ def plan_sweeps(
     return box, ends, clearances, lengths, offsets, fractions, points
 
 
+# Slack (metres) on the distance bound below: far above the float32 rounding of the queried
+# distances and coordinates (about 1e-6 m across a room).
+PROVABLY_CLEAR_SLACK_M = 1e-4
+
+
+@numba.njit(cache=True, nogil=True)
+def sweep_distance_queries(
+    start_clearances: np.ndarray,
+    offsets: np.ndarray,
+    fractions: np.ndarray,
+    lengths: np.ndarray,
+    clearances: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which sweep samples (:func:`plan_sweeps`) need a distance query, and the distances
+    known without one.
+
+    A sample's distance to the surface is at least its start's less how far it lies from the
+    start (a distance field changes no faster than the point moves), so a sample whose bound
+    clears the sweep's clearance by ``PROVABLY_CLEAR_SLACK_M`` is free whatever its exact
+    distance: it gets ``inf``, which :func:`sweep_stops` finds free alike. The first sample
+    is the start, whose distance is known; the last is always queried, as where a sweep stops
+    its exact distance is wanted (:func:`sweep_stops` returns it).
+
+    Returns:
+        ``needed`` (S,) bool and ``distances`` (S,) float32 (meaningful where not needed).
+    """
+    needed = np.zeros(fractions.shape[0], np.bool_)
+    distances = np.full(fractions.shape[0], np.inf, np.float32)
+    for i in range(lengths.shape[0]):
+        begin, end = offsets[i], offsets[i + 1]
+        distances[begin] = start_clearances[i]
+        for sample in range(begin + 1, end):
+            bound = np.float64(start_clearances[i]) - fractions[sample] * lengths[i]
+            needed[sample] = sample == end - 1 or not (
+                bound >= clearances[i] + PROVABLY_CLEAR_SLACK_M
+            )
+    return needed, distances
+
+
 @numba.njit(cache=True, nogil=True)
 def sweep_stops(
     fractions: np.ndarray,

@@ -48,11 +48,13 @@ from naruto_gym.scenes.stream import (
 )
 from naruto_gym.sensors.rasterizer import default_thread_count, run_parallel
 from naruto_gym.vector.batch_kernels import (
+    PROVABLY_CLEAR_SLACK_M,
     fill_panorama_rays,
     fill_pinhole_rays,
     mark_visible_batch,
     no_hit_counts,
     plan_sweeps,
+    sweep_distance_queries,
     sweep_stops,
 )
 
@@ -684,16 +686,29 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             start, np.ascontiguousarray(targets[group]), checker.box_min, checker.box_max,
             start_clearances, float(checker.radius_m),
         )
-        distances = raycaster.unsigned_distance(points)
+        # Only samples whose distance could block are queried, and only segments that could
+        # reach a surface are cast: the outcome is the full sweep's (sweep_distance_queries).
+        needed, distances = sweep_distance_queries(
+            start_clearances, offsets, fractions, lengths, clearances
+        )
+        if needed.any():
+            distances[needed] = raycaster.unsigned_distance(points[needed])
         walls = np.full(len(group), np.inf)
-        along = lengths > 0
+        along = (lengths > 0) & ~(
+            start_clearances >= lengths + clearances + PROVABLY_CLEAR_SLACK_M
+        )
         if along.any():
             directions = (end[along] - start[along]) / lengths[along, None]
             walls[along] = raycaster.cast_distance(start[along], directions)
-        stops, end_clearances[group] = sweep_stops(
+        stops, stop_clearances = sweep_stops(
             fractions, offsets, lengths, distances, walls, clearances
         )
         positions[group] = start + stops[:, None] * (end - start)
+        # A sweep stopped before its end, at a sample only bounded: ask for that distance.
+        bounded = np.isinf(stop_clearances)
+        if bounded.any():
+            stop_clearances[bounded] = raycaster.unsigned_distance(positions[group][bounded])
+        end_clearances[group] = stop_clearances
         reasons = np.where(stops < 1.0, "surface", np.where(box < 1.0, "bounds", ""))
         moves.reasons[group] = reasons
         moves.collided[group] = reasons != ""

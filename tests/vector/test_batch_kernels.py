@@ -51,3 +51,49 @@ def test_sweeps_planned_and_stopped_in_one_call_match_move_by_move():
         assert stop_clearances[i] == stop_clearance or (
             np.isnan(stop_clearance) and np.isnan(stop_clearances[i])
         )
+
+
+def test_sweeps_skip_the_distance_queries_their_start_proves_free():
+    """Samples whose start clearance, less how far they lie from the start, clears the sweep
+    stop where the full sweep stops, with the same distance there: moves of every length from
+    starts at every distance to the surface of a real scene (the bound needs a true distance
+    field), walls cast only for segments that could reach one."""
+    from naruto_gym.scenes.catalogue import resolve_scene
+    from naruto_gym.sensors.raycaster import RayCaster
+    from naruto_gym.vector.batch_kernels import (
+        PROVABLY_CLEAR_SLACK_M,
+        sweep_distance_queries,
+    )
+
+    scene = resolve_scene("two_rooms")
+    raycaster = RayCaster(scene.vertices, scene.faces)
+    rng = np.random.default_rng(4)
+    count = 3000
+    low, high = scene.bounds
+    starts = rng.uniform(low + 0.05, high - 0.05, (count, 3))
+    directions = rng.normal(size=(count, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    targets = starts + rng.choice([0.0, 0.1, 0.3, 1.0], count)[:, None] * directions
+    start_clearances = raycaster.unsigned_distance(starts)
+    box, ends, clearances, lengths, offsets, fractions, points = plan_sweeps(
+        starts, targets, low, high, start_clearances, 0.05
+    )
+    directions = (ends - starts) / np.maximum(lengths, 1e-300)[:, None]
+    all_walls = np.where(lengths > 0, raycaster.cast_distance(starts, directions), np.inf)
+    full = sweep_stops(fractions, offsets, lengths, raycaster.unsigned_distance(points),
+                       all_walls, clearances)
+
+    needed, distances = sweep_distance_queries(start_clearances, offsets, fractions, lengths,
+                                               clearances)
+    assert 0.1 < needed.mean() < 0.9  # both kinds of samples are there
+    distances[needed] = raycaster.unsigned_distance(points[needed])
+    reach = start_clearances >= lengths + clearances + PROVABLY_CLEAR_SLACK_M
+    walls = np.where(reach, np.inf, all_walls)
+    stops, stop_clearances = sweep_stops(fractions, offsets, lengths, distances, walls,
+                                         clearances)
+    bounded = np.isinf(stop_clearances)
+    positions = starts + stops[:, None] * (ends - starts)
+    stop_clearances[bounded] = raycaster.unsigned_distance(positions[bounded])
+    np.testing.assert_array_equal(stops, full[0])
+    np.testing.assert_array_equal(stop_clearances, full[1])
+    assert (full[0] < 1.0).sum() > 100 and bounded.any()  # blocked sweeps, bounded stops
