@@ -134,6 +134,7 @@ def mark_visible_in_cells(
     centres: np.ndarray,
     radii: np.ndarray,
     seen: np.ndarray,
+    unseen_in_cell: np.ndarray,
     camera_to_world: np.ndarray,
     intrinsics: np.ndarray,
     depth: np.ndarray,
@@ -141,13 +142,16 @@ def mark_visible_in_cells(
     tolerance_m: float,
 ) -> int:
     """Compiled :func:`visible_samples` that only visits unseen samples, and skips the cells
-    (:func:`sample_cells`) whose bounding sphere lies wholly outside the frame's view volume:
-    sets ``seen[i]`` for every sample the frame sees and returns how many were newly seen.
+    (:func:`sample_cells`) with none left or whose bounding sphere lies wholly outside the
+    frame's view volume: sets ``seen[i]`` for every sample the frame sees and returns how many
+    were newly seen.
 
     Args:
         samples_world: (N, 3) float64 surface samples.
         order, starts, centres, radii: their :class:`SampleCells`.
         seen: (N,) bool, updated in place.
+        unseen_in_cell: (C,) int64 samples of each cell not seen yet, updated in place (an
+            episode sees most of a room's cells whole, and then skips them).
         camera_to_world: 4x4 float64 pose.
         intrinsics: (6,) float64 ``(width, height, fx, fy, cx, cy)``.
         depth: (H, W) float32 z-depth, 0 where nothing was hit.
@@ -168,6 +172,8 @@ def mark_visible_in_cells(
     top, bottom = -(cy + 0.5) / fy, (height - 0.5 - cy) / fy
     added = 0
     for cell in range(starts.shape[0] - 1):
+        if unseen_in_cell[cell] == 0:
+            continue
         dx = centres[cell, 0] - tx
         dy = centres[cell, 1] - ty
         dz = centres[cell, 2] - tz
@@ -192,6 +198,7 @@ def mark_visible_in_cells(
                 max_range_m, tolerance, share,
             ):
                 seen[i] = True
+                unseen_in_cell[cell] -= 1
                 added += 1
     return added
 
@@ -208,10 +215,13 @@ class CoverageTracker:
         self.seen = np.zeros(len(samples_world), dtype=bool)
         self.intrinsics = camera_intrinsics_vector(camera)
         self.cells = sample_cells(self.samples_world)
+        self.cell_sizes = np.diff(self.cells[1]).astype(np.int64)
+        self.unseen_in_cell = self.cell_sizes.copy()
         self._count = 0
 
     def reset(self) -> None:
         self.seen[:] = False
+        self.unseen_in_cell[:] = self.cell_sizes
         self._count = 0
 
     @property
@@ -223,7 +233,7 @@ class CoverageTracker:
         """Mark what a frame sees and return the coverage gain (share, not percent)."""
         before = self.coverage
         self._count += mark_visible_in_cells(
-            self.samples_world, *self.cells, self.seen,
+            self.samples_world, *self.cells, self.seen, self.unseen_in_cell,
             np.ascontiguousarray(camera_to_world, np.float64), self.intrinsics,
             np.ascontiguousarray(depth, np.float32), self.max_range_m, COVERAGE_TOLERANCE_M,
         )

@@ -42,6 +42,7 @@ def test_culling_by_cells_marks_what_the_numpy_reference_sees(scene, camera):
     coverage = env.coverage
     rng = np.random.default_rng(1)
     seen = np.zeros(len(coverage.samples_world), bool)
+    unseen = coverage.cell_sizes.copy()
     for episode in range(25):
         env.reset(seed=int(rng.integers(1 << 30)))
         pose = env.unwrapped._pose.copy()
@@ -51,16 +52,22 @@ def test_culling_by_cells_marks_what_the_numpy_reference_sees(scene, camera):
         expected = visible_samples(coverage.samples_world, pose, camera, depth,
                                    coverage.max_range_m, COVERAGE_TOLERANCE_M)
         fresh = np.zeros_like(seen)
-        added = mark_visible_in_cells(coverage.samples_world, *coverage.cells, fresh, pose,
-                                      coverage.intrinsics, depth, coverage.max_range_m,
-                                      COVERAGE_TOLERANCE_M)
+        added = mark_visible_in_cells(coverage.samples_world, *coverage.cells, fresh,
+                                      coverage.cell_sizes.copy(), pose, coverage.intrinsics,
+                                      depth, coverage.max_range_m, COVERAGE_TOLERANCE_M)
         assert np.array_equal(fresh, expected) and added == expected.sum()
-        # With samples already seen: only the new ones count.
+        # With samples already seen: only the new ones count, and whole cells seen before
+        # are skipped (their counts reach 0).
         before = seen.copy()
         added = mark_visible_in_cells(
-            coverage.samples_world, *coverage.cells, seen, pose, coverage.intrinsics,
+            coverage.samples_world, *coverage.cells, seen, unseen, pose, coverage.intrinsics,
             depth, coverage.max_range_m, COVERAGE_TOLERANCE_M)
         assert added == (expected & ~before).sum()
         assert np.array_equal(seen, before | expected)
+        order, starts = coverage.cells[0], coverage.cells[1]
+        np.testing.assert_array_equal(unseen, [
+            (~seen[order[a:b]]).sum() for a, b in zip(starts[:-1], starts[1:], strict=True)
+        ])
+    assert (unseen == 0).any()
     assert 0 < seen.sum() < len(seen)
     env.close()

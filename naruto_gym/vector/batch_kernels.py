@@ -73,6 +73,7 @@ def mark_visible_batch(
     centres: np.ndarray,
     radii: np.ndarray,
     seen: np.ndarray,
+    unseen_in_cell: np.ndarray,
     agents: np.ndarray,
     poses: np.ndarray,
     intrinsics: np.ndarray,
@@ -88,6 +89,7 @@ def mark_visible_batch(
         samples_world: (M, 3) float64 surface samples of the scene.
         order, starts, centres, radii: the samples' cells (``CoverageTracker.cells``).
         seen: (N, >= M) bool seen flags of all agents (row per agent), updated in place.
+        unseen_in_cell: (N, >= C) int64 unseen samples per cell of all agents, likewise.
         agents: (K,) int64 rows of the agents to update.
         poses: (N, 4, 4) float64 poses of all agents.
         intrinsics: (6,) float64 ``(width, height, fx, fy, cx, cy)``.
@@ -98,7 +100,8 @@ def mark_visible_batch(
     for k in range(agents.shape[0]):
         agent = agents[k]
         added[k] = mark_visible_in_cells(
-            samples_world, order, starts, centres, radii, seen[agent], poses[agent],
+            samples_world, order, starts, centres, radii, seen[agent],
+            unseen_in_cell[agent], poses[agent],
             intrinsics, depth[agent], max_range_m, tolerance_m,
         )
 

@@ -263,6 +263,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         # Seen flags of each agent's scene samples (row i, the first len(samples) columns):
         # one array, so the coverage kernel updates them in place.
         self._seen = np.zeros((n, 0), bool)
+        self._unseen_in_cell = np.zeros((n, 0), np.int64)  # per agent and coverage cell
         self._seen_counts = np.zeros(n, np.int64)
         self._path_length = np.zeros(n)
         # Each agent's distance to the nearest surface where it stands (nan: not known yet),
@@ -486,6 +487,12 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             wider[:, :self._seen.shape[1]] = self._seen
             self._seen = wider
         self._seen[i] = False
+        sizes = env.coverage.cell_sizes
+        if len(sizes) > self._unseen_in_cell.shape[1]:
+            wider = np.zeros((self.num_envs, len(sizes)), np.int64)
+            wider[:, :self._unseen_in_cell.shape[1]] = self._unseen_in_cell
+            self._unseen_in_cell = wider
+        self._unseen_in_cell[i, :len(sizes)] = sizes
         self._seen_counts[i] = 0
         self._path_length[i] = 0.0
         self._clearances[i] = np.nan
@@ -757,7 +764,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             _in_threads(
                 lambda part, coverage=coverage, members=members, added=added: (
                     mark_visible_batch(
-                        coverage.samples_world, *coverage.cells, self._seen, members[part],
+                        coverage.samples_world, *coverage.cells, self._seen,
+                        self._unseen_in_cell, members[part],
                         self._poses, coverage.intrinsics, self._depth, coverage.max_range_m,
                         COVERAGE_TOLERANCE_M, added[part],
                     )
