@@ -288,6 +288,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         # Shares of the agents per part of a split step, adapted step by step so that the
         # parts finish together (:func:`share_bounds`, :func:`balanced_shares`).
         self._shares: np.ndarray | None = None
+        # The frames a split step's parts copied out for its observations (_observations).
+        self._prepared: dict[str, np.ndarray] | None = None
         self._intrinsics = self.camera.as_dict()
         self._discrete_zeros = np.zeros(n, np.int64)
         self._continuous_zeros = np.zeros((n, 7))
@@ -590,6 +592,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         moved = [threading.Event() for _ in range(parts)]
         started = time.perf_counter()
         finished = np.zeros(parts)
+        # Each part also copies its agents' frames out for the step's observations.
+        prepared = {"rgb": np.empty_like(self._rgb), "depth": np.empty_like(self._depth)}
 
         def run(part: int) -> tuple[_Moves, np.ndarray]:
             agents = np.arange(bounds[part], bounds[part + 1])
@@ -603,10 +607,14 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             finally:
                 moved[part].set()
             gains = self._observe(agents, moves, part)
+            rows = slice(bounds[part], bounds[part + 1])
+            prepared["rgb"][rows] = self._rgb[rows]
+            prepared["depth"][rows] = self._depth[rows]
             finished[part] = time.perf_counter() - started
             return moves, gains
 
         shares = run_parallel(run, parts)
+        self._prepared = prepared
         self._shares = balanced_shares(self._shares, finished, self._min_agents_per_part / n)
         return _Moves.joined([moves for moves, _ in shares]), np.concatenate(
             [gains for _, gains in shares]
@@ -729,6 +737,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         Returns each agent's coverage gain. ``part``: the share of the step this runs as
         (:meth:`_move_and_observe`; its compiled loops then stay in the calling thread)."""
         threads = self._threads if part is None else 1
+        self._prepared = None  # frames change: copies made before are stale
         agents = np.asarray(agents, np.int64)
         gains = np.zeros(len(agents))
         if len(agents) == 0:
@@ -878,9 +887,12 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         return [int(a) for a in escapers[undecided][shares > threshold]]
 
     def _observations(self) -> dict[str, np.ndarray]:
+        """Copies of the agents' observations (made by the parts of a split step, in their
+        threads, when the step was split and nothing was observed since)."""
+        prepared, self._prepared = self._prepared, None
         observations = {
-            "rgb": self._rgb.copy(),
-            "depth": self._depth.copy(),
+            "rgb": prepared["rgb"] if prepared is not None else self._rgb.copy(),
+            "depth": prepared["depth"] if prepared is not None else self._depth.copy(),
             "pose": self._poses.astype(np.float32),
         }
         if self._panorama is not None:
