@@ -221,15 +221,17 @@ def closed_solids(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The parts of a mesh that bound solids, whose back faces a camera outside them never sees.
 
-    A part (triangles joined through shared edges) bounds a solid when it is closed and
-    consistently oriented, every edge used by exactly two of its triangles in opposite
-    directions, and encloses a positive volume (normals by the right-hand rule point out). A
-    ray from a camera outside such a solid enters it through a front face before it can leave
-    through a back face, so the back face never wins a pixel and need not be drawn. A camera
-    inside (or closer than ``margin_m`` to the solid's box) draws every face. Parts join only
-    through edges used twice in the whole mesh, so two boxes touching along an edge stay two
-    solids. Open parts (scans), parts with an edge used once or more than twice in them, and
-    inside-out or flat parts are left out: they are always drawn whole.
+    A part (triangles joined through the edges no third triangle uses) bounds a solid when it
+    is closed and consistently oriented, every edge used by exactly two of its triangles in
+    opposite directions, and encloses a positive volume (normals by the right-hand rule point
+    out). A ray from a camera outside such a solid enters it through a front face before it
+    can leave through a back face, so the back face never wins a pixel and need not be drawn.
+    A camera inside (or closer than ``margin_m`` to the solid's box) draws every face. As parts
+    join only through edges used twice in the whole mesh, two boxes touching along an edge
+    stay two solids. Open parts (scans), parts with an edge used once or more than twice in
+    them, and inside-out or flat parts are left out: they are always drawn whole. A closed
+    part that passes through itself is assumed not to turn inside out anywhere (primitives and
+    furniture models do not; scans are open).
 
     Args:
         vertices: (V, 3) positions; faces: (F, 3) corner indices.

@@ -835,9 +835,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         # Agents with consecutive indices (one scene, or a share of a split step) get their
         # frames drawn and coloured straight into the observation rows.
         rows = slice(int(members[0]), int(members[0]) + count)
-        in_place = raster and int(members[-1]) - int(members[0]) + 1 == count and bool(
-            np.all(np.diff(members) == 1)
-        )
+        in_place = raster and bool(np.all(np.diff(members) == 1))
         if raster:
             frames = env.renderer.render_hits_many(
                 self._poses[members], worker=part,
