@@ -199,21 +199,24 @@ def triangle_clusters(
         the vertices ``vertex_list[vertex_starts[c]:vertex_starts[c + 1]]``.
     """
     points = np.asarray(vertices, np.float64)
-    faces = np.asarray(faces)
+    faces = np.asarray(faces, np.int64)
     order = morton_order(points[faces].mean(axis=1)).astype(np.int32)
     count = -(-len(faces) // size)
+    # The distinct corners of each cluster, in vertex order: (cluster, vertex) pairs made
+    # distinct in one pass (a scene streamed per episode builds these at its first frame).
+    clusters_of_corners = np.repeat(np.arange(len(faces)) // size, 3)
+    pairs = np.unique(clusters_of_corners * len(points) + faces[order].reshape(-1))
+    cluster_of, used = np.divmod(pairs, len(points))
+    starts = np.searchsorted(cluster_of, np.arange(count + 1)).astype(np.int64)
+    corners = points[used]
+    centres = 0.5 * (
+        np.minimum.reduceat(corners, starts[:-1]) + np.maximum.reduceat(corners, starts[:-1])
+    )
+    reach = ((corners - np.repeat(centres, np.diff(starts), axis=0)) ** 2).sum(axis=1)
     spheres = np.empty((count, 4))
-    lists = []
-    for cluster in range(count):
-        used = np.unique(faces[order[cluster * size:(cluster + 1) * size]])
-        corners = points[used]
-        centre = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
-        spheres[cluster, :3] = centre
-        spheres[cluster, 3] = np.sqrt(((corners - centre) ** 2).sum(axis=1).max())
-        lists.append(used.astype(np.int32))
-    starts = np.zeros(count + 1, np.int64)
-    starts[1:] = np.cumsum([len(used) for used in lists])
-    return order, spheres, starts, np.concatenate(lists)
+    spheres[:, :3] = centres
+    spheres[:, 3] = np.sqrt(np.maximum.reduceat(reach, starts[:-1]))
+    return order, spheres, starts, used.astype(np.int32)
 
 
 def closed_solids(
