@@ -91,3 +91,32 @@ def test_a_reset_wave_builds_its_new_scenes_in_threads_with_the_one_by_one_resul
     for a, b in zip(one, two, strict=True):
         for key in a:
             np.testing.assert_array_equal(a[key], b[key])
+
+
+def test_a_split_step_on_a_stream_gives_the_one_piece_step():
+    """Agents each in their own generated room, stepped in two shares that move in turn and
+    draw their frames into the observation rows: the same observations, rewards and infos
+    as the step in one piece, across resets to new rooms."""
+
+    def run(split: bool) -> list[tuple]:
+        env = NarutoReconVectorEnv(
+            6, scene="procedural:room", camera=PinholeCamera(32, 32, 16.0, 16.0, 15.5, 15.5),
+            panorama_shape=None, action_mode="discrete", max_episode_steps=25,
+            coverage_samples=2000,
+        )
+        env._threads, env._min_agents_per_part, env._split_steps = (
+            (2, 1, True) if split else (1, 8, False)
+        )
+        env.reset(seed=4)
+        rng = np.random.default_rng(0)
+        steps = []
+        for _ in range(60):
+            observations, rewards, _, _, infos = env.step(rng.integers(0, 10, 6))
+            steps.append((observations["rgb"], observations["depth"], observations["pose"],
+                          rewards, infos["coverage"], infos["collision_reason"]))
+        env.close()
+        return steps
+
+    for whole, split in zip(run(False), run(True), strict=True):
+        for a, b in zip(whole, split, strict=True):
+            np.testing.assert_array_equal(a, b)
