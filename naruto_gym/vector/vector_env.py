@@ -944,11 +944,18 @@ def _mask(n: int, agents: np.ndarray) -> np.ndarray:
 
 
 def _groups(scenes: list, agents: np.ndarray, selected: np.ndarray) -> list[np.ndarray]:
-    """Indices into ``agents`` (where ``selected``), grouped by the agents' scene."""
+    """Indices into ``agents`` (where ``selected``), grouped by the agents' scene, groups in
+    the order of their first agent."""
+    picked = np.flatnonzero(selected)
+    if len(picked) == 0:
+        return []
+    envs = [scenes[agent] for agent in np.asarray(agents)[picked].tolist()]
+    first = envs[0]
+    if all(env is first for env in envs):  # one scene for all: no dictionary per agent
+        return [picked.astype(np.int64)]
     groups: dict[int, list[int]] = {}
-    for k, agent in enumerate(agents):
-        if selected[k]:
-            groups.setdefault(id(scenes[agent]), []).append(k)
+    for k, env in zip(picked.tolist(), envs, strict=True):
+        groups.setdefault(id(env), []).append(k)
     return [np.array(group, np.int64) for group in groups.values()]
 
 
