@@ -27,6 +27,10 @@ PINHOLE_BACKENDS: tuple[str, ...] = ("raycast", "raster", "auto")
 # benchmarks/render_speed.py measured the rasterizer faster at 3.2 triangles per pixel and the
 # ray cast faster from 12 up (README, "Rendering speed").
 AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL = 4.0
+# The same for frames drawn many at a time (a batched env's agents): each thread draws whole
+# frames in one call, and on the Replica sample at 64 x 64 (12 triangles per pixel) the
+# rasterizer made 1.43x the ray cast's steps with 64 agents (about even with one).
+AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED = 16.0
 
 # Pixels per thread below which the colour lookup stays in the calling thread.
 _PARALLEL_SHADING_MIN_PIXELS = 65_536
@@ -134,9 +138,13 @@ class RgbdRenderer:
             casts every pixel ray. ``"raster"``: the pinhole rasterizer, the same hits
             (z-depth of the exact pixel ray, triangle, barycentrics) several times faster on
             full frames. ``"auto"``: the rasterizer when the mesh has at most
-            ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL`` triangles per pixel, else the ray cast.
+            ``auto_max_triangles_per_pixel`` triangles per pixel, else the ray cast.
         threads: threads for the rasterizer and the colour lookup (default: the CPUs this
             process may use, at most 2).
+
+    ``auto_max_triangles_per_pixel`` (default ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL``, for
+    frames drawn one at a time) is where ``"auto"`` turns to the ray cast; a batched env sets
+    ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED`` on its renderers.
     """
 
     def __init__(
@@ -161,6 +169,7 @@ class RgbdRenderer:
         self.raycaster = raycaster or RayCaster(scene.vertices, scene.faces)
         self.backend: PinholeBackend = backend
         self.threads = int(threads) if threads is not None else default_thread_count()
+        self.auto_max_triangles_per_pixel = AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL
         self._rasterizer: PinholeRasterizer | None = None
         self._workers: list[PinholeRasterizer] = []  # per-thread rasterizers of batches
         self._rays: np.ndarray | None = None  # the ray cast's buffer, made on first use
@@ -172,7 +181,7 @@ class RgbdRenderer:
             return self.backend
         pixels = self.camera.width * self.camera.height
         triangles = len(self.raycaster.faces)
-        return "raster" if triangles <= AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL * pixels else "raycast"
+        return "raster" if triangles <= self.auto_max_triangles_per_pixel * pixels else "raycast"
 
     @property
     def rasterizer(self) -> PinholeRasterizer:

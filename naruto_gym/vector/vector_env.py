@@ -46,6 +46,7 @@ from naruto_gym.scenes.stream import (
     is_procedural_name,
     parse_procedural_name,
 )
+from naruto_gym.sensors.pinhole import AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED
 from naruto_gym.sensors.rasterizer import default_thread_count, run_parallel
 from naruto_gym.vector.batch_kernels import (
     PROVABLY_CLEAR_SLACK_M,
@@ -150,8 +151,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
       / ``info["final_info"]``, as Stable-Baselines3 expects).
     * ``scene_cache_size``: generated scenes kept in memory for reuse (stream scenes only).
     * ``pinhole_backend``: as for ``NarutoReconEnv``, but ``"auto"`` by default (the
-      rasterizer for small frames of meshes of moderate size, 3x faster than the ray cast on
-      64 x 64 frames of the default room): the same frames as the single env's reference ray
+      rasterizer up to ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED`` triangles per pixel,
+      16, where drawing many frames at once beats the ray cast: 64 x 64 frames of the default
+      room or of a 50,000-triangle scan): the same frames as the single env's reference ray
       cast up to exact edge ties. Pass ``"raycast"`` for frames equal bit for bit to a
       default ``NarutoReconEnv``'s.
     * every other keyword is passed to ``NarutoReconEnv`` (``action_mode``, ``camera``,
@@ -297,6 +299,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
     # -- scenes ----------------------------------------------------------------------------
     def _make_scene_env(self, scene: Any) -> NarutoReconEnv:
         env = NarutoReconEnv(scene=scene, **self._env_kwargs)
+        # Many frames at a time: "auto" rasterizes denser meshes than for one frame.
+        env.renderer.auto_max_triangles_per_pixel = AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED
         env.coverage  # noqa: B018 - builds the samples (and observable surface) now
         return env
 

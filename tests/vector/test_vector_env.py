@@ -123,9 +123,17 @@ def test_matches_sync_with_rasterized_frames(split):
 
 def test_default_frames_are_rasterized_where_cheaper():
     settings = {k: v for k, v in SMALL.items() if k != "pinhole_backend"}
+    settings["camera"] = PinholeCamera(16, 16, 8, 8, 7.5, 7.5)
     vector = NarutoReconVectorEnv(2, **settings)
-    # 24 x 24 pixels: more than 4 triangles of the default room per pixel, so ray cast.
+    # 16 x 16 pixels: more than 16 triangles of the default room per pixel, so ray cast.
     assert vector.scene_envs[0].renderer.frame_backend == "raycast"
+    # 24 x 24: 7 per pixel, rasterized when drawn many at once, ray-cast one at a time.
+    settings["camera"] = PinholeCamera(24, 24, 12, 12, 11.5, 11.5)
+    assert NarutoReconVectorEnv(2, **settings).scene_envs[0].renderer.frame_backend == "raster"
+    single = gym.make("NarutoRecon-v0", pinhole_backend="auto", **{
+        k: v for k, v in settings.items() if k != "camera"}, camera=settings["camera"])
+    assert single.unwrapped.renderer.frame_backend == "raycast"
+    single.close()
     settings["camera"] = PinholeCamera(64, 64, 32, 32, 31.5, 31.5)
     assert NarutoReconVectorEnv(2, **settings).scene_envs[0].renderer.frame_backend == "raster"
 
