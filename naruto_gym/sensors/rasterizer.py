@@ -20,13 +20,15 @@ A frame is made in these passes:
    triangles would get that side's outcode bit, so the frame is the same (only a share of
    a room is in view of a 90-degree camera, and the passes below cost per vertex and per
    triangle);
-1. vertices (split between the threads): an outcode per vertex, one bit per side of the view
-   volume it lies outside of;
+1. vertices (split between the threads; small frames: all of them in vectorized loops, or
+   those of the clusters in view one at a time when they are under a quarter): the
+   camera-frame position, the image position and an outcode per vertex, one bit per side of
+   the view volume it lies outside of;
 2. setup (triangles split between the threads): triangles whose corners share an outcode bit
    (behind the camera, outside the image, entirely beyond the depth range) are dropped, and
    so are back faces of closed solids the camera is outside of (:func:`closed_solids`: a
-   front face of the same solid is always nearer); the
-   others get their corners in the camera frame (float64) and from them their edge planes,
+   front face of the same solid is always nearer); the others take their corners' camera-frame
+   positions (float64) from pass 1 and from them get their edge planes,
    inverse-depth plane and barycentric planes, all in pixel units, and the image rows they
    can cover (corners clipped to ``z >= NEAR_PLANE_M`` and projected), packed into a list;
 3. binning: which packed triangles touch each band of ``BAND_ROWS`` image rows;
@@ -98,38 +100,6 @@ def _store_plane(records, slot, offset, x, y, z, inverse_fx, inverse_fy, cx, cy)
     records[slot, offset + 2] = z - a * cx - b * cy
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _classify_vertex(
-    columns, index, rotation, origin, intrinsics, width, height, far_cut, outcodes, projections
-):
-    """Camera-frame position, outcode and image position of one vertex (see
-    :func:`vertex_outcodes`)."""
-    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
-    dx = np.float64(columns[0, index]) - origin[0]
-    dy = np.float64(columns[1, index]) - origin[1]
-    dz = np.float64(columns[2, index]) - origin[2]
-    x = rotation[0, 0] * dx + rotation[1, 0] * dy + rotation[2, 0] * dz
-    y = rotation[0, 1] * dx + rotation[1, 1] * dy + rotation[2, 1] * dz
-    z = rotation[0, 2] * dx + rotation[1, 2] * dy + rotation[2, 2] * dz
-    scale = 1.0 / max(z, NEAR_PLANE_M)
-    projections[0, index] = fx * x * scale + cx
-    projections[1, index] = fy * y * scale + cy
-    projections[2, index] = x
-    projections[3, index] = y
-    projections[4, index] = z
-    # Planes through the camera centre bounding u in [-1, width], v in [-1, height]; their
-    # intersection lies in front of the camera, so sharing a bit means unseen.
-    # Sums of comparisons, not branches: which bits are set is unpredictable.
-    outcodes[index] = (
-        (fx * x + (cx + 1.0) * z < 0.0) * 1
-        + ((width - cx) * z - fx * x < 0.0) * 2
-        + (fy * y + (cy + 1.0) * z < 0.0) * 4
-        + ((height - cy) * z - fy * y < 0.0) * 8
-        + (z < NEAR_PLANE_M) * 16
-        + (z > far_cut) * 32
-    )
-
-
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def vertex_outcodes(
     columns: np.ndarray,
@@ -146,8 +116,8 @@ def vertex_outcodes(
 ) -> None:
     """View-volume outcodes, image and camera-frame positions of vertices ``first .. stop - 1``.
 
-    The same numbers as :func:`_classify_vertex` vertex by vertex, in loops over the columns
-    that the compiler vectorizes (a few times faster than one vertex at a time).
+    In loops over the columns that the compiler vectorizes: a few times faster per vertex than
+    one at a time, which a range of one vertex gives.
 
     Args:
         columns: (3, V) float32 world positions, a row per axis.
@@ -181,6 +151,8 @@ def vertex_outcodes(
         projections[1, index] = fy * y * scale + cy
     for index in range(first, stop):
         x, y, z = projections[2, index], projections[3, index], projections[4, index]
+        # Planes through the camera centre bounding u in [-1, width], v in [-1, height]; their
+        # intersection lies in front of the camera, so sharing a bit means unseen.
         outcodes[index] = (
             (fx * x + (cx + 1.0) * z < 0.0) * 1
             + ((width - cx) * z - fx * x < 0.0) * 2
@@ -766,8 +738,9 @@ def render_frames(
                     vertex = cluster_vertices[entry]
                     if scratch_stamps[vertex] != mark:
                         scratch_stamps[vertex] = mark
-                        _classify_vertex(columns, vertex, rotation, origin, intrinsics, width,
-                                         height, far_cut, scratch_outcodes, scratch_projections)
+                        vertex_outcodes(columns, vertex, vertex + 1, rotation, origin,
+                                        intrinsics, width, height, far_cut, scratch_outcodes,
+                                        scratch_projections)
         # Records packed from slot 0 (a frame touches only as much scratch as it draws: with
         # a batched env's many scenes the scratch of each stays small in the cache).
         used = 0
