@@ -44,6 +44,7 @@ from functools import cached_property
 
 import numpy as np
 
+from naruto_gym.motion.lattice_kernels import corners_supported, usable_corners
 from naruto_gym.scenes.mesh_scene import sample_mesh_surface
 from naruto_gym.sensors.raycaster import RayCaster, RayHits
 
@@ -190,6 +191,8 @@ class ScannedSpace:
         )
         # Per corner: -1 not evaluated yet, else the number of empty support sectors.
         self._empty = np.full(self.shape, -1, np.int8)
+        self._lattice_origin = np.array(self.origin)  # for the compiled lookups
+        self._lattice_shape = np.array(self.shape, np.int64)
         self.support_directions = support_directions(self.config)[0]
         self.facing_directions = cap_directions(
             self.config.facing_rays, 180.0, np.array([0, 0, 1.0])
@@ -403,29 +406,19 @@ class ScannedSpace:
         if clearances_m is None:
             clearances_m = np.zeros(len(positions))
             clearances_m[inside] = self.raycaster.unsigned_distance(positions[inside])
-        clearances_m = np.asarray(clearances_m, np.float64).reshape(-1)
-        origin = np.array(self.origin)
-        voxel = self.config.voxel_m
-        low = np.clip(
-            np.floor((positions - origin) / voxel).astype(np.int64), 0, np.array(self.shape) - 2
+        clearances_m = np.ascontiguousarray(clearances_m, np.float64).reshape(-1)
+        origin, shape, voxel = self._lattice_origin, self._lattice_shape, self.config.voxel_m
+        usable, exact, unknown = usable_corners(
+            positions, clearances_m, self.top_m, origin, voxel, shape, self._empty
         )
-        corners = low[:, None, :] + _CELL_STEPS_ARRAY[None]
-        # Term by term as in contains, so both answer alike to the last bit.
-        offset = origin + corners * voxel - positions[:, None, :]
-        distance2 = offset[..., 0] * offset[..., 0] + offset[..., 1] * offset[..., 1]
-        distance2 = distance2 + offset[..., 2] * offset[..., 2]
-        usable = (distance2 < (clearances_m * clearances_m)[:, None]) & inside[:, None]
-        exact = inside & ~usable.any(axis=1)
         if exact.any():
             inside[exact] = self.evaluate(positions[exact])
-        wanted = corners[usable]
-        unknown = self._empty[tuple(wanted.T)] < 0
-        if unknown.any():
-            self._ensure(wanted[unknown])
-        supported = np.ones(usable.shape, bool)
-        supported[usable] = self._empty[tuple(wanted.T)] <= self.config.max_empty_sectors
-        return inside & supported.all(axis=1)
+        if len(unknown):
+            self._ensure(unknown)
+        supported = corners_supported(
+            positions, usable, origin, voxel, shape, self._empty, self.config.max_empty_sectors
+        )
+        return inside & supported
 
 
 _CELL_STEPS = tuple((i, j, k) for i in (0, 1) for j in (0, 1) for k in (0, 1))
-_CELL_STEPS_ARRAY = np.array(_CELL_STEPS, np.int64)
