@@ -487,17 +487,10 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             env.np_random = rng
             pose = env._sample_start_pose()
         self._poses[i] = pose
-        samples = len(env.coverage.samples_world)
-        if samples > self._seen.shape[1]:
-            wider = np.zeros((self.num_envs, samples), bool)
-            wider[:, :self._seen.shape[1]] = self._seen
-            self._seen = wider
+        self._seen = _widened(self._seen, len(env.coverage.samples_world))
         self._seen[i] = False
         sizes = env.coverage.cell_sizes
-        if len(sizes) > self._unseen_in_cell.shape[1]:
-            wider = np.zeros((self.num_envs, len(sizes)), np.int64)
-            wider[:, :self._unseen_in_cell.shape[1]] = self._unseen_in_cell
-            self._unseen_in_cell = wider
+        self._unseen_in_cell = _widened(self._unseen_in_cell, len(sizes))
         self._unseen_in_cell[i, :len(sizes)] = sizes
         self._seen_counts[i] = 0
         self._path_length[i] = 0.0
@@ -945,6 +938,16 @@ def _mask(n: int, agents: np.ndarray) -> np.ndarray:
     mask = np.zeros(n, bool)
     mask[np.asarray(agents, np.int64)] = True
     return mask
+
+
+def _widened(array: np.ndarray, columns: int) -> np.ndarray:
+    """``array`` (a row per agent) with at least ``columns`` columns, the new ones zero: a
+    stream's next scene may have more samples or cells than any before."""
+    if columns <= array.shape[1]:
+        return array
+    wider = np.zeros((len(array), columns), array.dtype)
+    wider[:, :array.shape[1]] = array
+    return wider
 
 
 def _groups(scenes: list, agents: np.ndarray, selected: np.ndarray) -> list[np.ndarray]:
