@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import gymnasium as gym
@@ -290,8 +291,6 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         # Shares of the agents per part of a split step, adapted step by step so that the
         # parts finish together (:func:`share_bounds`, :func:`balanced_shares`).
         self._shares: np.ndarray | None = None
-        # The frames a split step's parts copied out for its observations (_observations).
-        self._prepared: dict[str, np.ndarray] | None = None
         self._intrinsics = self.camera.as_dict()
         self._discrete_zeros = np.zeros(n, np.int64)
         self._continuous_zeros = np.zeros((n, 7))
@@ -352,6 +351,13 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         indices = np.flatnonzero(mask)
         self._validate_reset_options(options, indices)
         self._reset_agents(indices, [seeds[i] for i in indices], options)
+        others = np.flatnonzero(~mask)
+        self._new_frame_buffers(keep=None if self._started else ~mask)
+        if self._started and len(others):
+            # The frames of the agents not reset were handed out with the last observations
+            # (the caller may have changed them): drawn again, the same frames.
+            for group in _groups(self._scenes, others, np.ones(len(others), bool)):
+                self._render(others[group], np.zeros(len(group), bool))
         gains = np.zeros(self.num_envs)
         gains[indices] = self._observe(indices, None)
         self._autoreset[indices] = False
@@ -374,6 +380,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         ) else everyone[:0]
         stepping = everyone[~np.isin(everyone, resetting)]
         self._reset_agents(resetting, [None] * len(resetting), {})
+        self._new_frame_buffers()  # every agent's frame is drawn anew
         moves, gains = self._move_and_observe(stepping, discrete, continuous)
         collided = np.zeros(n, bool)
         reasons = np.full(n, "", dtype=object)
@@ -403,6 +410,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                 final_obs[i] = {key: value[i] for key, value in observations.items()}
                 final_infos = self._add_info(final_infos, agent_info(infos, int(i)), int(i))
             self._reset_agents(done, [None] * len(done), {})
+            # The final observations stay as they are: the new episodes' first frames go
+            # into new buffers, the other agents' frames copied over.
+            self._new_frame_buffers(keep=~_mask(n, done))
             reset_gains = np.zeros(n)
             reset_gains[done] = self._observe(done, None)
             reset_infos = self._infos(done, reset_gains, np.zeros(n, bool),
@@ -589,8 +599,6 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         moved = [threading.Event() for _ in range(parts)]
         started = time.perf_counter()
         finished = np.zeros(parts)
-        # Each part also copies its agents' frames out for the step's observations.
-        prepared = {"rgb": np.empty_like(self._rgb), "depth": np.empty_like(self._depth)}
 
         def run(part: int) -> tuple[_Moves, np.ndarray]:
             agents = np.arange(bounds[part], bounds[part + 1])
@@ -601,17 +609,15 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                     stepping[(stepping >= bounds[part]) & (stepping < bounds[part + 1])],
                     discrete, continuous,
                 )
+                # The next part moves once this one's frames start (they release the GIL):
+                # its Python until then would only wait for this part's.
+                gains = self._observe(agents, moves, part, frames_start=moved[part].set)
             finally:
                 moved[part].set()
-            gains = self._observe(agents, moves, part)
-            rows = slice(bounds[part], bounds[part + 1])
-            prepared["rgb"][rows] = self._rgb[rows]
-            prepared["depth"][rows] = self._depth[rows]
             finished[part] = time.perf_counter() - started
             return moves, gains
 
         shares = run_parallel(run, parts)
-        self._prepared = prepared
         self._shares = balanced_shares(self._shares, finished, self._min_agents_per_part / n)
         return _Moves.joined([moves for moves, _ in shares]), np.concatenate(
             [gains for _, gains in shares]
@@ -727,14 +733,15 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
 
     # -- observation -----------------------------------------------------------------------
     def _observe(
-        self, agents: np.ndarray, moves: _Moves | None, part: int | None = None
+        self, agents: np.ndarray, moves: _Moves | None, part: int | None = None,
+        frames_start: Callable[[], None] | None = None,
     ) -> np.ndarray:
         """Render ``agents`` at their poses (one cast per scene, with the escape rays of the
         agents ``moves`` flags), undo refused moves, update path length and coverage.
         Returns each agent's coverage gain. ``part``: the share of the step this runs as
-        (:meth:`_move_and_observe`; its compiled loops then stay in the calling thread)."""
+        (:meth:`_move_and_observe`; its compiled loops then stay in the calling thread);
+        ``frames_start``: called once, as the first frames are drawn."""
         threads = self._threads if part is None else 1
-        self._prepared = None  # frames change: copies made before are stale
         agents = np.asarray(agents, np.int64)
         gains = np.zeros(len(agents))
         if len(agents) == 0:
@@ -745,7 +752,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         refused: list[int] = []
         for group in _groups(self._scenes, agents, np.ones(len(agents), bool)):
             members = agents[group]
-            refused += self._render(members, escape[members], part)
+            refused += self._render(members, escape[members], part, frames_start)
+            frames_start = None
         if refused:
             # A refused move stays at its start (with the new rotation): render it there.
             lookup = {int(a): k for k, a in enumerate(moves.agents)}
@@ -788,7 +796,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         return gains
 
     def _render(
-        self, members: np.ndarray, escape: np.ndarray, part: int | None = None
+        self, members: np.ndarray, escape: np.ndarray, part: int | None = None,
+        frames_start: Callable[[], None] | None = None,
     ) -> list[int]:
         """Render agents of one scene with one cast that carries their pinhole rays, their
         observation panorama rays and the first escape-check rays of the agents flagged in
@@ -797,7 +806,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         With the rasterizing pinhole backend the frames are rasterized (the single env's
         renderer) and the cast carries only the panorama rays. ``part``: as for
         :meth:`_observe` (the frames are drawn in the calling thread with that share's
-        rasterizer).
+        rasterizer); ``frames_start``: as for :meth:`_observe`.
         """
         env = self._scenes[members[0]]
         camera = self.camera
@@ -826,6 +835,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         if len(escapers):
             fill_panorama_rays(order[:first], np.ascontiguousarray(positions32[escape]), rays,
                                escape_offset)
+        if frames_start is not None:
+            frames_start()
         hits = env.raycaster.cast_packed(rays) if len(rays) else None
         self._count_rays(len(rays))
 
@@ -882,17 +893,30 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         return [int(a) for a in escapers[undecided][shares > threshold]]
 
     def _observations(self) -> dict[str, np.ndarray]:
-        """Copies of the agents' observations (made by the parts of a split step, in their
-        threads, when the step was split and nothing was observed since)."""
-        prepared, self._prepared = self._prepared, None
+        """The agents' observations: the frame buffers themselves, handed out (every reset
+        and step draws into new ones, :meth:`_new_frame_buffers`, so what the caller holds
+        never changes)."""
         observations = {
-            "rgb": prepared["rgb"] if prepared is not None else self._rgb.copy(),
-            "depth": prepared["depth"] if prepared is not None else self._depth.copy(),
+            "rgb": self._rgb,
+            "depth": self._depth,
             "pose": self._poses.astype(np.float32),
         }
         if self._panorama is not None:
-            observations["panorama"] = self._panorama.copy()
+            observations["panorama"] = self._panorama
         return observations
+
+    def _new_frame_buffers(self, keep: np.ndarray | None = None) -> None:
+        """New frame buffers (those of the last observations belong to the caller now), with
+        the frames of the agents ``keep`` flags copied over."""
+        buffers = [self._rgb, self._depth] + ([self._panorama] if self._panorama is not None
+                                              else [])
+        fresh = [np.empty_like(buffer) for buffer in buffers]
+        if keep is not None:
+            for old, new in zip(buffers, fresh, strict=True):
+                new[keep] = old[keep]
+        self._rgb, self._depth = fresh[0], fresh[1]
+        if self._panorama is not None:
+            self._panorama = fresh[2]
 
     # -- infos -----------------------------------------------------------------------------
     def _infos(

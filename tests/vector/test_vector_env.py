@@ -155,6 +155,45 @@ def test_partial_reset_mask_and_seeds_list():
     assert not np.allclose(after["pose"][2], first["pose"][2])
 
 
+@pytest.mark.parametrize("split", [False, True])
+def test_observations_handed_out_never_change_afterwards(split):
+    """The env hands out its frame buffers without copying them and draws every step into
+    new ones: what a caller holds (a rollout buffer, the final observations of ended
+    episodes) stays as it was returned, and a caller changing it changes nothing the env
+    returns later."""
+    vector = NarutoReconVectorEnv(3, max_episode_steps=4, autoreset_mode=AutoresetMode.SAME_STEP,
+                                  **{**SMALL, "pinhole_backend": "auto"})
+    if split:
+        vector._threads, vector._min_agents_per_part, vector._split_steps = 2, 1, True
+    rng = np.random.default_rng(4)
+    held = [vector.reset(seed=1)[0]]
+    finals = []
+    for _ in range(9):
+        observation, _, terminated, truncated, infos = vector.step(rng.integers(0, 10, 3))
+        held.append(observation)
+        if (terminated | truncated).any():
+            finals += [final for final in infos["final_obs"] if final is not None]
+    assert finals, "no episode ended: the final observations went untested"
+    copies = [{key: value.copy() for key, value in obs.items()} for obs in held]
+    final_copies = [{key: value.copy() for key, value in obs.items()} for obs in finals]
+    for _ in range(3):
+        vector.step(rng.integers(0, 10, 3))
+    for obs, copy in zip(held + finals, copies + final_copies, strict=True):
+        for key in obs:
+            np.testing.assert_array_equal(obs[key], copy[key], err_msg=key)
+    # A caller scribbling over the last observations: a partial reset redraws the others.
+    last = held[-1]
+    expected = {key: value.copy() for key, value in vector.step(np.zeros(3, int))[0].items()}
+    after_step = vector._observations()
+    for key in ("rgb", "depth", "panorama"):
+        after_step[key][...] = 0
+    after, _ = vector.reset(seed=[None, 8, None], options={"reset_mask": np.array([0, 1, 0], bool)})
+    for key in ("rgb", "depth", "panorama"):
+        np.testing.assert_array_equal(after[key][[0, 2]], expected[key][[0, 2]], err_msg=key)
+        assert after[key] is not after_step[key]
+    assert not np.array_equal(last["pose"], after["pose"])
+
+
 def test_make_vec_vector_entry_point_returns_batched_env():
     env = gym.make_vec("NarutoRecon-v0", num_envs=2,
                        vectorization_mode="vector_entry_point", **SMALL)
