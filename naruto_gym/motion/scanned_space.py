@@ -24,8 +24,9 @@ orientation, so meshes with flipped normals (common in CAD-made scenes) are judg
 other. Start poses and viewpoints, drawn once, also reject points inside solids by the
 published free-space test's facing criterion (:meth:`ScannedSpace.is_inside`).
 
-Evaluating a point casts up to 112 rays (16 where the steepest ring already sees surface all
-around, as above any floor), too many to repeat at every step of a fast env.
+Evaluating a point casts up to 112 rays (8, one per sector of the steepest ring, where those
+already see surface all around, as above any floor), too many to repeat at every step of a
+fast env.
 :class:`ScannedSpace` therefore evaluates the corners of a lattice (``voxel_m`` = 5 cm) once,
 lazily, the first time a query needs them, and answers a query from the corners of its cell
 that lie within its clearance (the ball around it that no surface enters, so no wall
@@ -193,7 +194,15 @@ class ScannedSpace:
         self._empty = np.full(self.shape, -1, np.int8)
         self._lattice_origin = np.array(self.origin)  # for the compiled lookups
         self._lattice_shape = np.array(self.shape, np.int64)
-        self.support_directions = support_directions(self.config)[0]
+        self.support_directions, sectors = support_directions(self.config)
+        # The staged probe of empty_sectors: first one ray per sector of the steepest ring,
+        # then every other ray, sector after sector.
+        per_ring = self.config.support_sectors * self.config.rays_per_sector
+        leading = np.arange(0, per_ring, self.config.rays_per_sector)
+        others = np.setdiff1d(np.arange(len(sectors)), leading)
+        others = others[np.argsort(sectors[others], kind="stable")]
+        self._leading_directions = np.ascontiguousarray(self.support_directions[leading])
+        self._other_directions = np.ascontiguousarray(self.support_directions[others])
         self.facing_directions = cap_directions(
             self.config.facing_rays, 180.0, np.array([0, 0, 1.0])
         )
@@ -246,20 +255,22 @@ class ScannedSpace:
         """Empty support sectors below (N, 3) points: :meth:`probe`'s first answer, casting
         fewer rays.
 
-        The steepest ring goes first: above a floor it sees surface in every sector, and
-        then the other rings cannot change the answer. Only points it leaves undecided
-        (over a hole, past an edge) cast the remaining rings.
+        One ray per sector of the steepest ring goes first: above a floor each finds
+        surface, and then no other ray can change the answer (a sector is seen when any of
+        its rays hits). Only points it leaves undecided (over a hole, past an edge) cast the
+        other rays.
         """
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
-        per_ring = self.config.support_sectors * self.config.rays_per_sector
-        first, rest = self.support_directions[:per_ring], self.support_directions[per_ring:]
-        hit = self._cast_from(positions, first).hit_mask.reshape(len(positions), per_ring)
-        seen = self._seen_sectors(hit)
+        sectors = self.config.support_sectors
+        seen = self._cast_from(positions, self._leading_directions).hit_mask.reshape(
+            len(positions), sectors
+        )
         undecided = np.flatnonzero(~seen.all(axis=1))
-        if len(undecided) and len(rest):
-            more = self._cast_from(positions[undecided], rest).hit_mask
-            seen[undecided] |= self._seen_sectors(more.reshape(len(undecided), len(rest)))
-        return self.config.support_sectors - seen.sum(axis=1)
+        others = self._other_directions
+        if len(undecided) and len(others):
+            more = self._cast_from(positions[undecided], others).hit_mask
+            seen[undecided] |= more.reshape(len(undecided), sectors, -1).any(axis=2)
+        return sectors - seen.sum(axis=1)
 
     def front_facing_share(self, position: np.ndarray) -> float:
         """Share of the surfaces seen all around ``position`` that face it (1 when none)."""
