@@ -60,7 +60,7 @@ def dataclass_parser(
             )
         elif get_origin(kind) in (list, tuple):
             element = get_args(kind)[0]
-            parser.add_argument(flag, nargs="+", type=element, default=default, help=help_text)
+            parser.add_argument(flag, nargs="*", type=element, default=default, help=help_text)
         else:
             element = next((a for a in get_args(kind) if a is not type(None)), kind)
             parser.add_argument(flag, type=element, default=default, help=help_text)

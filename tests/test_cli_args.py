@@ -33,6 +33,8 @@ def test_defaults_and_types():
         ["--steps", "3", "--scale", "0.25", "--scenes", "a", "b", "--no-plots", "--device", "cpu"],
     )
     assert args == ExampleArgs(3, 0.25, ["a", "b"], False, "cpu")
+    # A list flag given without values is an empty list (benchmarks: "empty: none").
+    assert parse_dataclass_args(ExampleArgs, ["--scenes"]).scenes == []
 
 
 def test_help_text_comes_from_field_docstrings():
