@@ -39,13 +39,13 @@ def usable_corners(
     Returns:
         ``usable`` ((N, 8) bool: the corners of the point's cell closer to it than its
         clearance, in ``_CELL_STEPS`` order), ``exact`` ((N,) bool: points below the top with
-        no usable corner, which need an exact evaluation) and ``unknown`` ((K, 3) int64: usable
-        corners not evaluated yet, possibly repeated).
+        no usable corner, which need an exact evaluation) and ``unknown`` ((K, 3) int64: the
+        distinct usable corners not evaluated yet, in lattice (flat index) order).
     """
     count = positions.shape[0]
     usable = np.zeros((count, 8), np.bool_)
     exact = np.zeros(count, np.bool_)
-    unknown = np.empty((count * 8, 3), np.int64)
+    flat = np.empty(count * 8, np.int64)  # flat lattice indices of the unknown corners
     found = 0
     for point in range(count):
         x, y, z = positions[point, 0], positions[point, 1], positions[point, 2]
@@ -68,11 +68,23 @@ def usable_corners(
                         usable[point, step] = True
                         any_usable = True
                         if empty[i, j, k] < 0:
-                            unknown[found, 0], unknown[found, 1], unknown[found, 2] = i, j, k
+                            flat[found] = (i * shape[1] + j) * shape[2] + k
                             found += 1
                     step += 1
         exact[point] = not any_usable
-    return usable, exact, unknown[:found]
+    # Neighbouring points share corners: each is evaluated once.
+    flat = np.sort(flat[:found])
+    unknown = np.empty((found, 3), np.int64)
+    distinct = 0
+    for entry in range(found):
+        if entry and flat[entry] == flat[entry - 1]:
+            continue
+        index = flat[entry]
+        unknown[distinct, 2] = index % shape[2]
+        unknown[distinct, 1] = (index // shape[2]) % shape[1]
+        unknown[distinct, 0] = index // (shape[1] * shape[2])
+        distinct += 1
+    return usable, exact, unknown[:distinct]
 
 
 @numba.njit(cache=True, nogil=True)

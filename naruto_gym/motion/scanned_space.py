@@ -47,6 +47,7 @@ import numpy as np
 
 from naruto_gym.motion.lattice_kernels import corners_supported, usable_corners
 from naruto_gym.scenes.mesh_scene import sample_mesh_surface
+from naruto_gym.sensors.kernels import fill_panorama_rays
 from naruto_gym.sensors.raycaster import RayCaster, RayHits
 
 _GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
@@ -237,10 +238,10 @@ class ScannedSpace:
 
     def _cast_from(self, positions: np.ndarray, directions: np.ndarray) -> RayHits:
         """One cast of ``directions`` from every point of (N, 3) ``positions``, point-major."""
-        return self.raycaster.cast(
-            np.repeat(positions.astype(np.float32), len(directions), axis=0),
-            np.tile(directions, (len(positions), 1)),
-        )
+        rays = np.empty((len(positions) * len(directions), 6), np.float32)
+        fill_panorama_rays(np.ascontiguousarray(directions, np.float32),
+                           np.ascontiguousarray(positions, np.float32), rays, 0)
+        return self.raycaster.cast_packed(rays)
 
     def _seen_sectors(self, hit: np.ndarray) -> np.ndarray:
         """(N, sectors) bool: which sectors some ray of ``hit`` found surface in; ``hit``
@@ -334,8 +335,11 @@ class ScannedSpace:
         if unknown.any():
             # Distinct corners through their flat index (np.unique over rows is much slower).
             flat = np.unique(np.ravel_multi_index(tuple(index[unknown].T), self._empty.shape))
-            todo = np.stack(np.unravel_index(flat, self._empty.shape), axis=1)
-            self._empty[tuple(todo.T)] = self.empty_sectors(self._corner_points(todo))
+            self._evaluate(np.stack(np.unravel_index(flat, self._empty.shape), axis=1))
+
+    def _evaluate(self, corners: np.ndarray) -> None:
+        """Evaluate the distinct lattice corners (K, 3)."""
+        self._empty[tuple(corners.T)] = self.empty_sectors(self._corner_points(corners))
 
     def fill(self, batch: int = 4096) -> None:
         """Evaluate every lattice corner now (for maps and statistics; the env never needs it)."""
@@ -425,7 +429,7 @@ class ScannedSpace:
         if exact.any():
             inside[exact] = self.evaluate(positions[exact])
         if len(unknown):
-            self._ensure(unknown)
+            self._evaluate(unknown)  # distinct and not evaluated yet
         supported = corners_supported(
             positions, usable, origin, voxel, shape, self._empty, self.config.max_empty_sectors
         )

@@ -42,30 +42,6 @@ def fill_pinhole_rays(
 
 
 @numba.njit(cache=True, nogil=True)
-def fill_panorama_rays(
-    directions: np.ndarray, positions: np.ndarray, rays: np.ndarray, offset: int
-) -> None:
-    """Write world-aligned panorama rays of every position into ``rays[offset:]``.
-
-    Args:
-        directions: (P, 3) float32 unit world directions.
-        positions: (N, 3) float32 ray origins.
-        rays: float32 ray buffer, position ``i`` at ``offset + i * P``.
-        offset: first row of the block.
-    """
-    count = directions.shape[0]
-    for i in range(positions.shape[0]):
-        start = offset + i * count
-        for k in range(count):
-            rays[start + k, 0] = positions[i, 0]
-            rays[start + k, 1] = positions[i, 1]
-            rays[start + k, 2] = positions[i, 2]
-            rays[start + k, 3] = directions[k, 0]
-            rays[start + k, 4] = directions[k, 1]
-            rays[start + k, 5] = directions[k, 2]
-
-
-@numba.njit(cache=True, nogil=True)
 def mark_visible_batch(
     samples_world: np.ndarray,
     order: np.ndarray,

@@ -47,11 +47,11 @@ from naruto_gym.scenes.stream import (
     is_procedural_name,
     parse_procedural_name,
 )
+from naruto_gym.sensors.kernels import fill_panorama_rays
 from naruto_gym.sensors.pinhole import AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED
 from naruto_gym.sensors.rasterizer import default_thread_count, run_parallel
 from naruto_gym.vector.batch_kernels import (
     PROVABLY_CLEAR_SLACK_M,
-    fill_panorama_rays,
     fill_pinhole_rays,
     mark_visible_batch,
     no_hit_counts,
