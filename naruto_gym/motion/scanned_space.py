@@ -238,10 +238,18 @@ class ScannedSpace:
 
     def _cast_from(self, positions: np.ndarray, directions: np.ndarray) -> RayHits:
         """One cast of ``directions`` from every point of (N, 3) ``positions``, point-major."""
+        return self.raycaster.cast_packed(self._rays_from(positions, directions))
+
+    def _hits_from(self, positions: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Whether each of those rays hits anything: (N * R,) bool, a cheaper query."""
+        return self.raycaster.hits_any_packed(self._rays_from(positions, directions))
+
+    @staticmethod
+    def _rays_from(positions: np.ndarray, directions: np.ndarray) -> np.ndarray:
         rays = np.empty((len(positions) * len(directions), 6), np.float32)
         fill_panorama_rays(np.ascontiguousarray(directions, np.float32),
                            np.ascontiguousarray(positions, np.float32), rays, 0)
-        return self.raycaster.cast_packed(rays)
+        return rays
 
     def _seen_sectors(self, hit: np.ndarray) -> np.ndarray:
         """(N, sectors) bool: which sectors some ray of ``hit`` found surface in; ``hit``
@@ -263,13 +271,13 @@ class ScannedSpace:
         """
         positions = np.asarray(positions, np.float64).reshape(-1, 3)
         sectors = self.config.support_sectors
-        seen = self._cast_from(positions, self._leading_directions).hit_mask.reshape(
+        seen = self._hits_from(positions, self._leading_directions).reshape(
             len(positions), sectors
         )
         undecided = np.flatnonzero(~seen.all(axis=1))
         others = self._other_directions
         if len(undecided) and len(others):
-            more = self._cast_from(positions[undecided], others).hit_mask
+            more = self._hits_from(positions[undecided], others)
             seen[undecided] |= more.reshape(len(undecided), sectors, -1).any(axis=2)
         return sectors - seen.sum(axis=1)
 

@@ -160,6 +160,18 @@ class RayCaster:
         uv = np.stack([result["u"], result["v"]], axis=1).astype(np.float32)
         return RayHits(distance, triangle_ids, uv)
 
+    def hits_any_packed(self, rays: np.ndarray) -> np.ndarray:
+        """Whether each ray of (N, 6) float32 ``rays`` hits the mesh at all, (N,) bool: the
+        ``hit_mask`` of :meth:`cast_packed`, about twice as fast with Open3D (an occlusion
+        query stops at the first triangle found, not the nearest)."""
+        rays = np.ascontiguousarray(rays, dtype=np.float32)
+        if self.backend == "open3d":
+            scene = self.native_scene  # built first: it imports Open3D
+            return scene.test_occlusions(self._o3d.core.Tensor.from_numpy(rays)).numpy().astype(
+                bool
+            )
+        return self.cast_packed(rays).hit_mask
+
     def cast_distance(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Only the first-hit distance of each ray ((N,) float32, ``inf`` for no hit)."""
         return self.cast(origins, directions).distance

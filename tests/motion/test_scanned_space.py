@@ -119,11 +119,19 @@ def test_lattice_agrees_with_exact_test_away_from_the_boundary(room):
     assert not room.contains_many(points[outer]).any()
 
 
+def _count_casts(raycaster: RayCaster, calls: list[int]) -> None:
+    """Append the ray count of every cast (first hits or any hit: all rays go through these
+    two) to ``calls``."""
+    for name in ("cast_packed", "hits_any_packed"):
+        query = getattr(raycaster, name)
+        setattr(raycaster, name,
+                lambda rays, query=query: calls.append(len(rays)) or query(rays))
+
+
 def test_a_visited_cell_is_answered_without_casting():
     space = _space(_open_top_room())
     calls = []
-    cast = space.raycaster.cast_packed  # every cast goes through it
-    space.raycaster.cast_packed = lambda *args: calls.append(1) or cast(*args)
+    _count_casts(space.raycaster, calls)
     position = np.array([0.31, -0.42, 1.23])
     assert space.contains(position)
     assert len(calls) == 1
@@ -239,8 +247,7 @@ def test_batched_query_answers_as_the_point_query_with_one_cast_per_batch():
                          zip(points, clearances, strict=True)])
     assert 0.2 < expected.mean() < 0.8  # both answers are well represented
     calls = []
-    cast = batched.raycaster.cast_packed  # every cast goes through it
-    batched.raycaster.cast_packed = lambda *args: calls.append(len(args[0])) or cast(*args)
+    _count_casts(batched.raycaster, calls)
     np.testing.assert_array_equal(batched.contains_many(points, clearances), expected)
     # New corners in one staged probe (steepest ring, then the rest where needed), corner-less
     # points in one more.

@@ -39,6 +39,23 @@ def test_both_backends_agree():
     np.testing.assert_array_equal(a.triangle_ids, b.triangle_ids)
 
 
+def test_any_hit_query_is_the_cast_hit_mask(box_caster):
+    """hits_any_packed (an occlusion query with Open3D) answers as the first-hit cast does,
+    from inside, outside and on the surface, along and across the faces."""
+    rng = np.random.default_rng(3)
+    origins = np.concatenate([
+        rng.uniform(-3.0, 3.0, size=(2000, 3)),
+        rng.uniform(-1.0, 1.0, size=(500, 3)) * np.array([1.0, 1.0, 0.0]) + [0, 0, 1.0],
+    ])
+    directions = rng.normal(size=(len(origins), 3))
+    directions[::5] = [0.0, 0.0, -1.0]
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    rays = np.concatenate([origins, directions], axis=1).astype(np.float32)
+    expected = box_caster.cast_packed(rays).hit_mask
+    assert 0.2 < expected.mean() < 0.9
+    np.testing.assert_array_equal(box_caster.hits_any_packed(rays), expected)
+
+
 def test_free_fraction_stops_before_wall(box_caster):
     # From the centre towards the +x face at 1 m with a 0.1 m sphere: free up to 0.9 m.
     fraction = box_caster.free_fraction_of_segment(np.zeros(3), np.array([2.0, 0, 0]), 0.1)
