@@ -31,7 +31,8 @@ A frame is made in these passes:
    positions (float64) from pass 1 and from them get their edge planes,
    inverse-depth plane and barycentric planes, all in pixel units, and the image rows they
    can cover (corners clipped to ``z >= NEAR_PLANE_M`` and projected), packed into a list;
-3. binning: which packed triangles touch each band of ``BAND_ROWS`` image rows;
+3. binning: which packed triangles touch each band of ``BAND_ROWS`` image rows (a small
+   frame drawn in one thread is one band, ``SINGLE_BAND_MAX_BYTES``);
 4. drawing (bands dealt out to the threads in turn): per row of a triangle, the span of
    columns where all three edge planes are non-negative (a bound per edge, from its plane),
    each pixel of it kept when its inverse depth beats the band's z-buffer; then, per pixel of
@@ -72,6 +73,11 @@ _BOX_MARGIN_PX = 1e-6
 
 # Image rows drawn together: a band's z-buffer (16 x 1200 x 12 bytes) stays in the L2 cache.
 BAND_ROWS = 16
+
+# Frames drawn in one thread (render_frames) whose whole z-buffer takes at most this many bytes
+# are drawn as one band: no triangle is read once per band (64 x 64 frames 1.03x, 128 x 128
+# 1.07x faster than in bands of 16 rows).
+SINGLE_BAND_MAX_BYTES = 256 * 1024
 
 # Neighbouring triangles culled together against the view volume (pass 0).
 CLUSTER_FACES = 64
@@ -945,6 +951,13 @@ class PinholeRasterizer:
         tall = max(cy + 1.0, self.height - cy) / fy
         return max(1e-3, 10.0 * NEAR_PLANE_M * float(np.sqrt(1.0 + wide**2 + tall**2)))
 
+    @property
+    def _frame_band_rows(self) -> int:
+        """Rows per band of the frames :func:`render_frames` draws: the whole frame when its
+        z-buffer is small (``SINGLE_BAND_MAX_BYTES``)."""
+        whole = self.width * self.height * 12 <= SINGLE_BAND_MAX_BYTES
+        return self.height if whole else BAND_ROWS
+
     def _scratch(self) -> tuple[np.ndarray, ...]:
         if self._buffers is None:
             count = len(self.faces)
@@ -954,8 +967,10 @@ class PinholeRasterizer:
                 np.empty((count, _RECORD_FLOATS), np.float64),
                 np.empty((count, 6), np.float64),
                 np.empty((count, 3), np.int64),
-                np.empty((self.threads, BAND_ROWS, self.width), np.float64),
-                np.empty((self.threads, BAND_ROWS, self.width), np.int32),
+                np.empty((self.threads, max(BAND_ROWS, self._frame_band_rows), self.width),
+                         np.float64),
+                np.empty((self.threads, max(BAND_ROWS, self._frame_band_rows), self.width),
+                         np.int32),
                 np.zeros(len(self.vertices) + 1, np.int64),
             )
         return self._buffers
@@ -994,8 +1009,9 @@ class PinholeRasterizer:
             render_frames(
                 self.vertex_columns, pose[None], self.intrinsics, self.width,
                 self.height, far_cut, nearest, max_depth, barycentrics, *self._clusters(),
-                outcodes, projections, records, hit_planes, record_rows, stamps, inverse_depth[0],
-                winners[0], depth, triangle_ids, uv,
+                outcodes, projections, records, hit_planes, record_rows, stamps,
+                inverse_depth[0, :self._frame_band_rows], winners[0, :self._frame_band_rows],
+                depth, triangle_ids, uv,
             )
             return depth[0], triangle_ids, (uv if barycentrics else None)
         groups = self.threads
@@ -1031,7 +1047,8 @@ class PinholeRasterizer:
         def draw(group: int) -> None:
             draw_bands(
                 records, hit_planes, record_rows, band_starts, entries, group, groups, nearest,
-                max_depth, barycentrics, inverse_depth[group], winners[group], depth,
+                max_depth, barycentrics, inverse_depth[group, :BAND_ROWS],
+                winners[group, :BAND_ROWS], depth,
                 triangle_ids, uv,
             )
 
@@ -1073,7 +1090,8 @@ class PinholeRasterizer:
         render_frames(
             self.vertex_columns, poses, self.intrinsics, self.width, self.height,
             far_cut, nearest, max_depth, True, *self._clusters(), outcodes, projections,
-            records, hit_planes, record_rows, stamps, inverse_depth[0], winners[0], depth,
+            records, hit_planes, record_rows, stamps, inverse_depth[0, :self._frame_band_rows],
+            winners[0, :self._frame_band_rows], depth,
             triangle_ids, barycentric_uv,
         )
 
