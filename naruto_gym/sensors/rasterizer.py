@@ -715,6 +715,8 @@ def render_frames(
     clusters = spheres.shape[0]
     vertex_count = columns.shape[1]
     segments = np.zeros((1, 2), np.int64)
+    whole_band = np.zeros(2, np.int64)
+    every_record = np.arange(cluster_faces.shape[0], dtype=np.int32)
     seen = np.empty(clusters, np.int64)
     for frame in range(poses.shape[0]):
         rotation = np.ascontiguousarray(poses[frame, :3, :3])
@@ -762,8 +764,14 @@ def render_frames(
             for slot in range(used, used + count):  # the mesh's own triangle ids
                 scratch_record_rows[slot, 0] = cluster_order[scratch_record_rows[slot, 0]]
             used += count
-        segments[0, 1] = used
-        band_starts, entries = bin_records(scratch_record_rows, segments, band_rows, band_count)
+        if band_count == 1:  # one band holds every record, in order
+            whole_band[1] = used
+            band_starts, entries = whole_band, every_record[:used]
+        else:
+            segments[0, 1] = used
+            band_starts, entries = bin_records(
+                scratch_record_rows, segments, band_rows, band_count
+            )
         first = frame * pixels
         draw_bands(
             scratch_records, scratch_hit_planes, scratch_record_rows, band_starts, entries, 0, 1,
