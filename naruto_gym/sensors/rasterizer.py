@@ -19,7 +19,8 @@ A frame is made in these passes:
    outside a side of the view volume is skipped, vertices and triangles: every corner of its
    triangles would get that side's outcode bit, so the frame is the same (only a share of
    a room is in view of a 90-degree camera, and the passes below cost per vertex and per
-   triangle);
+   triangle); within a cluster seen, each group of ``SUBCLUSTER_FACES`` is tested alike
+   before its triangles are set up (64 x 64 frames of generated rooms 1.1x faster);
 1. vertices (split between the threads; small frames: all of them in vectorized loops, or
    those of the clusters in view one at a time when they are under a quarter): the
    camera-frame position, the image position and an outcode per vertex, one bit per side of
@@ -79,8 +80,10 @@ BAND_ROWS = 16
 # 1.07x faster than in bands of 16 rows).
 SINGLE_BAND_MAX_BYTES = 256 * 1024
 
-# Neighbouring triangles culled together against the view volume (pass 0).
+# Neighbouring triangles culled together against the view volume (pass 0), then in groups of
+# SUBCLUSTER_FACES within the clusters seen: a quarter of a cluster is culled more often.
 CLUSTER_FACES = 64
+SUBCLUSTER_FACES = 16
 
 # A cluster is culled only when its sphere lies this much (relative, plus 1 um) outside a
 # side: the vertices' own outcodes are computed another way, and rounding must not cull a
@@ -220,6 +223,20 @@ def triangle_clusters(
     return order, spheres, starts, used.astype(np.int32)
 
 
+def group_spheres(vertices: np.ndarray, faces: np.ndarray, size: int) -> np.ndarray:
+    """(G, 4) float64 bounding spheres (centre, radius) of the consecutive groups of ``size``
+    triangles of ``faces`` (the last may hold fewer), centred on their corners' box."""
+    corners = np.asarray(vertices, np.float64)[np.asarray(faces)].reshape(-1, 3)
+    starts = np.arange(0, len(corners), 3 * size)
+    centres = 0.5 * (np.minimum.reduceat(corners, starts) + np.maximum.reduceat(corners, starts))
+    groups = np.arange(len(corners)) // (3 * size)
+    reach = ((corners - centres[groups]) ** 2).sum(axis=1)
+    spheres = np.empty((len(starts), 4))
+    spheres[:, :3] = centres
+    spheres[:, 3] = np.sqrt(np.maximum.reduceat(reach, starts))
+    return spheres
+
+
 def closed_solids(
     vertices: np.ndarray, faces: np.ndarray, margin_m: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -297,6 +314,22 @@ def closed_solids(
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
+def view_side_planes(intrinsics: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(4, 2) float64 unit normals, pointing into the view volume, of its left, right, top
+    and bottom sides (the outcode planes of :func:`vertex_outcodes`), each as the (x or y, z)
+    coefficients of a camera-frame point's signed distance (x for the first two)."""
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    sides = np.array([
+        [fx, cx + 1.0], [-fx, width - cx], [fy, cy + 1.0], [-fy, height - cy],
+    ])
+    for side in range(4):
+        norm = np.sqrt(sides[side, 0] ** 2 + sides[side, 1] ** 2)
+        sides[side, 0] /= norm
+        sides[side, 1] /= norm
+    return sides
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def cluster_may_be_seen(
     spheres: np.ndarray, cluster: int, rotation: np.ndarray, origin: np.ndarray,
     intrinsics: np.ndarray, width: int, height: int, far_cut: float,
@@ -304,7 +337,18 @@ def cluster_may_be_seen(
     """False when the cluster's bounding sphere lies wholly outside one side of the view
     volume (the outcode planes of :func:`vertex_outcodes`): every corner of its triangles
     then has that side's bit, and the setup pass would drop every one of them."""
-    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    return sphere_may_be_seen(
+        spheres, cluster, rotation, origin, view_side_planes(intrinsics, width, height),
+        far_cut,
+    )
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def sphere_may_be_seen(
+    spheres: np.ndarray, cluster: int, rotation: np.ndarray, origin: np.ndarray,
+    sides: np.ndarray, far_cut: float,
+) -> bool:
+    """:func:`cluster_may_be_seen` with the frame's :func:`view_side_planes` given."""
     dx = spheres[cluster, 0] - origin[0]
     dy = spheres[cluster, 1] - origin[1]
     dz = spheres[cluster, 2] - origin[2]
@@ -315,10 +359,10 @@ def cluster_may_be_seen(
     if z + reach < NEAR_PLANE_M or z - reach > far_cut:
         return False
     # Signed distances to the side planes (unit normals pointing into the view volume).
-    left = (fx * x + (cx + 1.0) * z) / np.sqrt(fx * fx + (cx + 1.0) * (cx + 1.0))
-    right = ((width - cx) * z - fx * x) / np.sqrt(fx * fx + (width - cx) * (width - cx))
-    top = (fy * y + (cy + 1.0) * z) / np.sqrt(fy * fy + (cy + 1.0) * (cy + 1.0))
-    bottom = ((height - cy) * z - fy * y) / np.sqrt(fy * fy + (height - cy) * (height - cy))
+    left = sides[0, 0] * x + sides[0, 1] * z
+    right = sides[1, 0] * x + sides[1, 1] * z
+    top = sides[2, 0] * y + sides[2, 1] * z
+    bottom = sides[3, 0] * y + sides[3, 1] * z
     return min(min(left, right), min(top, bottom)) >= -reach
 
 
@@ -673,6 +717,7 @@ def render_frames(
     cluster_faces: np.ndarray,
     cluster_order: np.ndarray,
     spheres: np.ndarray,
+    sub_spheres: np.ndarray,
     cluster_vertex_starts: np.ndarray,
     cluster_vertices: np.ndarray,
     cluster_face_solids: np.ndarray,
@@ -700,6 +745,7 @@ def render_frames(
         cluster_faces: ``faces[cluster_order]``, the triangles cluster after cluster.
         cluster_order, spheres, cluster_vertex_starts, cluster_vertices:
             :func:`triangle_clusters` of the mesh, ``CLUSTER_FACES`` triangles per cluster.
+        sub_spheres: :func:`group_spheres` of ``cluster_faces``, ``SUBCLUSTER_FACES`` each.
         cluster_face_solids, solid_boxes: :func:`closed_solids` of the mesh, the solid of
             each face in cluster order.
         scratch_*: the single-frame buffers of :class:`PinholeRasterizer`;
@@ -718,14 +764,14 @@ def render_frames(
     whole_band = np.zeros(2, np.int64)
     every_record = np.arange(cluster_faces.shape[0], dtype=np.int32)
     seen = np.empty(clusters, np.int64)
+    sides = view_side_planes(intrinsics, width, height)
     for frame in range(poses.shape[0]):
         rotation = np.ascontiguousarray(poses[frame, :3, :3])
         origin = np.ascontiguousarray(poses[frame, :3, 3])
         seen_count = 0
         corners = 0
         for cluster in range(clusters):
-            if cluster_may_be_seen(spheres, cluster, rotation, origin, intrinsics, width,
-                                   height, far_cut):
+            if sphere_may_be_seen(spheres, cluster, rotation, origin, sides, far_cut):
                 seen[seen_count] = cluster
                 seen_count += 1
                 corners += cluster_vertex_starts[cluster + 1] - cluster_vertex_starts[cluster]
@@ -754,16 +800,20 @@ def render_frames(
         used = 0
         for rank in range(seen_count):
             cluster = seen[rank]
-            first = cluster * CLUSTER_FACES
-            count = setup_triangles(
-                scratch_outcodes, scratch_projections, cluster_faces, first,
-                min(first + CLUSTER_FACES, cluster_faces.shape[0]), origin, intrinsics,
-                width, height, scratch_records, scratch_hit_planes, scratch_record_rows, used,
-                cluster_face_solids, solid_boxes,
-            )
-            for slot in range(used, used + count):  # the mesh's own triangle ids
-                scratch_record_rows[slot, 0] = cluster_order[scratch_record_rows[slot, 0]]
-            used += count
+            stop = min((cluster + 1) * CLUSTER_FACES, cluster_faces.shape[0])
+            for first in range(cluster * CLUSTER_FACES, stop, SUBCLUSTER_FACES):
+                if not sphere_may_be_seen(sub_spheres, first // SUBCLUSTER_FACES, rotation,
+                                          origin, sides, far_cut):
+                    continue
+                count = setup_triangles(
+                    scratch_outcodes, scratch_projections, cluster_faces, first,
+                    min(first + SUBCLUSTER_FACES, stop), origin, intrinsics, width, height,
+                    scratch_records, scratch_hit_planes, scratch_record_rows, used,
+                    cluster_face_solids, solid_boxes,
+                )
+                for slot in range(used, used + count):  # the mesh's own triangle ids
+                    scratch_record_rows[slot, 0] = cluster_order[scratch_record_rows[slot, 0]]
+                used += count
         if band_count == 1:  # one band holds every record, in order
             whole_band[1] = used
             band_starts, entries = whole_band, every_record[:used]
@@ -928,14 +978,17 @@ class PinholeRasterizer:
         return self._splits[key]
 
     def _clusters(self) -> tuple[np.ndarray, ...]:
-        """The faces in cluster order, the mesh's culling clusters (:func:`triangle_clusters`)
-        and the solid of each face in that order with the solids' boxes, made on first use."""
+        """The faces in cluster order, the mesh's culling clusters (:func:`triangle_clusters`:
+        order, spheres, vertex starts and list) with the spheres of their groups of
+        ``SUBCLUSTER_FACES`` after the clusters' own, and the solid of each face in that order
+        with the solids' boxes, made on first use."""
         if self._cluster_arrays is None:
-            order, *clusters = triangle_clusters(self.vertices, self.faces)
+            order, spheres, starts, members = triangle_clusters(self.vertices, self.faces)
+            faces = np.ascontiguousarray(self.faces[order])
             face_solids, boxes = self._solids()
             self._cluster_arrays = (
-                np.ascontiguousarray(self.faces[order]), order, *clusters,
-                np.ascontiguousarray(face_solids[order]), boxes,
+                faces, order, spheres, group_spheres(self.vertices, faces, SUBCLUSTER_FACES),
+                starts, members, np.ascontiguousarray(face_solids[order]), boxes,
             )
         return self._cluster_arrays
 

@@ -460,7 +460,7 @@ def test_culling_clusters_changes_no_pixel(name):
         return depth, triangle_ids, uv
 
     culled = draw()
-    faces, order, spheres, starts, members, *solids = rasterizer._clusters()
+    faces, order, spheres, sub_spheres, starts, members, *solids = rasterizer._clusters()
     seen = [cluster_may_be_seen(spheres, c, pose[:3, :3].copy(), pose[:3, 3].copy(),
                                 rasterizer.intrinsics, 64, 64, np.inf)
             for pose in poses for c in range(len(spheres))]
@@ -471,8 +471,17 @@ def test_culling_clusters_changes_no_pixel(name):
         corners = (np.reshape(seen, (len(poses), -1)) * np.diff(starts)).sum(axis=1)
         one_at_a_time = 4 * corners < len(rasterizer.vertices)
         assert one_at_a_time.any() and not one_at_a_time.all()
-    never = np.concatenate([spheres[:, :3], np.full((len(spheres), 1), np.inf)], axis=1)
-    rasterizer._cluster_arrays = (faces, order, never, starts, members, *solids)
+    # Groups of SUBCLUSTER_FACES within the clusters seen are culled too.
+    sub_seen = [cluster_may_be_seen(sub_spheres, c, pose[:3, :3].copy(), pose[:3, 3].copy(),
+                                    rasterizer.intrinsics, 64, 64, np.inf)
+                for pose in poses for c in range(len(sub_spheres))]
+    assert np.mean(sub_seen) < np.mean(seen)
+
+    def never(spheres: np.ndarray) -> np.ndarray:
+        return np.concatenate([spheres[:, :3], np.full((len(spheres), 1), np.inf)], axis=1)
+
+    rasterizer._cluster_arrays = (faces, order, never(spheres), never(sub_spheres), starts,
+                                  members, *solids)
     whole = draw()
     np.testing.assert_array_equal(culled[0], whole[0])
     np.testing.assert_array_equal(culled[1], whole[1])
