@@ -411,7 +411,7 @@ def _outside_solid(solid: int, boxes: np.ndarray, origin: np.ndarray) -> bool:
     )
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def setup_triangles(
     outcodes: np.ndarray,
     projections: np.ndarray,
@@ -428,6 +428,7 @@ def setup_triangles(
     slot_base: int,
     face_solids: np.ndarray,
     solid_boxes: np.ndarray,
+    corners: np.ndarray,
 ) -> int:
     """Set up triangles ``first .. stop - 1``; pack the drawable ones from
     ``records[slot_base]``.
@@ -447,6 +448,8 @@ def setup_triangles(
         face_solids, solid_boxes: :func:`closed_solids` of the mesh (``face_solids`` in the
             order of ``faces``): a back face of a solid whose box the camera is outside of is
             dropped.
+        corners: (3, 3) float64 scratch for a triangle's camera-frame corners (the caller's:
+            a frame sets up its triangles in many small calls).
 
     Returns:
         The number of records written from index ``slot_base``.
@@ -454,9 +457,7 @@ def setup_triangles(
     fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
     inverse_fx, inverse_fy = 1.0 / fx, 1.0 / fy
     count = 0
-    xs = np.empty(3)
-    ys = np.empty(3)
-    zs = np.empty(3)
+    xs, ys, zs = corners[0], corners[1], corners[2]
     for triangle in range(first, stop):
         i0, i1, i2 = faces[triangle, 0], faces[triangle, 1], faces[triangle, 2]
         if outcodes[i0] & outcodes[i1] & outcodes[i2]:
@@ -765,6 +766,7 @@ def render_frames(
     every_record = np.arange(cluster_faces.shape[0], dtype=np.int32)
     seen = np.empty(clusters, np.int64)
     sides = view_side_planes(intrinsics, width, height)
+    corner_scratch = np.empty((3, 3))
     for frame in range(poses.shape[0]):
         rotation = np.ascontiguousarray(poses[frame, :3, :3])
         origin = np.ascontiguousarray(poses[frame, :3, 3])
@@ -809,7 +811,7 @@ def render_frames(
                     scratch_outcodes, scratch_projections, cluster_faces, first,
                     min(first + SUBCLUSTER_FACES, stop), origin, intrinsics, width, height,
                     scratch_records, scratch_hit_planes, scratch_record_rows, used,
-                    cluster_face_solids, solid_boxes,
+                    cluster_face_solids, solid_boxes, corner_scratch,
                 )
                 for slot in range(used, used + count):  # the mesh's own triangle ids
                     scratch_record_rows[slot, 0] = cluster_order[scratch_record_rows[slot, 0]]
@@ -1092,7 +1094,7 @@ class PinholeRasterizer:
             return setup_triangles(
                 outcodes, projections, self.faces, bounds[group], bounds[group + 1], origin,
                 self.intrinsics, self.width, self.height, records, hit_planes, record_rows,
-                bounds[group], face_solids, solid_boxes,
+                bounds[group], face_solids, solid_boxes, np.empty((3, 3)),
             )
 
         run_parallel(classify, vertex_groups)
