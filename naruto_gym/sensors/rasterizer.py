@@ -51,8 +51,9 @@ from __future__ import annotations
 
 import itertools
 import os
+import queue
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable
 
 import numba
 import numpy as np
@@ -836,18 +837,36 @@ def render_frames(
 # Pixels plus triangles below which a frame is drawn in the calling thread alone.
 PARALLEL_MIN_WORK = 150_000
 
+class _WorkerPool:
+    """Daemon threads that run the callables put in their queue, nothing more: a split step
+    hands work over several times per step, and what a thread does after its last signal
+    (``concurrent.futures``' bookkeeping took 20-40 microseconds) holds up the thread it woke.
+    The callables handle their own errors (:func:`run_parallel`'s ``work``)."""
+
+    def __init__(self, workers: int) -> None:
+        self._tasks: queue.SimpleQueue = queue.SimpleQueue()
+        for index in range(workers):
+            threading.Thread(target=self._serve, name=f"naruto-raster-{index}", daemon=True).start()
+
+    def _serve(self) -> None:
+        while True:
+            self._tasks.get()()
+
+    def submit(self, task: Callable[[], None]) -> None:
+        self._tasks.put(task)
+
+
 _POOL_LOCK = threading.Lock()
-_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}
+_POOLS: dict[tuple[int, int], _WorkerPool] = {}
 
 
-def _pool(workers: int) -> ThreadPoolExecutor:
+def _pool(workers: int) -> _WorkerPool:
     """A thread pool of the current process (a forked child must not reuse its parent's)."""
     key = (os.getpid(), workers)
     with _POOL_LOCK:
         pool = _POOLS.get(key)
         if pool is None:
-            pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="naruto-raster")
-            _POOLS[key] = pool
+            pool = _POOLS[key] = _WorkerPool(workers)
         return pool
 
 
