@@ -19,6 +19,7 @@ different scenes (a list of scenes, or ``"procedural:..."`` streams) are grouped
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -77,13 +78,12 @@ class _Moves:
 
     @classmethod
     def joined(cls, shares: list[_Moves]) -> _Moves:
-        """The moves of several shares of a step, in order, as one."""
+        """The outcome of several shares' moves of a step, in order, as one: the agents,
+        whether each collided and why (what the step reports; the shares have been
+        observed already)."""
         moves = cls(np.concatenate([share.agents for share in shares]))
-        moves.starts = np.concatenate([share.starts for share in shares])
         moves.collided = np.concatenate([share.collided for share in shares])
         moves.reasons = np.concatenate([share.reasons for share in shares])
-        moves.check_escape = np.concatenate([share.check_escape for share in shares])
-        moves.start_clearances = np.concatenate([share.start_clearances for share in shares])
         return moves
 
 
@@ -113,16 +113,25 @@ def balanced_shares(shares: np.ndarray, finished: np.ndarray, minimum: float) ->
     """Shares for the next step: each part's grows or shrinks with how much earlier or later
     than the average it finished (damped by half, so timing noise does not make them swing),
     none below ``minimum``."""
-    if not np.all(finished > 0.0):
+    # Plain Python over the few parts: this runs at every split step, after the frames have
+    # pushed NumPy's dispatch out of the caches.
+    times = [float(value) for value in finished]
+    if min(times) <= 0.0:
         return shares
-    updated = shares * np.sqrt(finished.mean() / finished)
-    updated /= updated.sum()
-    low = np.zeros(len(updated), bool)
-    while (updated < minimum - 1e-12).any() and not low.all():  # pin the smallest at the minimum
-        low |= updated < minimum
-        updated[~low] *= (1.0 - minimum * low.sum()) / updated[~low].sum()
-        updated[low] = minimum
-    return updated
+    mean = sum(times) / len(times)
+    updated = [float(share) * math.sqrt(mean / time) for share, time in zip(shares, times,
+                                                                               strict=True)]
+    total = sum(updated)
+    updated = [share / total for share in updated]
+    low = [False] * len(updated)
+    # Pin the smallest at the minimum.
+    while any(share < minimum - 1e-12 for share in updated) and not all(low):
+        low = [pinned or share < minimum for pinned, share in zip(low, updated, strict=True)]
+        free = sum(share for pinned, share in zip(low, updated, strict=True) if not pinned)
+        scale = (1.0 - minimum * sum(low)) / free if free > 0.0 else 0.0
+        updated = [minimum if pinned else share * scale
+                   for pinned, share in zip(low, updated, strict=True)]
+    return np.array(updated)
 
 
 def _escape_rule(checker: Any) -> str:
@@ -291,7 +300,11 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         # Shares of the agents per part of a split step, adapted step by step so that the
         # parts finish together (:func:`share_bounds`, :func:`balanced_shares`).
         self._shares: np.ndarray | None = None
-        self._intrinsics = self.camera.as_dict()
+        self._intrinsic_columns = {
+            key: np.full(n, value, type(value)) for key, value in self.camera.as_dict().items()
+        }
+        # Coverage samples of each agent's scene (set at its reset; 1 before any).
+        self._sample_totals = np.ones(n, np.int64)
         self._discrete_zeros = np.zeros(n, np.int64)
         self._continuous_zeros = np.zeros((n, 7))
 
@@ -498,6 +511,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             pose = env._sample_start_pose()
         self._poses[i] = pose
         self._seen = _widened(self._seen, len(env.coverage.samples_world))
+        self._sample_totals[i] = len(env.coverage.samples_world)
         self._seen[i] = False
         sizes = env.coverage.cell_sizes
         self._unseen_in_cell = _widened(self._unseen_in_cell, len(sizes))
@@ -925,18 +939,18 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         """Infos of ``agents`` as ``SyncVectorEnv`` gathers single-env infos (arrays plus
         ``_key`` masks); the other arguments are per-env arrays of length ``num_envs``."""
         n = self.num_envs
-        mask = _mask(n, agents)
-        totals = np.array([
-            len(env.coverage.samples_world) if env is not None else 1 for env in self._scenes
-        ])
+        every = len(agents) == n  # a step's infos: every agent's, no masking to do
+        mask = np.ones(n, bool) if every else _mask(n, agents)
 
         def column(values: np.ndarray, dtype: Any) -> np.ndarray:
+            if every:
+                return np.array(values, dtype)
             array = np.full(n, None, object) if dtype is object else np.zeros(n, dtype)
             array[mask] = np.asarray(values)[mask]
             return array
 
         infos: dict[str, Any] = {
-            "coverage": column(self._seen_counts / totals, float),
+            "coverage": column(self._seen_counts / self._sample_totals, float),
             "coverage_gain": column(gains, float),
             "collided": column(collided, bool),
             "collision_reason": column(reasons, object),
@@ -944,8 +958,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             "intrinsics": {},
             "step": column(self._steps, int),
         }
-        for key, value in self._intrinsics.items():
-            infos["intrinsics"][key] = column(np.full(n, value), type(value))
+        for key, value in self._intrinsic_columns.items():
+            infos["intrinsics"][key] = column(value, value.dtype)
             infos["intrinsics"][f"_{key}"] = mask.copy()
         if self._panorama is not None:
             infos["panorama_no_hit_share"] = column(
