@@ -102,11 +102,14 @@ def share_bounds(shares: np.ndarray, count: int) -> np.ndarray:
     """Contiguous parts of ``count`` agents in proportion to ``shares`` (summing to 1): the
     (P + 1,) bounds, every part at least one agent."""
     parts = len(shares)
-    bounds = np.rint(np.concatenate([[0.0], np.cumsum(shares)]) * count).astype(np.int64)
-    bounds[-1] = count
+    bounds = [0] * (parts + 1)
+    cumulative = 0.0
     for part in range(1, parts):  # at least one agent per part, from both ends
-        bounds[part] = min(max(bounds[part], bounds[part - 1] + 1), count - (parts - part))
-    return bounds
+        cumulative += float(shares[part - 1])
+        bounds[part] = min(max(round(cumulative * count), bounds[part - 1] + 1),
+                           count - (parts - part))
+    bounds[parts] = count
+    return np.array(bounds, np.int64)
 
 
 def balanced_shares(shares: np.ndarray, finished: np.ndarray, minimum: float) -> np.ndarray:
@@ -388,11 +391,11 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         discrete, continuous = self._validated_actions(actions)
         n = self.num_envs
         everyone = np.arange(n)
-        resetting = everyone[self._autoreset] if (
-            self.autoreset_mode == AutoresetMode.NEXT_STEP
-        ) else everyone[:0]
-        stepping = everyone[~np.isin(everyone, resetting)]
-        self._reset_agents(resetting, [None] * len(resetting), {})
+        if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._autoreset.any():
+            resetting, stepping = everyone[self._autoreset], everyone[~self._autoreset]
+            self._reset_agents(resetting, [None] * len(resetting), {})
+        else:
+            stepping = everyone
         self._new_frame_buffers()  # every agent's frame is drawn anew
         moves, gains = self._move_and_observe(stepping, discrete, continuous)
         collided = np.zeros(n, bool)
