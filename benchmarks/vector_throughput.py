@@ -18,6 +18,10 @@ Reported, all in one run and process (load average printed beside every figure):
   ray-cast pinhole frames beside the defaults;
 * rays per second the batched env casts, against the bare Open3D cast rate of the same pinhole
   rays in one call;
+* the 5x comparison in rounds (``goal_rounds``): the AsyncVectorEnv and the batched env with 64
+  envs made afresh and timed back to back in each round, the goal's ratio the median of the
+  rounds' (timed minutes apart, as the table's rows are, the machine's drift of up to 10-20 %
+  in that time moved the ratio by as much);
 * the batched env on a scene stream (``scene="procedural:room"``, a new generated room for
   every agent at every reset, as ``benchmarks/train_ppo.py`` trains, with its 5,000 coverage
   samples) with 16 and 64 envs and episodes of ``stream_episode_steps``, timed over
@@ -74,6 +78,11 @@ class Args:
     env's is 20,000, and a new scene's build cost grows with them)"""
     stream_episodes: int = 2
     """whole episodes timed per scene-stream row (each agent resets once per episode)"""
+    goal_rounds: int = 3
+    """rounds of the 5x comparison: in each, the AsyncVectorEnv (every worker count) and the
+    batched env with 64 envs, all with the batched env's default frames, are made afresh and
+    timed one right after the other, so that the machine's drift over the run falls on both
+    alike; the goal's ratio is the median of the rounds' ratios (0: no rounds)"""
     output: str = "benchmarks/results/vector_throughput.json"
     """where the JSON goes"""
 
@@ -149,6 +158,26 @@ def bare_cast_rate(count: int, size: int, seconds: float) -> dict[str, float]:
     return {"mrays_per_s": calls * len(rays) / elapsed / 1e6, "load": load()}
 
 
+def time_goal_round(args: Args) -> dict[str, Any]:
+    """One round of the 5x comparison: each AsyncVectorEnv, then the batched env with 64
+    envs, fresh and back to back, with the batched env's default frames (rasterized where
+    cheaper) for both."""
+    extra = {"pinhole_backend": "auto"}
+    row: dict[str, Any] = {"async": {}}
+    for workers in args.async_workers:
+        env = gym.make_vec("NarutoRecon-v0", num_envs=workers, vectorization_mode="async",
+                           vector_kwargs={"context": "spawn"},
+                           max_episode_steps=args.episode_steps, **env_kwargs(64, False, **extra))
+        row["async"][workers] = time_vector(env, args.seconds)["steps_per_s"]
+        env.close()
+    env = NarutoReconVectorEnv(64, max_episode_steps=args.episode_steps,
+                               **env_kwargs(64, False))
+    row["batched_64"] = time_vector(env, args.seconds)["steps_per_s"]
+    row["ratio"] = row["batched_64"] / max(row["async"].values())
+    row["load"] = load()
+    return row
+
+
 def main(args: Args) -> dict[str, Any]:
     from tqdm.auto import tqdm
 
@@ -216,17 +245,33 @@ def main(args: Args) -> dict[str, Any]:
         print(f"bare Open3D cast, 64 agents' {size} px frames in one call: "
               f"{row['mrays_per_s']:.2f} Mrays/s (load {row['load']})")
 
+    results["goal_rounds"] = []
+    for round_index in range(args.goal_rounds):
+        row = time_goal_round(args)
+        results["goal_rounds"].append(row)
+        print(f"5x comparison, round {round_index + 1}: batched 64 envs "
+              f"{row['batched_64']:.0f} steps/s, AsyncVectorEnv "
+              + ", ".join(f"{workers} workers {value:.0f}" for workers, value in
+                          row["async"].items())
+              + f" steps/s: {row['ratio']:.2f}x (load {row['load']})")
+
     # The same settings as the batched env's defaults (frames rasterized where cheaper).
     best_async = max(row["steps_per_s"] for row in results["async_auto_frames"].values())
     best_async_default = max(row["steps_per_s"] for row in results["async"].values())
     goal_row = next((row for row in results["batched"] if row["size"] == 64
                      and not row["panorama"] and row["num_envs"] == 64), None)
     if goal_row is not None:
+        # The goal's ratio: the rounds' median where there are rounds (async and batched
+        # back to back), else the table's (their rows timed minutes apart).
+        rounds = [row["ratio"] for row in results["goal_rounds"]]
+        ratio = float(np.median(rounds)) if rounds else goal_row["steps_per_s"] / best_async
         results["goals"] = {
             "batched_64_envs_steps_per_s": goal_row["steps_per_s"],
             "goal_2000": goal_row["steps_per_s"] >= 2000,
-            "ratio_vs_best_async": goal_row["steps_per_s"] / best_async,
-            "goal_5x_async": goal_row["steps_per_s"] >= 5 * best_async,
+            "ratio_vs_best_async": ratio,
+            "ratio_vs_best_async_rounds": rounds,
+            "ratio_vs_best_async_table_rows": goal_row["steps_per_s"] / best_async,
+            "goal_5x_async": ratio >= 5,
             "ratio_vs_best_async_ray_cast_frames": goal_row["steps_per_s"] / best_async_default,
             "single_env_steps_per_s": results["single_env"]["steps_per_s"],
             "goal_single_800": results["single_env"]["steps_per_s"] >= 800,

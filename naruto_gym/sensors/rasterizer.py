@@ -412,13 +412,12 @@ def _outside_solid(solid: int, boxes: np.ndarray, origin: np.ndarray) -> bool:
     )
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def setup_triangles(
     outcodes: np.ndarray,
     projections: np.ndarray,
     faces: np.ndarray,
-    first: int,
-    stop: int,
+    ranges: np.ndarray,
     origin: np.ndarray,
     intrinsics: np.ndarray,
     width: int,
@@ -429,16 +428,16 @@ def setup_triangles(
     slot_base: int,
     face_solids: np.ndarray,
     solid_boxes: np.ndarray,
-    corners: np.ndarray,
 ) -> int:
-    """Set up triangles ``first .. stop - 1``; pack the drawable ones from
-    ``records[slot_base]``.
+    """Set up the triangles of ``ranges``; pack the drawable ones from ``records[slot_base]``.
 
     Args:
         outcodes, projections: :func:`vertex_outcodes`'s output (image and camera-frame
             positions of the vertices).
         faces: (F, 3) int32 corner indices.
-        first, stop: the range of triangles this call sets up.
+        ranges: (R, 2) int64 ranges of triangles to set up, ``[first, stop)`` each (one call
+            for a frame's many groups: every call of a compiled function with array
+            arguments costs two atomic reference counts per array).
         origin: (3,) float64 camera centre.
         intrinsics: float64 (fx, fy, cx, cy).
         width, height: image size in pixels.
@@ -449,8 +448,6 @@ def setup_triangles(
         face_solids, solid_boxes: :func:`closed_solids` of the mesh (``face_solids`` in the
             order of ``faces``): a back face of a solid whose box the camera is outside of is
             dropped.
-        corners: (3, 3) float64 scratch for a triangle's camera-frame corners (the caller's:
-            a frame sets up its triangles in many small calls).
 
     Returns:
         The number of records written from index ``slot_base``.
@@ -458,64 +455,64 @@ def setup_triangles(
     fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
     inverse_fx, inverse_fy = 1.0 / fx, 1.0 / fy
     count = 0
-    xs, ys, zs = corners[0], corners[1], corners[2]
-    for triangle in range(first, stop):
-        i0, i1, i2 = faces[triangle, 0], faces[triangle, 1], faces[triangle, 2]
-        if outcodes[i0] & outcodes[i1] & outcodes[i2]:
-            continue
-        crosses_near_plane = (outcodes[i0] | outcodes[i1] | outcodes[i2]) & 16
-        if not crosses_near_plane:
-            u_min = min(projections[0, i0], min(projections[0, i1], projections[0, i2]))
-            u_max = max(projections[0, i0], max(projections[0, i1], projections[0, i2]))
-            v_min = min(projections[1, i0], min(projections[1, i1], projections[1, i2]))
-            v_max = max(projections[1, i0], max(projections[1, i1], projections[1, i2]))
-            if _holds_no_pixel(u_min, u_max, v_min, v_max, width, height):
+    for entry in range(ranges.shape[0]):
+        for triangle in range(ranges[entry, 0], ranges[entry, 1]):
+            i0, i1, i2 = faces[triangle, 0], faces[triangle, 1], faces[triangle, 2]
+            if outcodes[i0] & outcodes[i1] & outcodes[i2]:
                 continue
-        for corner in range(3):
-            index = faces[triangle, corner]
-            xs[corner] = projections[2, index]
-            ys[corner] = projections[3, index]
-            zs[corner] = projections[4, index]
-        if crosses_near_plane:
-            u_min, u_max, v_min, v_max = _clipped_box(xs, ys, zs, fx, fy, cx, cy)
-            if _holds_no_pixel(u_min, u_max, v_min, v_max, width, height):
-                continue
-        row_first = max(np.ceil(max(v_min - _BOX_MARGIN_PX, -1.0)), 0.0)
-        row_last = min(np.floor(min(v_max + _BOX_MARGIN_PX, float(height))), height - 1.0)
-        nx, ny, nz = _cross(
-            xs[1] - xs[0], ys[1] - ys[0], zs[1] - zs[0], xs[2] - xs[0], ys[2] - ys[0], zs[2] - zs[0]
-        )
-        det = xs[0] * nx + ys[0] * ny + zs[0] * nz
-        if det == 0.0:
-            continue  # the plane passes through the camera centre: seen edge-on
-        if det > 0.0 and _outside_solid(face_solids[triangle], solid_boxes, origin):
-            continue  # a back face of a solid seen from outside: a front face hides it
-        sign = 1.0 if det > 0.0 else -1.0
-        slot = slot_base + count
-        for edge in range(3):
-            a, b = (edge + 1) % 3, (edge + 2) % 3
-            px, py, pz = _cross(xs[a], ys[a], zs[a], xs[b], ys[b], zs[b])
-            _store_plane(
-                records, slot, 3 * edge, sign * px, sign * py, sign * pz, inverse_fx, inverse_fy,
-                cx, cy,
+            crosses_near_plane = (outcodes[i0] | outcodes[i1] | outcodes[i2]) & 16
+            if not crosses_near_plane:
+                u_min = min(projections[0, i0], min(projections[0, i1], projections[0, i2]))
+                u_max = max(projections[0, i0], max(projections[0, i1], projections[0, i2]))
+                v_min = min(projections[1, i0], min(projections[1, i1], projections[1, i2]))
+                v_max = max(projections[1, i0], max(projections[1, i1], projections[1, i2]))
+                if _holds_no_pixel(u_min, u_max, v_min, v_max, width, height):
+                    continue
+            # Tuples, not arrays: views of a scratch array cost two atomic reference counts each.
+            xs = (projections[2, i0], projections[2, i1], projections[2, i2])
+            ys = (projections[3, i0], projections[3, i1], projections[3, i2])
+            zs = (projections[4, i0], projections[4, i1], projections[4, i2])
+            if crosses_near_plane:
+                u_min, u_max, v_min, v_max = _clipped_box(xs, ys, zs, fx, fy, cx, cy)
+                if _holds_no_pixel(u_min, u_max, v_min, v_max, width, height):
+                    continue
+            row_first = max(np.ceil(max(v_min - _BOX_MARGIN_PX, -1.0)), 0.0)
+            row_last = min(np.floor(min(v_max + _BOX_MARGIN_PX, float(height))), height - 1.0)
+            nx, ny, nz = _cross(
+                xs[1] - xs[0], ys[1] - ys[0], zs[1] - zs[0],
+                xs[2] - xs[0], ys[2] - ys[0], zs[2] - zs[0],
             )
-            slope = records[slot, 3 * edge]
-            # 0 marks an edge plane that is constant along a row (its 1 / slope would overflow).
-            records[slot, _INVERSE_SLOPES + edge] = 1.0 / slope if abs(slope) > 1e-290 else 0.0
-        inverse_det = 1.0 / det
-        _store_plane(
-            records, slot, _INVERSE_DEPTH, nx * inverse_det, ny * inverse_det, nz * inverse_det,
-            inverse_fx, inverse_fy, cx, cy,
-        )
-        # u = e1 / (e0 + e1 + e2) with e0 + e1 + e2 = sign * det / z, so u = e1 * z / |det|.
-        scale = abs(inverse_det)
-        for coefficient in range(3):
-            hit_planes[slot, coefficient] = records[slot, 3 + coefficient] * scale
-            hit_planes[slot, 3 + coefficient] = records[slot, 6 + coefficient] * scale
-        record_rows[slot, 0] = triangle
-        record_rows[slot, 1] = int(row_first)
-        record_rows[slot, 2] = int(row_last)
-        count += 1
+            det = xs[0] * nx + ys[0] * ny + zs[0] * nz
+            if det == 0.0:
+                continue  # the plane passes through the camera centre: seen edge-on
+            if det > 0.0 and _outside_solid(face_solids[triangle], solid_boxes, origin):
+                continue  # a back face of a solid seen from outside: a front face hides it
+            sign = 1.0 if det > 0.0 else -1.0
+            slot = slot_base + count
+            for edge in range(3):
+                a, b = (edge + 1) % 3, (edge + 2) % 3
+                px, py, pz = _cross(xs[a], ys[a], zs[a], xs[b], ys[b], zs[b])
+                _store_plane(
+                    records, slot, 3 * edge, sign * px, sign * py, sign * pz, inverse_fx,
+                    inverse_fy, cx, cy,
+                )
+                slope = records[slot, 3 * edge]
+                # 0 marks an edge plane that is constant along a row (its 1 / slope would overflow).
+                records[slot, _INVERSE_SLOPES + edge] = 1.0 / slope if abs(slope) > 1e-290 else 0.0
+            inverse_det = 1.0 / det
+            _store_plane(
+                records, slot, _INVERSE_DEPTH, nx * inverse_det, ny * inverse_det, nz * inverse_det,
+                inverse_fx, inverse_fy, cx, cy,
+            )
+            # u = e1 / (e0 + e1 + e2) with e0 + e1 + e2 = sign * det / z, so u = e1 * z / |det|.
+            scale = abs(inverse_det)
+            for coefficient in range(3):
+                hit_planes[slot, coefficient] = records[slot, 3 + coefficient] * scale
+                hit_planes[slot, 3 + coefficient] = records[slot, 6 + coefficient] * scale
+            record_rows[slot, 0] = triangle
+            record_rows[slot, 1] = int(row_first)
+            record_rows[slot, 2] = int(row_last)
+            count += 1
     return count
 
 
@@ -767,7 +764,7 @@ def render_frames(
     every_record = np.arange(cluster_faces.shape[0], dtype=np.int32)
     seen = np.empty(clusters, np.int64)
     sides = view_side_planes(intrinsics, width, height)
-    corner_scratch = np.empty((3, 3))
+    group_ranges = np.empty((sub_spheres.shape[0], 2), np.int64)
     for frame in range(poses.shape[0]):
         rotation = np.ascontiguousarray(poses[frame, :3, :3])
         origin = np.ascontiguousarray(poses[frame, :3, 3])
@@ -800,23 +797,23 @@ def render_frames(
                                         scratch_projections)
         # Records packed from slot 0 (a frame touches only as much scratch as it draws: with
         # a batched env's many scenes the scratch of each stays small in the cache).
-        used = 0
+        groups = 0
         for rank in range(seen_count):
             cluster = seen[rank]
             stop = min((cluster + 1) * CLUSTER_FACES, cluster_faces.shape[0])
             for first in range(cluster * CLUSTER_FACES, stop, SUBCLUSTER_FACES):
-                if not sphere_may_be_seen(sub_spheres, first // SUBCLUSTER_FACES, rotation,
-                                          origin, sides, far_cut):
-                    continue
-                count = setup_triangles(
-                    scratch_outcodes, scratch_projections, cluster_faces, first,
-                    min(first + SUBCLUSTER_FACES, stop), origin, intrinsics, width, height,
-                    scratch_records, scratch_hit_planes, scratch_record_rows, used,
-                    cluster_face_solids, solid_boxes, corner_scratch,
-                )
-                for slot in range(used, used + count):  # the mesh's own triangle ids
-                    scratch_record_rows[slot, 0] = cluster_order[scratch_record_rows[slot, 0]]
-                used += count
+                if sphere_may_be_seen(sub_spheres, first // SUBCLUSTER_FACES, rotation,
+                                      origin, sides, far_cut):
+                    group_ranges[groups, 0] = first
+                    group_ranges[groups, 1] = min(first + SUBCLUSTER_FACES, stop)
+                    groups += 1
+        used = setup_triangles(
+            scratch_outcodes, scratch_projections, cluster_faces, group_ranges[:groups],
+            origin, intrinsics, width, height, scratch_records, scratch_hit_planes,
+            scratch_record_rows, 0, cluster_face_solids, solid_boxes,
+        )
+        for slot in range(used):  # the mesh's own triangle ids
+            scratch_record_rows[slot, 0] = cluster_order[scratch_record_rows[slot, 0]]
         if band_count == 1:  # one band holds every record, in order
             whole_band[1] = used
             band_starts, entries = whole_band, every_record[:used]
@@ -1111,9 +1108,9 @@ class PinholeRasterizer:
 
         def setup(group: int) -> int:
             return setup_triangles(
-                outcodes, projections, self.faces, bounds[group], bounds[group + 1], origin,
+                outcodes, projections, self.faces, bounds[group:group + 2][None], origin,
                 self.intrinsics, self.width, self.height, records, hit_planes, record_rows,
-                bounds[group], face_solids, solid_boxes, np.empty((3, 3)),
+                bounds[group], face_solids, solid_boxes,
             )
 
         run_parallel(classify, vertex_groups)
