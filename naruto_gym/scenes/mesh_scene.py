@@ -148,6 +148,15 @@ class Scene:
             axis=(1, 2)
         )
 
+    @cached_property
+    def faces_needing_barycentrics(self) -> np.ndarray:
+        """(F,) bool: the triangles whose colour varies over them (corner colours that differ,
+        or a texture), so that :meth:`colour_at` reads a hit's barycentric (u, v) there."""
+        needed = self._flat_colours[:, 3] == 0
+        if self.face_texture_ids is not None and self.textures:
+            needed |= np.asarray(self.face_texture_ids) >= 0
+        return needed
+
     # -- geometry --------------------------------------------------------------------
     @property
     def bounds(self) -> np.ndarray:

@@ -214,7 +214,7 @@ class RgbdRenderer:
 
     def render_hits_many(
         self, camera_to_world: np.ndarray, worker: int | None = None,
-        depth_out: np.ndarray | None = None,
+        depth_out: np.ndarray | None = None, barycentric_faces: np.ndarray | None = None,
     ) -> PixelHits:
         """:meth:`render_hits` of K poses (K, 4, 4) at once, the same hits frame by frame.
 
@@ -229,6 +229,10 @@ class RgbdRenderer:
 
         ``depth_out``: a C-contiguous (K, H, W) float32 array the rasterized depth is drawn
         into (a batched env's observation rows) and returned as ``depth``.
+
+        ``barycentric_faces``: (F,) flags of the triangles whose rasterized hits need their
+        barycentric (u, v) (the others get (0, 0); default every triangle, and every hit of
+        ray-cast frames): a batched env shading a scene flat per triangle skips the rest.
 
         Returns:
             ``depth`` (K, H, W), ``triangle_ids`` (K * H * W,), ``barycentric_uv``
@@ -252,7 +256,7 @@ class RgbdRenderer:
         barycentric_uv = np.empty((count * pixels, 2), np.float32)
         if worker is not None:
             self._workers[worker].render_many_into(
-                poses, self.max_depth_m, depth, triangle_ids, barycentric_uv
+                poses, self.max_depth_m, depth, triangle_ids, barycentric_uv, barycentric_faces
             )
             return PixelHits(depth, triangle_ids, barycentric_uv)
         workers = self._frame_rasterizers(min(self.threads, count))
@@ -263,7 +267,7 @@ class RgbdRenderer:
             workers[part].render_many_into(
                 poses[first:stop], self.max_depth_m, depth[first:stop],
                 triangle_ids[first * pixels:stop * pixels],
-                barycentric_uv[first * pixels:stop * pixels],
+                barycentric_uv[first * pixels:stop * pixels], barycentric_faces,
             )
 
         run_parallel(draw, len(workers))

@@ -629,6 +629,7 @@ def resolve_band(
     winners: np.ndarray,
     max_depth: float,
     want_barycentrics: bool,
+    barycentric_faces: np.ndarray,
     depth: np.ndarray,
     triangle_ids: np.ndarray,
     barycentric_uv: np.ndarray,
@@ -637,7 +638,8 @@ def resolve_band(
 
     Writes ``depth`` ((H, W) float32 z-depth, 0 for no hit or beyond ``max_depth``),
     ``triangle_ids`` ((H * W,) int32, -1 where the depth is 0) and, when asked,
-    ``barycentric_uv`` ((H * W, 2) float32, Embree's (u, v) of the hit).
+    ``barycentric_uv`` ((H * W, 2) float32, Embree's (u, v) of the hit) on the triangles
+    ``barycentric_faces`` ((F,) uint8, by triangle id) flags, (0, 0) on the others.
     """
     band_height, width = inverse_depth.shape
     for line in range(min(band_height, depth.shape[0] - row_first_band)):
@@ -656,8 +658,12 @@ def resolve_band(
                     barycentric_uv[pixel, 1] = 0.0
                 continue
             depth[row, column] = value
-            triangle_ids[pixel] = record_rows[record, 0]
-            if want_barycentrics:
+            triangle = record_rows[record, 0]
+            triangle_ids[pixel] = triangle
+            if want_barycentrics and not barycentric_faces[triangle]:
+                barycentric_uv[pixel, 0] = 0.0
+                barycentric_uv[pixel, 1] = 0.0
+            elif want_barycentrics:
                 u = float(column)
                 barycentric_uv[pixel, 0] = (
                     hit_planes[record, 0] * u + hit_planes[record, 1] * v + hit_planes[record, 2]
@@ -679,6 +685,7 @@ def draw_bands(
     nearest: float,
     max_depth: float,
     want_barycentrics: bool,
+    barycentric_faces: np.ndarray,
     inverse_depth: np.ndarray,
     winners: np.ndarray,
     depth: np.ndarray,
@@ -687,7 +694,8 @@ def draw_bands(
 ) -> None:
     """Rasterize and resolve bands ``group, group + groups, ...`` (one thread's share).
 
-    ``inverse_depth`` and ``winners`` are this thread's band-sized z-buffer.
+    ``inverse_depth`` and ``winners`` are this thread's band-sized z-buffer;
+    ``barycentric_faces`` as for :func:`resolve_band`.
     """
     band_height = inverse_depth.shape[0]
     for band in range(group, band_starts.shape[0] - 1, groups):
@@ -698,7 +706,7 @@ def draw_bands(
         )
         resolve_band(
             hit_planes, record_rows, row_first_band, inverse_depth, winners, max_depth,
-            want_barycentrics, depth, triangle_ids, barycentric_uv,
+            want_barycentrics, barycentric_faces, depth, triangle_ids, barycentric_uv,
         )
 
 
@@ -713,6 +721,7 @@ def render_frames(
     nearest: float,
     max_depth: float,
     want_barycentrics: bool,
+    barycentric_faces: np.ndarray,
     cluster_faces: np.ndarray,
     cluster_order: np.ndarray,
     spheres: np.ndarray,
@@ -825,7 +834,8 @@ def render_frames(
         first = frame * pixels
         draw_bands(
             scratch_records, scratch_hit_planes, scratch_record_rows, band_starts, entries, 0, 1,
-            nearest, max_depth, want_barycentrics, inverse_depth, winners, depth[frame],
+            nearest, max_depth, want_barycentrics, barycentric_faces, inverse_depth, winners,
+            depth[frame],
             triangle_ids[first:first + pixels], barycentric_uv[first:first + pixels],
         )
 
@@ -977,6 +987,7 @@ class PinholeRasterizer:
         self._splits: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._cluster_arrays: tuple[np.ndarray, ...] | None = None
         self.cull_back_faces = bool(cull_back_faces)
+        self._every_face = np.ones(len(self.faces), np.uint8)  # barycentrics of every hit
         self._solid_arrays: tuple[np.ndarray, np.ndarray] | None = None
 
     def __getstate__(self) -> dict:
@@ -1087,7 +1098,8 @@ class PinholeRasterizer:
             uv = np.empty((self.height * self.width, 2), np.float32)
             render_frames(
                 self.vertex_columns, pose[None], self.intrinsics, self.width,
-                self.height, far_cut, nearest, max_depth, barycentrics, *self._clusters(),
+                self.height, far_cut, nearest, max_depth, barycentrics, self._every_face,
+                *self._clusters(),
                 outcodes, projections, records, hit_planes, record_rows, stamps,
                 inverse_depth[0, :self._frame_band_rows], winners[0, :self._frame_band_rows],
                 depth, triangle_ids, uv,
@@ -1126,7 +1138,7 @@ class PinholeRasterizer:
         def draw(group: int) -> None:
             draw_bands(
                 records, hit_planes, record_rows, band_starts, entries, group, groups, nearest,
-                max_depth, barycentrics, inverse_depth[group, :BAND_ROWS],
+                max_depth, barycentrics, self._every_face, inverse_depth[group, :BAND_ROWS],
                 winners[group, :BAND_ROWS], depth,
                 triangle_ids, uv,
             )
@@ -1141,6 +1153,7 @@ class PinholeRasterizer:
         depth: np.ndarray,
         triangle_ids: np.ndarray,
         barycentric_uv: np.ndarray,
+        barycentric_faces: np.ndarray | None = None,
     ) -> None:
         """:meth:`render` of K poses (K, 4, 4) in the calling thread, into given arrays.
 
@@ -1149,6 +1162,10 @@ class PinholeRasterizer:
         float32. One compiled call draws them all, which is what makes many small frames
         cheap (a batched env's 64 x 64 frames); threads each call this on their own
         rasterizer (the scratch space is per rasterizer).
+
+        ``barycentric_faces``: (F,) bool or uint8 flags of the triangles whose hits need
+        their barycentric (u, v), the others' being (0, 0): a scene coloured flat per
+        triangle needs none (default: every triangle's).
         """
         poses = _checked_poses(camera_to_world, (len(camera_to_world), 4, 4))
         count, pixels = len(poses), self.width * self.height
@@ -1161,6 +1178,11 @@ class PinholeRasterizer:
                 f"output arrays must hold {count} frames of {self.height} x {self.width}, got "
                 f"{depth.shape}, {triangle_ids.shape}, {barycentric_uv.shape}"
             )
+        if barycentric_faces is None:
+            barycentric_faces = self._every_face
+        elif barycentric_faces.shape != (len(self.faces),):
+            raise ValueError(f"barycentric_faces must flag the {len(self.faces)} triangles, got "
+                             f"shape {barycentric_faces.shape}")
         max_depth, far_cut, nearest = _depth_limits(max_depth_m)
         (
             outcodes, projections, records, hit_planes, record_rows, inverse_depth, winners,
@@ -1168,7 +1190,9 @@ class PinholeRasterizer:
         ) = self._scratch()
         render_frames(
             self.vertex_columns, poses, self.intrinsics, self.width, self.height,
-            far_cut, nearest, max_depth, True, *self._clusters(), outcodes, projections,
+            far_cut, nearest, max_depth, True,
+            np.ascontiguousarray(barycentric_faces, np.uint8), *self._clusters(),
+            outcodes, projections,
             records, hit_planes, record_rows, stamps, inverse_depth[0, :self._frame_band_rows],
             winners[0, :self._frame_band_rows], depth,
             triangle_ids, barycentric_uv,

@@ -865,6 +865,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             frames = env.renderer.render_hits_many(
                 self._poses[members], worker=part,
                 depth_out=self._depth[rows] if in_place else None,
+                barycentric_faces=env.scene.faces_needing_barycentrics,
             )
             depth = frames.depth.reshape(-1)
             triangle_ids, barycentric_uv = frames.triangle_ids, frames.barycentric_uv

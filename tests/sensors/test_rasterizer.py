@@ -440,6 +440,37 @@ def test_frames_drawn_in_one_call_need_outputs_of_their_size():
         np.testing.assert_array_equal(depth[k], rasterizer.render(pose, 10.0)[0])
 
 
+def test_barycentrics_only_where_the_colour_needs_them():
+    """Hits of the flagged triangles get their barycentrics, the others (0, 0), and nothing
+    else changes: a scene coloured flat per triangle shades alike (the batched env's
+    frames)."""
+    scene = _scene("procedural_room_3")
+    needed = scene.faces_needing_barycentrics
+    assert 0 < needed.sum() < len(needed)  # some gradient-coloured triangles, most flat
+    rasterizer = PinholeRasterizer(scene.vertices, scene.faces, 32, 32, 15.5, 15.5, 16.0, 16.0,
+                                   threads=1)
+    poses = np.stack(random_poses(scene, 12, 4))
+    pixels = len(poses) * 32 * 32
+
+    def draw(flags: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        depth, ids = np.empty((len(poses), 32, 32), np.float32), np.empty(pixels, np.int32)
+        uv = np.full((pixels, 2), np.nan, np.float32)
+        rasterizer.render_many_into(poses, 10.0, depth, ids, uv, flags)
+        return depth, ids, uv
+
+    depth, ids, uv = draw(None)
+    depth_some, ids_some, uv_some = draw(needed)
+    np.testing.assert_array_equal(depth_some, depth)
+    np.testing.assert_array_equal(ids_some, ids)
+    flagged = (ids >= 0) & needed[np.maximum(ids, 0)]
+    assert flagged.any() and (~flagged & (ids >= 0)).any()
+    np.testing.assert_array_equal(uv_some[flagged], uv[flagged])
+    assert not uv_some[~flagged].any()
+    np.testing.assert_array_equal(scene.colour_at(ids_some, uv_some), scene.colour_at(ids, uv))
+    with pytest.raises(ValueError, match="barycentric_faces must flag"):
+        draw(needed[:-1])
+
+
 @pytest.mark.parametrize("name", ["replica_like_room", "apartment", "procedural_room_3"])
 def test_culling_clusters_changes_no_pixel(name):
     """Clusters of triangles culled against the view volume before any vertex is projected
