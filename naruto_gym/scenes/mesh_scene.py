@@ -19,6 +19,7 @@ import numpy as np
 import trimesh
 
 from naruto_gym.geometry.sorted_search import searchsorted_right
+from naruto_gym.sensors.kernels import interpolate_corner_colours
 
 UpAxis = Literal["z", "y", "-y", "x", "-x", "-z", "auto"]
 
@@ -200,8 +201,6 @@ class Scene:
         Misses (triangle id < 0) come back black. ``out``: a C-contiguous (N, 3) uint8 array
         to write them into (a batched env's observation rows), returned.
         """
-        from naruto_gym.sensors.kernels import interpolate_corner_colours
-
         triangle_ids = np.ascontiguousarray(triangle_ids)
         barycentric_uv = np.ascontiguousarray(barycentric_uv, dtype=np.float32)
         if out is None:

@@ -816,9 +816,10 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self, members: np.ndarray, escape: np.ndarray, part: int | None = None,
         frames_start: Callable[[], None] | None = None,
     ) -> list[int]:
-        """Render agents of one scene with one cast that carries their pinhole rays, their
-        observation panorama rays and the first escape-check rays of the agents flagged in
-        ``escape``; returns the agents whose move the escape check refuses.
+        """Render agents of one scene (``members``, in increasing order) with one cast that
+        carries their pinhole rays, their observation panorama rays and the first escape-check
+        rays of the agents flagged in ``escape``; returns the agents whose move the escape
+        check refuses.
 
         With the rasterizing pinhole backend the frames are rasterized (the single env's
         renderer) and the cast carries only the panorama rays. ``part``: as for
@@ -860,7 +861,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         # Agents with consecutive indices (one scene, or a share of a split step) get their
         # frames drawn and coloured straight into the observation rows.
         rows = slice(int(members[0]), int(members[0]) + count)
-        in_place = raster and bool(np.all(np.diff(members) == 1))
+        # Members come in increasing order: consecutive when they span exactly their count.
+        in_place = raster and int(members[-1]) - int(members[0]) == count - 1
         if raster:
             frames = env.renderer.render_hits_many(
                 self._poses[members], worker=part,
