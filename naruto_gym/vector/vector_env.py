@@ -178,6 +178,10 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
     ``observation_space`` / ``action_space`` batch them. Streams and scene lists need
     ``action_mode="discrete"`` or ``"delta"`` (pose actions are bounded by one scene's box).
 
+    ## Observations
+    Each reset and step returns new arrays, drawn into directly (no copy is made); the env
+    never writes to arrays it has returned, so a caller may keep or change them.
+
     ## Infos
     The keys of ``NarutoReconEnv``'s info as arrays with ``_key`` masks, as
     ``SyncVectorEnv`` gathers them.
