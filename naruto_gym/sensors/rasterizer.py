@@ -213,15 +213,7 @@ def triangle_clusters(
     pairs = np.unique(clusters_of_corners * len(points) + faces[order].reshape(-1))
     cluster_of, used = np.divmod(pairs, len(points))
     starts = np.searchsorted(cluster_of, np.arange(count + 1)).astype(np.int64)
-    corners = points[used]
-    centres = 0.5 * (
-        np.minimum.reduceat(corners, starts[:-1]) + np.maximum.reduceat(corners, starts[:-1])
-    )
-    reach = ((corners - np.repeat(centres, np.diff(starts), axis=0)) ** 2).sum(axis=1)
-    spheres = np.empty((count, 4))
-    spheres[:, :3] = centres
-    spheres[:, 3] = np.sqrt(np.maximum.reduceat(reach, starts[:-1]))
-    return order, spheres, starts, used.astype(np.int32)
+    return order, group_spheres(points, faces[order], size), starts, used.astype(np.int32)
 
 
 def group_spheres(vertices: np.ndarray, faces: np.ndarray, size: int) -> np.ndarray:
