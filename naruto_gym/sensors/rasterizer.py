@@ -213,21 +213,27 @@ def triangle_clusters(
     pairs = np.unique(clusters_of_corners * len(points) + faces[order].reshape(-1))
     cluster_of, used = np.divmod(pairs, len(points))
     starts = np.searchsorted(cluster_of, np.arange(count + 1)).astype(np.int64)
-    return order, group_spheres(points, faces[order], size), starts, used.astype(np.int32)
+    return order, box_spheres(points[used], starts[:-1]), starts, used.astype(np.int32)
 
 
-def group_spheres(vertices: np.ndarray, faces: np.ndarray, size: int) -> np.ndarray:
-    """(G, 4) float64 bounding spheres (centre, radius) of the consecutive groups of ``size``
-    triangles of ``faces`` (the last may hold fewer), centred on their corners' box."""
-    corners = np.asarray(vertices, np.float64)[np.asarray(faces)].reshape(-1, 3)
-    starts = np.arange(0, len(corners), 3 * size)
-    centres = 0.5 * (np.minimum.reduceat(corners, starts) + np.maximum.reduceat(corners, starts))
-    groups = np.arange(len(corners)) // (3 * size)
-    reach = ((corners - centres[groups]) ** 2).sum(axis=1)
+def box_spheres(points: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """(G, 4) float64 bounding spheres (centre, radius) of consecutive groups of (N, 3)
+    ``points``, group ``g`` starting at ``starts[g]``, each centred on its points' box."""
+    centres = 0.5 * (np.minimum.reduceat(points, starts) + np.maximum.reduceat(points, starts))
+    reach = ((points - np.repeat(centres, np.diff(np.r_[starts, len(points)]), axis=0)) ** 2).sum(
+        axis=1
+    )
     spheres = np.empty((len(starts), 4))
     spheres[:, :3] = centres
     spheres[:, 3] = np.sqrt(np.maximum.reduceat(reach, starts))
     return spheres
+
+
+def group_spheres(vertices: np.ndarray, faces: np.ndarray, size: int) -> np.ndarray:
+    """(G, 4) float64 bounding spheres of the consecutive groups of ``size`` triangles of
+    ``faces`` (the last may hold fewer), centred on their corners' box (:func:`box_spheres`)."""
+    corners = np.asarray(vertices, np.float64)[np.asarray(faces)].reshape(-1, 3)
+    return box_spheres(corners, np.arange(0, len(corners), 3 * size))
 
 
 def closed_solids(
