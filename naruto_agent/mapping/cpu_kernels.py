@@ -21,7 +21,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from naruto_gym.sensors.rasterizer import run_parallel
+from naruto_gym.utils.threads import run_parallel
 
 # Below this many points a single call beats the threads' hand-off.
 _MIN_POINTS_PER_THREAD = 8192

@@ -16,8 +16,9 @@ import numpy as np
 
 from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.kernels import fill_world_rays
-from naruto_gym.sensors.rasterizer import PinholeRasterizer, default_thread_count, run_parallel
+from naruto_gym.sensors.rasterizer import PinholeRasterizer
 from naruto_gym.sensors.raycaster import RayCaster, RayHits
+from naruto_gym.utils.threads import default_thread_count, run_parallel
 
 PinholeBackend = Literal["raycast", "raster", "auto"]
 PINHOLE_BACKENDS: tuple[str, ...] = ("raycast", "raster", "auto")

@@ -50,7 +50,7 @@ from naruto_gym.scenes.stream import (
 )
 from naruto_gym.sensors.kernels import fill_panorama_rays
 from naruto_gym.sensors.pinhole import AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED
-from naruto_gym.sensors.rasterizer import default_thread_count, run_parallel
+from naruto_gym.utils.threads import default_thread_count, run_parallel
 from naruto_gym.vector.batch_kernels import (
     PROVABLY_CLEAR_SLACK_M,
     fill_pinhole_rays,
