@@ -43,7 +43,8 @@ def policy_episode(policy_name: str, scene: str, steps: int, seed: int) -> dict[
 
     kwargs: dict[str, Any] = {}
     if policy_name == "naruto":
-        kwargs = {"mapper": "tsdf"}
+        # A long planning limit: the plan then depends on the seed, not on the load.
+        kwargs = {"mapper": "tsdf", "planner": {"time_limit_s": 120.0}}
     policy = make_policy(policy_name, **kwargs)
     env = gym.make(
         "NarutoRecon-v0",

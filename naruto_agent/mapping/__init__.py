@@ -13,6 +13,8 @@ from naruto_agent.mapping.base import Mapper, resolve_device
 from naruto_agent.mapping.config import NeuralMapperConfig
 from naruto_agent.mapping.encoding import HashGridEncoding, NaiveHashGridEncoding, OneBlobEncoding
 from naruto_agent.mapping.neural_mapper import NeuralMapper, select_active_rays
+from naruto_agent.mapping.occupancy import OccupancyGrid
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_agent.mapping.tsdf_mapper import TsdfMapperConfig, TsdfUncertaintyMapper
 from naruto_agent.mapping.uncertainty_grid import UncertaintyGrid, gaussian_nll
 
@@ -22,7 +24,9 @@ __all__ = [
     "NaiveHashGridEncoding",
     "NeuralMapper",
     "NeuralMapperConfig",
+    "OccupancyGrid",
     "OneBlobEncoding",
+    "SdfVolume",
     "TsdfMapperConfig",
     "TsdfUncertaintyMapper",
     "UncertaintyGrid",

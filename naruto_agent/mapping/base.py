@@ -13,7 +13,7 @@ import numpy as np
 import torch
 import trimesh
 
-from naruto_agent.planning.sdf_volume import SdfVolume
+from naruto_agent.mapping.sdf_volume import SdfVolume
 
 
 def resolve_device(device: str | torch.device = "auto") -> torch.device:

@@ -8,7 +8,7 @@ import numpy as np
 import trimesh
 from skimage.measure import marching_cubes
 
-from naruto_agent.planning.sdf_volume import SdfVolume
+from naruto_agent.mapping.sdf_volume import SdfVolume
 
 
 def mesh_from_sdf_function(

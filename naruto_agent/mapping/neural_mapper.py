@@ -45,8 +45,8 @@ from naruto_agent.mapping.rendering import (
     surface_variance,
     weighted_total,
 )
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_agent.mapping.uncertainty_grid import UncertaintyGrid
-from naruto_agent.planning.sdf_volume import SdfVolume
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 _QUERY_CHUNK = 65_536

@@ -44,8 +44,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import ndimage
 
-from naruto_agent.planning.sdf_volume import SdfVolume
-from naruto_agent.policies.occupancy import OccupancyGrid
+from naruto_agent.mapping.occupancy import OccupancyGrid
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)

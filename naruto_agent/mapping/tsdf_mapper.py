@@ -41,7 +41,7 @@ from naruto_agent.mapping.observed_space import (
     ObservedSpaceConfig,
     add_unknown_space_uncertainty,
 )
-from naruto_agent.planning.sdf_volume import SdfVolume
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper
 from naruto_gym.sensors.pinhole import PinholeCamera
 

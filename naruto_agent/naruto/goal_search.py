@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_agent.planning.rrt import PlannerConfig, reachable_voxels
-from naruto_agent.planning.sdf_volume import SdfVolume
 
 # Comparisons of float32 volumes against float64 thresholds: a TSDF stores its truncation
 # (8 cm) as float32(0.08) < 0.08, which must still count as "at least 8 cm".

@@ -26,7 +26,7 @@ from enum import Enum
 
 import numpy as np
 
-from naruto_agent.planning.sdf_volume import SdfVolume
+from naruto_agent.mapping.sdf_volume import SdfVolume
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@
   turns towards target views in steps of at most ``max_rotation_deg``.
 """
 
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_agent.planning.collision import (
     free_steps_along_segment,
     guaranteed_margin_m,
@@ -24,7 +25,6 @@ from naruto_agent.planning.rotation import (
     slerp_rotations,
 )
 from naruto_agent.planning.rrt import PlannerConfig, PlanResult, plan_path, reachable_voxels
-from naruto_agent.planning.sdf_volume import SdfVolume
 from naruto_agent.planning.shortcut import shortcut_path
 
 __all__ = [

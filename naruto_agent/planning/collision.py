@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from naruto_agent.planning.sdf_volume import SdfVolume
+from naruto_agent.mapping.sdf_volume import SdfVolume
 
 
 def guaranteed_margin_m(voxel_size: float, sample_m: float) -> float:

@@ -18,7 +18,7 @@ import numba
 import numpy as np
 from scipy import ndimage
 
-from naruto_agent.planning.sdf_volume import SdfVolume
+from naruto_agent.mapping.sdf_volume import SdfVolume
 
 _CELL_CORNERS = np.array(
     [[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.int64

@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_agent.planning.collision import samples_per_step, segment_is_free
 from naruto_agent.planning.free_space import FreeSpaceComponents
-from naruto_agent.planning.sdf_volume import SdfVolume
 
 _RANDOM_BATCH = 256
 

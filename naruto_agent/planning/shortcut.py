@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_agent.planning.collision import segment_is_free
-from naruto_agent.planning.sdf_volume import SdfVolume
 
 
 def shortcut_path(

@@ -16,6 +16,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from naruto_agent.mapping.occupancy import OccupancyGrid
 from naruto_agent.policies.adapters import (
     CallablePolicy,
     SB3Policy,
@@ -24,7 +25,6 @@ from naruto_agent.policies.adapters import (
 )
 from naruto_agent.policies.base import EnvContext, OwnReconstruction, Policy, pose_action
 from naruto_agent.policies.frontier import FrontierPolicy
-from naruto_agent.policies.occupancy import OccupancyGrid
 from naruto_agent.policies.passive import PassivePolicy, load_trajectory, subsample_poses
 from naruto_agent.policies.random_policy import RandomPolicy
 

@@ -1,6 +1,6 @@
 """Classic frontier-based exploration (Yamauchi, 1997) on a voxel occupancy map from depth.
 
-The policy builds its own :class:`~naruto_agent.policies.occupancy.OccupancyGrid` from the
+The policy builds its own :class:`~naruto_agent.mapping.occupancy.OccupancyGrid` from the
 depth and pose observations (never the ground-truth mesh), then repeats:
 
 1. *look around*: at the start, turn on the spot through ``look_around_headings`` headings
@@ -68,8 +68,8 @@ from collections import deque
 import numpy as np
 from scipy import ndimage
 
+from naruto_agent.mapping.occupancy import OccupancyGrid
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
-from naruto_agent.policies.occupancy import OccupancyGrid
 from naruto_agent.policies.panorama_clearance import (
     RefusedMoves,
     clear_part_of_move,

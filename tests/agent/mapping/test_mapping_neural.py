@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 
 from naruto_agent.mapping import NeuralMapper, NeuralMapperConfig, select_active_rays
 from naruto_agent.mapping.rendering import RayBatch, truncated_weights
-from naruto_agent.planning.sdf_volume import SdfVolume
+from naruto_agent.mapping.sdf_volume import SdfVolume
 
 from .conftest import orbit_poses
 

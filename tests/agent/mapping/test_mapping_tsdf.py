@@ -8,8 +8,8 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from naruto_agent.mapping import Mapper, TsdfMapperConfig, TsdfUncertaintyMapper
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_agent.planning.collision import segment_is_free
-from naruto_agent.planning.sdf_volume import SdfVolume
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 from naruto_gym.scenes.mesh_scene import Scene, scene_from_trimesh
 from naruto_gym.sensors.pinhole import RgbdRenderer

@@ -11,6 +11,7 @@ import pytest
 
 import naruto_gym  # noqa: F401  (registers the env)
 from naruto_agent.mapping.observed_space import ObservedSpace
+from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_agent.naruto import NarutoPolicy
 from naruto_agent.naruto.recovery import (
     BlockedSpace,
@@ -20,7 +21,6 @@ from naruto_agent.naruto.recovery import (
     densify,
     look_around_targets,
 )
-from naruto_agent.planning.sdf_volume import SdfVolume
 from naruto_agent.policies import EnvContext
 from naruto_gym.scenes import make_random_scene
 from tests.agent.synthetic_panoramas import floor_panorama, wall_panorama

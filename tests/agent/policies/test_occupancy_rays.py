@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from naruto_agent.policies.occupancy import OccupancyGrid
+from naruto_agent.mapping.occupancy import OccupancyGrid
 
 
 def _vectorised_integrate_rays(grid: OccupancyGrid, origin, directions, ranges) -> None:

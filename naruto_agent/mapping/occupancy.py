@@ -25,7 +25,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.graph import MCP_Geometric
 
-from naruto_agent.policies.support_kernels import empty_sectors_below
+from naruto_agent.mapping.occupancy_kernels import empty_sectors_below
 from naruto_gym.motion.scanned_space import ScannedSpaceConfig, support_directions
 from naruto_gym.sensors.pinhole import PinholeCamera
 
