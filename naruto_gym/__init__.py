@@ -17,7 +17,7 @@ from gymnasium.envs.registration import register
 from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
 
 __all__ = ["NarutoReconEnv"]
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 ENTRY_POINT = "naruto_gym.envs.naruto_recon_env:NarutoReconEnv"
 VECTOR_ENTRY_POINT = "naruto_gym.vector.vector_env:NarutoReconVectorEnv"
