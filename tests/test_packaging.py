@@ -37,11 +37,12 @@ def test_torch_has_no_upper_bound() -> None:
 
 @pytest.fixture(scope="module")
 def built(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A wheel and an sdist built from this checkout (without network: no build isolation)."""
+    """An sdist of this checkout and a wheel built from that sdist (in a temporary folder, so
+    the checkout gets no build/ folder; without network: no build isolation)."""
     pytest.importorskip("build")
     out = tmp_path_factory.mktemp("dist")
     result = subprocess.run(
-        [sys.executable, "-m", "build", "--no-isolation", "--wheel", "--sdist",
+        [sys.executable, "-m", "build", "--no-isolation",
          "--outdir", str(out), str(ROOT)],
         capture_output=True, text=True, timeout=600,
     )
