@@ -1,6 +1,6 @@
 """Reconstruction metrics of the active-mapping literature, as pure functions.
 
-Definitions (NARUTO, CVPR 2024, and the works it compares with; see ``NARUTO_NOTES.md`` §9):
+Definitions (as in NARUTO, Feng et al., CVPR 2024, and the works it compares with):
 
 * **Accuracy** (cm): mean distance from each *reconstruction* sample to its nearest
   *ground-truth* sample. Low when nothing spurious was reconstructed.

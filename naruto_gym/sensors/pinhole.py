@@ -25,8 +25,8 @@ PINHOLE_BACKENDS: tuple[str, ...] = ("raycast", "raster", "auto")
 
 # "auto" rasterizes when the mesh has at most this many triangles per pixel of the frame:
 # rasterizing pays a per-triangle setup on every frame, the ray cast a per-pixel cost.
-# benchmarks/render_speed.py measured the rasterizer faster at 3.2 triangles per pixel and the
-# ray cast faster from 12 up (README, "Rendering speed").
+# benchmarks/render_speed.py finds the rasterizer faster at 3.2 triangles per pixel and the
+# ray cast faster from 12 up (docs/benchmarks/rendering.md).
 AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL = 4.0
 # The same for frames drawn many at a time (a batched env's agents): each thread draws whole
 # frames in one call, and on the Replica sample at 64 x 64 (12 triangles per pixel) the

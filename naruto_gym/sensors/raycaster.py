@@ -2,9 +2,9 @@
 
 Two backends implement :class:`RayCaster`:
 
-* ``"open3d"`` (default): Open3D's ``RaycastingScene`` (Embree inside). Measured on the
-  2-core CI machine it casts the 816k rays of a 680 x 1200 frame on the Replica sample in
-  about 64 ms, against about 124 ms for embreex, so it is the default.
+* ``"open3d"`` (default): Open3D's ``RaycastingScene`` (Embree inside); it casts a full
+  680 x 1200 frame about twice as fast as embreex (docs/benchmarks/rendering.md), so it is
+  the default.
 * ``"embreex"``: the embreex binding, kept behind the same interface for comparison
   (``pip install naruto-gym[embree]``).
 
