@@ -21,7 +21,8 @@ from naruto_gym.scenes import Scene, make_random_scene, resolve_scene
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
 from naruto_gym.sensors.raster import PinholeRasterizer
 from naruto_gym.sensors.raster import rasterizer as rasterizer_module
-from naruto_gym.sensors.raster.culling import closed_solids, cluster_may_be_seen
+from naruto_gym.sensors.raster.culling import closed_solids
+from naruto_gym.sensors.raster.kernels import cluster_may_be_seen
 from tests.conftest import REPLICA_DIR
 
 QUARTER = PinholeCamera().scaled(0.25)  # 170 x 300, same field of view

@@ -45,9 +45,10 @@ edge planes exactly (the cross product of two corners only changes sign when the
 ray through a shared edge is claimed by both neighbours and the image has no cracks; which of
 the two wins such an exact tie can differ from Embree.
 
-Modules: :mod:`.culling` (the view volume, the clusters and closed solids of pass 0 and 2),
-:mod:`.kernels` (the compiled passes 1 to 4) and :mod:`.rasterizer` (:class:`PinholeRasterizer`,
-which owns a mesh's data and scratch space and hands the passes to the threads).
+Modules: :mod:`.culling` (the per-mesh clusters and closed solids that passes 0 and 2 cull
+with), :mod:`.kernels` (the compiled passes 0 to 4) and :mod:`.rasterizer`
+(:class:`PinholeRasterizer`, which owns a mesh's data and scratch space and hands the passes
+to the threads).
 """
 
 from naruto_gym.sensors.raster.rasterizer import MeshClusters, PinholeRasterizer

@@ -1,34 +1,20 @@
-"""The view volume and the mesh geometry a rasterized frame is culled with.
+"""The per-mesh geometry a rasterized frame is culled with, made once per mesh in numpy.
 
-Made once per mesh, in numpy: the triangles in clusters of ``CLUSTER_FACES`` neighbours
-(Z-order of their centroids) with a bounding sphere each (:func:`triangle_clusters`), the
-spheres of groups of ``SUBCLUSTER_FACES`` within them (:func:`group_spheres`), and the parts of
-the mesh that bound closed solids, whose back faces a camera outside never sees
-(:func:`closed_solids`). Compiled, per frame: whether a sphere can reach the view volume
-(:func:`sphere_may_be_seen`, against the sides of :func:`view_side_planes`, the near plane
-``NEAR_PLANE_M`` and the far cut). A sphere that cannot holds no triangle the frame would
-draw, so skipping it changes no pixel.
+The triangles in clusters of ``CLUSTER_FACES`` neighbours (Z-order of their centroids) with a
+bounding sphere each (:func:`triangle_clusters`), the spheres of groups of ``SUBCLUSTER_FACES``
+within them (:func:`group_spheres`), and the parts of the mesh that bound closed solids, whose
+back faces a camera outside never sees (:func:`closed_solids`). Per frame, the compiled passes
+(:mod:`.kernels`) skip a sphere that cannot reach the view volume, and with it every triangle
+it bounds, which changes no pixel.
 """
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 
-# Hits closer to the camera centre than this (metres) are not drawn; the ray cast starts at 0.
-NEAR_PLANE_M = 1e-6
-
-# Neighbouring triangles culled together against the view volume (pass 0), then in groups of
-# SUBCLUSTER_FACES within the clusters seen: a quarter of a cluster is culled more often.
-CLUSTER_FACES = 64
-SUBCLUSTER_FACES = 16
-
-# A cluster is culled only when its sphere lies this much (relative, plus 1 um) outside a
-# side: the vertices' own outcodes are computed another way, and rounding must not cull a
-# triangle they would keep.
-_CULL_SLACK = 1e-6
+from naruto_gym.sensors.raster.kernels import CLUSTER_FACES
 
 
 def morton_order(points: np.ndarray, bits: int = 10) -> np.ndarray:
@@ -168,57 +154,3 @@ def closed_solids(
     index[candidates[solid]] = np.arange(int(solid.sum()), dtype=np.int32)
     boxes = np.concatenate([low[solid] - margin_m, high[solid] + margin_m], axis=1)
     return index[label], np.ascontiguousarray(boxes)
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def view_side_planes(intrinsics: np.ndarray, width: int, height: int) -> np.ndarray:
-    """(4, 2) float64 unit normals, pointing into the view volume, of its left, right, top
-    and bottom sides (the outcode planes of :func:`.kernels.vertex_outcodes`), each as the
-    (x or y, z) coefficients of a camera-frame point's signed distance (x for the first two)."""
-    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
-    sides = np.array([
-        [fx, cx + 1.0], [-fx, width - cx], [fy, cy + 1.0], [-fy, height - cy],
-    ])
-    for side in range(4):
-        norm = np.sqrt(sides[side, 0] ** 2 + sides[side, 1] ** 2)
-        sides[side, 0] /= norm
-        sides[side, 1] /= norm
-    return sides
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def cluster_may_be_seen(
-    spheres: np.ndarray, cluster: int, rotation: np.ndarray, origin: np.ndarray,
-    intrinsics: np.ndarray, width: int, height: int, far_cut: float,
-) -> bool:
-    """False when the cluster's bounding sphere lies wholly outside one side of the view
-    volume (the outcode planes of :func:`.kernels.vertex_outcodes`): every corner of its
-    triangles then has that side's bit, and the setup pass would drop every one of them."""
-    return sphere_may_be_seen(
-        spheres, cluster, rotation, origin, view_side_planes(intrinsics, width, height),
-        far_cut,
-    )
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def sphere_may_be_seen(
-    spheres: np.ndarray, cluster: int, rotation: np.ndarray, origin: np.ndarray,
-    sides: np.ndarray, far_cut: float,
-) -> bool:
-    """:func:`cluster_may_be_seen` with the frame's :func:`view_side_planes` given."""
-    dx = spheres[cluster, 0] - origin[0]
-    dy = spheres[cluster, 1] - origin[1]
-    dz = spheres[cluster, 2] - origin[2]
-    x = rotation[0, 0] * dx + rotation[1, 0] * dy + rotation[2, 0] * dz
-    y = rotation[0, 1] * dx + rotation[1, 1] * dy + rotation[2, 1] * dz
-    z = rotation[0, 2] * dx + rotation[1, 2] * dy + rotation[2, 2] * dz
-    reach = spheres[cluster, 3] * (1.0 + _CULL_SLACK) + _CULL_SLACK
-    if z + reach < NEAR_PLANE_M or z - reach > far_cut:
-        return False
-    # Signed distances to the side planes (unit normals pointing into the view volume).
-    left = sides[0, 0] * x + sides[0, 1] * z
-    right = sides[1, 0] * x + sides[1, 1] * z
-    top = sides[2, 0] * y + sides[2, 1] * z
-    bottom = sides[3, 0] * y + sides[3, 1] * z
-    return min(min(left, right), min(top, bottom)) >= -reach
-

@@ -1,11 +1,16 @@
-"""The compiled passes of the rasterizer: vertices, triangle setup, binning and drawing.
+"""The compiled passes of the rasterizer: culling, vertices, triangle setup, binning, drawing.
 
 Each pass is a numba function that releases the GIL, so that :class:`.PinholeRasterizer` can
 split it between threads (:func:`vertex_outcodes`, :func:`setup_triangles`,
 :func:`draw_bands` over a share of the vertices, triangles or bands, with :func:`bin_records`
-in between); :func:`render_frames` runs every pass of many small frames in one call, culling
-clusters first (:mod:`.culling`). The triangle records the setup pass writes are laid out as
+in between); :func:`render_frames` runs every pass of many small frames in one call, first
+skipping the clusters of :mod:`.culling` whose sphere cannot reach the view volume
+(:func:`sphere_may_be_seen`). The triangle records the setup pass writes are laid out as
 ``RECORD_FLOATS`` float64 per triangle (see the constants below).
+
+Every compiled function, and every constant they read, lives in this one module: numba's
+on-disk cache (``cache=True``) notices a change to a function's own file only, and the
+constants are frozen into the compiled code.
 """
 
 from __future__ import annotations
@@ -13,13 +18,18 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from naruto_gym.sensors.raster.culling import (
-    CLUSTER_FACES,
-    NEAR_PLANE_M,
-    SUBCLUSTER_FACES,
-    sphere_may_be_seen,
-    view_side_planes,
-)
+# Hits closer to the camera centre than this (metres) are not drawn; the ray cast starts at 0.
+NEAR_PLANE_M = 1e-6
+
+# Neighbouring triangles culled together against the view volume (pass 0), then in groups of
+# SUBCLUSTER_FACES within the clusters seen: a quarter of a cluster is culled more often.
+CLUSTER_FACES = 64
+SUBCLUSTER_FACES = 16
+
+# A cluster is culled only when its sphere lies this much (relative, plus 1 um) outside a
+# side: the vertices' own outcodes are computed another way, and rounding must not cull a
+# triangle they would keep.
+_CULL_SLACK = 1e-6
 
 # Layout of the float64 triangle records made by the setup pass, every plane in pixel units
 # (a * u + b * v + c): the three edge planes (times the sign of det), the inverse-depth plane
@@ -115,6 +125,59 @@ def vertex_outcodes(
 
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def view_side_planes(intrinsics: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(4, 2) float64 unit normals, pointing into the view volume, of its left, right, top
+    and bottom sides (the outcode planes of :func:`vertex_outcodes`), each as the
+    (x or y, z) coefficients of a camera-frame point's signed distance (x for the first two)."""
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    sides = np.array([
+        [fx, cx + 1.0], [-fx, width - cx], [fy, cy + 1.0], [-fy, height - cy],
+    ])
+    for side in range(4):
+        norm = np.sqrt(sides[side, 0] ** 2 + sides[side, 1] ** 2)
+        sides[side, 0] /= norm
+        sides[side, 1] /= norm
+    return sides
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def cluster_may_be_seen(
+    spheres: np.ndarray, cluster: int, rotation: np.ndarray, origin: np.ndarray,
+    intrinsics: np.ndarray, width: int, height: int, far_cut: float,
+) -> bool:
+    """False when the cluster's bounding sphere lies wholly outside one side of the view
+    volume (the outcode planes of :func:`vertex_outcodes`): every corner of its
+    triangles then has that side's bit, and the setup pass would drop every one of them."""
+    return sphere_may_be_seen(
+        spheres, cluster, rotation, origin, view_side_planes(intrinsics, width, height),
+        far_cut,
+    )
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def sphere_may_be_seen(
+    spheres: np.ndarray, cluster: int, rotation: np.ndarray, origin: np.ndarray,
+    sides: np.ndarray, far_cut: float,
+) -> bool:
+    """:func:`cluster_may_be_seen` with the frame's :func:`view_side_planes` given."""
+    dx = spheres[cluster, 0] - origin[0]
+    dy = spheres[cluster, 1] - origin[1]
+    dz = spheres[cluster, 2] - origin[2]
+    x = rotation[0, 0] * dx + rotation[1, 0] * dy + rotation[2, 0] * dz
+    y = rotation[0, 1] * dx + rotation[1, 1] * dy + rotation[2, 1] * dz
+    z = rotation[0, 2] * dx + rotation[1, 2] * dy + rotation[2, 2] * dz
+    reach = spheres[cluster, 3] * (1.0 + _CULL_SLACK) + _CULL_SLACK
+    if z + reach < NEAR_PLANE_M or z - reach > far_cut:
+        return False
+    # Signed distances to the side planes (unit normals pointing into the view volume).
+    left = sides[0, 0] * x + sides[0, 1] * z
+    right = sides[1, 0] * x + sides[1, 1] * z
+    top = sides[2, 0] * y + sides[2, 1] * z
+    bottom = sides[3, 0] * y + sides[3, 1] * z
+    return min(min(left, right), min(top, bottom)) >= -reach
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _holds_no_pixel(u_min, u_max, v_min, v_max, width, height):
     """Whether an image box holds no pixel (pixels sit at integer (u, v)): so it is with most
@@ -193,9 +256,9 @@ def setup_triangles(
         hit_planes: (F, 6) float64 output: the planes of the barycentric coordinates u and v
             divided by the z-depth (u = plane(pixel) * z), in pixel units.
         record_rows: (F, 3) int64 output: triangle id, first row, last row.
-        face_solids, solid_boxes: :func:`closed_solids` of the mesh (``face_solids`` in the
-            order of ``faces``): a back face of a solid whose box the camera is outside of is
-            dropped.
+        face_solids, solid_boxes: :func:`.culling.closed_solids` of the mesh
+            (``face_solids`` in the order of ``faces``): a back face of a solid whose box the
+            camera is outside of is dropped.
 
     Returns:
         The number of records written from index ``slot_base``.
@@ -500,11 +563,13 @@ def render_frames(
         poses: (K, 4, 4) float64 camera-to-world poses (already rounded to float32).
         cluster_faces: ``faces[cluster_order]``, the triangles cluster after cluster.
         cluster_order, spheres, cluster_vertex_starts, cluster_vertices:
-            :func:`triangle_clusters` of the mesh, ``CLUSTER_FACES`` triangles per cluster.
-        sub_spheres: :func:`group_spheres` of ``cluster_faces``, ``SUBCLUSTER_FACES`` each.
-        cluster_face_solids, solid_boxes: :func:`closed_solids` of the mesh, the solid of
-            each face in cluster order.
-        scratch_*: the single-frame buffers of :class:`PinholeRasterizer`;
+            :func:`.culling.triangle_clusters` of the mesh, ``CLUSTER_FACES`` triangles per
+            cluster.
+        sub_spheres: :func:`.culling.group_spheres` of ``cluster_faces``,
+            ``SUBCLUSTER_FACES`` each.
+        cluster_face_solids, solid_boxes: :func:`.culling.closed_solids` of the mesh, the
+            solid of each face in cluster order.
+        scratch_*: the single-frame buffers of :class:`.PinholeRasterizer`;
             ``scratch_stamps``: (V + 1,) int64, the frame mark each vertex was last
             classified for, the last mark at the end.
         inverse_depth, winners: one band's z-buffer.

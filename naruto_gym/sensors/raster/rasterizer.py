@@ -14,15 +14,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from naruto_gym.sensors.raster.culling import (
-    NEAR_PLANE_M,
-    SUBCLUSTER_FACES,
-    closed_solids,
-    group_spheres,
-    triangle_clusters,
-)
+from naruto_gym.sensors.raster.culling import closed_solids, group_spheres, triangle_clusters
 from naruto_gym.sensors.raster.kernels import (
+    NEAR_PLANE_M,
     RECORD_FLOATS,
+    SUBCLUSTER_FACES,
     bin_records,
     draw_bands,
     render_frames,
