@@ -245,7 +245,7 @@ def bench_frame_sizes(
 FIRST_CALL_SCRIPT = """
 import time
 import numpy as np
-from naruto_gym.sensors.rasterizer import PinholeRasterizer
+from naruto_gym.sensors.raster import PinholeRasterizer
 started = time.perf_counter()
 PinholeRasterizer(np.eye(3), np.array([[0, 1, 2]]), 8, 8, 4.0, 4.0, 3.5, 3.5).render(np.eye(4))
 print(time.perf_counter() - started)

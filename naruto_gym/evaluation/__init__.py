@@ -1,6 +1,11 @@
 """Reconstruction scoring: metrics, mesh culling, a reference TSDF mapper, one-call scoring."""
 
-from naruto_gym.evaluation.culling import CullingCache, cull_mesh, visible_vertex_mask
+from naruto_gym.evaluation.culling import (
+    CullingCache,
+    CullingSettings,
+    cull_mesh,
+    visible_vertex_mask,
+)
 from naruto_gym.evaluation.metrics import (
     ReconstructionMetrics,
     mean_absolute_distance_cm,
@@ -17,6 +22,7 @@ from naruto_gym.scenes.mesh_scene import sample_mesh_surface
 
 __all__ = [
     "CullingCache",
+    "CullingSettings",
     "EpisodeReconstruction",
     "ReconstructionMetrics",
     "TsdfFusionMapper",

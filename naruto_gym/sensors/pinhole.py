@@ -1,7 +1,7 @@
 """Pinhole RGB-D camera: intrinsics and the renderer that makes a frame.
 
 The renderer finds the first hit of every pixel ray either by Embree ray casting (the
-reference, and the default) or by rasterizing (:mod:`naruto_gym.sensors.rasterizer`), which
+reference, and the default) or by rasterizing (:mod:`naruto_gym.sensors.raster`), which
 yields the same per-pixel hits several times faster on full frames; both feed the same colour
 lookup.
 """
@@ -16,7 +16,7 @@ import numpy as np
 
 from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.kernels import fill_world_rays
-from naruto_gym.sensors.rasterizer import PinholeRasterizer
+from naruto_gym.sensors.raster import PinholeRasterizer
 from naruto_gym.sensors.raycaster import RayCaster, RayHits
 from naruto_gym.utils.threads import default_thread_count, run_parallel
 

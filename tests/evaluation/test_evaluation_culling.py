@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from naruto_gym.evaluation import CullingCache, cull_mesh, culling, visible_vertex_mask
+from naruto_gym.evaluation import (
+    CullingCache,
+    CullingSettings,
+    cull_mesh,
+    visible_vertex_mask,
+)
 from naruto_gym.evaluation.culling import visible_vertex_mask_reference
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 from naruto_gym.scenes.mesh_scene import scene_from_trimesh
@@ -173,16 +178,25 @@ def test_fast_culling_equals_the_per_pose_loop(seed):
         np.testing.assert_array_equal(mask, expected)
 
 
-def test_fast_culling_equals_the_loop_with_tiny_casts_and_rounds(monkeypatch):
+def test_fast_culling_equals_the_loop_with_tiny_casts_and_rounds():
     # Many chunks per round and one pair per vertex per round: every bookkeeping path runs.
-    monkeypatch.setattr(culling, "MAX_RAYS_PER_CAST", 257)
-    monkeypatch.setattr(culling, "MAX_LIKELY_PER_ROUND", 1)
-    monkeypatch.setattr(culling, "MAX_UNLIKELY_PER_ROUND", 3)
-    monkeypatch.setattr(culling, "BLOCK_SIZE_M", 0.2)
+    settings = CullingSettings(
+        max_rays_per_cast=257, max_likely_per_round=1, max_unlikely_per_round=3, block_size_m=0.2
+    )
     scene, vertices, rng = cluttered_room(3)
     poses = random_poses(rng, 25)
     expected = visible_vertex_mask_reference(vertices, poses, CAMERA, scene, every=1)
-    np.testing.assert_array_equal(visible_vertex_mask(vertices, poses, CAMERA, scene, 1), expected)
+    mask = visible_vertex_mask(vertices, poses, CAMERA, scene, 1, settings=settings)
+    np.testing.assert_array_equal(mask, expected)
+    # Other guide images and pose orders change how many rays are cast, not the verdicts.
+    for other in (
+        CullingSettings(guide_width_px=7, guide_slack_m=0.0, guide_slack_share=0.0),
+        CullingSettings(order_poses_by_distance=False, block_size_m=3.0),
+    ):
+        mask = visible_vertex_mask(vertices, poses, CAMERA, scene, 1, settings=other)
+        np.testing.assert_array_equal(mask, expected)
+    with pytest.raises(ValueError, match="max_rays_per_cast"):
+        CullingSettings(max_rays_per_cast=0)
 
 
 def test_fast_depth_image_culling_equals_the_loop():

@@ -18,13 +18,11 @@ from scipy.spatial.transform import Rotation
 
 import naruto_gym  # noqa: F401
 from naruto_gym.scenes import Scene, make_random_scene, resolve_scene
-from naruto_gym.sensors import rasterizer as rasterizer_module
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
-from naruto_gym.sensors.rasterizer import (
-    PinholeRasterizer,
-    closed_solids,
-    cluster_may_be_seen,
-)
+from naruto_gym.sensors.raster import PinholeRasterizer
+from naruto_gym.sensors.raster import rasterizer as rasterizer_module
+from naruto_gym.sensors.raster.culling import closed_solids
+from naruto_gym.sensors.raster.kernels import cluster_may_be_seen
 from tests.conftest import REPLICA_DIR
 
 QUARTER = PinholeCamera().scaled(0.25)  # 170 x 300, same field of view
@@ -478,20 +476,24 @@ def test_culling_clusters_changes_no_pixel(name):
     free poses, poses millimetres off a surface and grazing ones; and culling does skip
     clusters."""
     scene = _scene(name)
-    rasterizer = PinholeRasterizer(scene.vertices, scene.faces, 64, 64, 31.5, 31.5, 32.0, 32.0,
-                                   threads=1)
     poses = np.stack(random_poses(scene, 30, 11))
     pixels = 64 * 64
 
-    def draw() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def draw(rasterizer: PinholeRasterizer) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         depth = np.empty((len(poses), 64, 64), np.float32)
         triangle_ids = np.empty(len(poses) * pixels, np.int32)
         uv = np.empty((len(poses) * pixels, 2), np.float32)
         rasterizer.render_many_into(poses, 10.0, depth, triangle_ids, uv)
         return depth, triangle_ids, uv
 
-    culled = draw()
-    faces, order, spheres, sub_spheres, starts, members, *solids = rasterizer._clusters()
+    def rasterizer_of(cull_clusters: bool) -> PinholeRasterizer:
+        return PinholeRasterizer(scene.vertices, scene.faces, 64, 64, 31.5, 31.5, 32.0, 32.0,
+                                 threads=1, cull_clusters=cull_clusters)
+
+    rasterizer = rasterizer_of(True)
+    culled = draw(rasterizer)
+    clusters = rasterizer.clusters
+    spheres, sub_spheres = clusters.spheres, clusters.sub_spheres
     seen = [cluster_may_be_seen(spheres, c, pose[:3, :3].copy(), pose[:3, 3].copy(),
                                 rasterizer.intrinsics, 64, 64, np.inf)
             for pose in poses for c in range(len(spheres))]
@@ -499,7 +501,8 @@ def test_culling_clusters_changes_no_pixel(name):
     if name == "replica_office0":
         # Frames seeing under a quarter of the vertices classify them one at a time, the
         # others all at once: both kinds are compared with the unculled frames here.
-        corners = (np.reshape(seen, (len(poses), -1)) * np.diff(starts)).sum(axis=1)
+        corners = (np.reshape(seen, (len(poses), -1))
+                   * np.diff(clusters.cluster_vertex_starts)).sum(axis=1)
         one_at_a_time = 4 * corners < len(rasterizer.vertices)
         assert one_at_a_time.any() and not one_at_a_time.all()
     # Groups of SUBCLUSTER_FACES within the clusters seen are culled too.
@@ -508,12 +511,9 @@ def test_culling_clusters_changes_no_pixel(name):
                 for pose in poses for c in range(len(sub_spheres))]
     assert np.mean(sub_seen) < np.mean(seen)
 
-    def never(spheres: np.ndarray) -> np.ndarray:
-        return np.concatenate([spheres[:, :3], np.full((len(spheres), 1), np.inf)], axis=1)
-
-    rasterizer._cluster_arrays = (faces, order, never(spheres), never(sub_spheres), starts,
-                                  members, *solids)
-    whole = draw()
+    unculled = rasterizer_of(False)
+    whole = draw(unculled)
+    assert np.isinf(unculled.clusters.spheres[:, 3]).all()  # no cluster can be culled
     np.testing.assert_array_equal(culled[0], whole[0])
     np.testing.assert_array_equal(culled[1], whole[1])
     hit = whole[1] >= 0
@@ -573,7 +573,7 @@ def test_dropping_back_faces_of_solids_changes_no_pixel(name):
         np.testing.assert_array_equal(single[0], depth[0])
         frames.append((depth, triangle_ids, uv))
         if cull and not name.startswith("replica_office"):
-            assert (rasterizer._solids()[0] >= 0).mean() > 0.5
+            assert (rasterizer.solids[0] >= 0).mean() > 0.5
     for culled, whole in zip(*frames, strict=True):
         np.testing.assert_array_equal(culled, whole)
 
@@ -597,4 +597,4 @@ def test_a_camera_inside_a_solid_sees_its_inside():
         drawn, cast = raster.render_hits(pose), reference.render_hits(pose)
         assert (drawn.depth > 0).all()
         np.testing.assert_allclose(drawn.depth, cast.depth, rtol=1e-5)
-    assert (raster.rasterizer._solids()[0] == 0).all()  # the box is a solid
+    assert (raster.rasterizer.solids[0] == 0).all()  # the box is a solid
