@@ -12,8 +12,10 @@ size, so its mesh never needs to be downloaded:
   it is asked for; generation is deterministic, so the file is byte-identical to the shipped
   one. ``$NARUTO_GYM_ASSETS_DIR`` points the lookup at another assets folder.
 
-``resolve_scene`` is what the environment calls: it accepts a catalogue name, a mesh file
-path or an already built :class:`~naruto_gym.scenes.mesh_scene.Scene`.
+``resolve_scene`` is what the environment calls: it accepts a catalogue name, a catalogue
+name with scan openings (``"NAME:OPENINGS"``, an open-scan variant built in memory by
+:func:`catalogue_open_scan`), one fixed generated scene (``"procedural:<kind>:<seed>"``), a
+mesh file path or an already built :class:`~naruto_gym.scenes.mesh_scene.Scene`.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from naruto_gym.scenes.mesh_scene import Scene, UpAxis, load_scene
+from naruto_gym.scenes.open_scans import ALIASES, OPENINGS, open_scan_variant, parse_openings
 from naruto_gym.scenes.procedural import (
     GENERATOR_VERSION,
     SceneLayout,
@@ -37,6 +40,7 @@ from naruto_gym.scenes.procedural import (
     save_scene_ply,
     scene_to_ply_bytes,
 )
+from naruto_gym.scenes.stream import parse_procedural_name
 
 DEFAULT_SCENE = "replica_like_room"
 ASSETS_DIR_ENV = "NARUTO_GYM_ASSETS_DIR"
@@ -289,6 +293,29 @@ def catalogue_document() -> dict:
 
 
 # ---------------------------------------------------------------------------------------
+# Open-scan variants of catalogue scenes
+# ---------------------------------------------------------------------------------------
+def catalogue_open_scan(name: str, seed: int = 0) -> Scene:
+    """A catalogue scene opened up: ``"NAME:OPENINGS"``, e.g. ``"two_rooms:no_ceiling+holes"``.
+
+    Raises:
+        ValueError: an unknown catalogue name or opening.
+    """
+    base, _, openings = name.partition(":")
+    entry = catalogue_entry(base)
+    if not openings:
+        raise ValueError(
+            f"scene {name!r} names no opening; use NAME:OPENINGS with openings among "
+            f"{', '.join(OPENINGS + tuple(ALIASES))} joined by '+'"
+        )
+    names = parse_openings(openings)
+    return open_scan_variant(
+        entry.layout(), names, seed=seed, scene=load_catalogue_scene(base),
+        name=f"{base}:{'+'.join(names) or 'fragments'}",
+    )
+
+
+# ---------------------------------------------------------------------------------------
 # One entry point for the environment
 # ---------------------------------------------------------------------------------------
 def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z") -> Scene:
@@ -310,12 +337,8 @@ def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z"
     if isinstance(name_or_path, str) and name_or_path in _ENTRIES:
         return load_catalogue_scene(name_or_path)
     if isinstance(name_or_path, str) and name_or_path.partition(":")[0] in _ENTRIES:
-        from naruto_gym.scenes.open_scans import catalogue_open_scan
-
         return catalogue_open_scan(name_or_path)  # "NAME:OPENINGS", an open-scan variant
     if isinstance(name_or_path, str) and name_or_path.startswith("procedural:"):
-        from naruto_gym.scenes.stream import parse_procedural_name
-
         spec = parse_procedural_name(name_or_path)
         if spec.is_stream:
             raise ValueError(

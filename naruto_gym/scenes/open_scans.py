@@ -401,25 +401,3 @@ def open_scan_variant(
     if fragments:
         cut = add_boxes(cut, fragment_boxes(layout, seed), _FRAGMENT_RGB, name=label)
     return cut
-
-
-def catalogue_open_scan(name: str, seed: int = 0) -> Scene:
-    """A catalogue scene opened up: ``"NAME:OPENINGS"``, e.g. ``"two_rooms:no_ceiling+holes"``.
-
-    Raises:
-        ValueError: an unknown catalogue name or opening.
-    """
-    from naruto_gym.scenes.catalogue import catalogue_entry, load_catalogue_scene
-
-    base, _, openings = name.partition(":")
-    entry = catalogue_entry(base)
-    if not openings:
-        raise ValueError(
-            f"scene {name!r} names no opening; use NAME:OPENINGS with openings among "
-            f"{', '.join(OPENINGS + tuple(ALIASES))} joined by '+'"
-        )
-    names = parse_openings(openings)
-    return open_scan_variant(
-        entry.layout(), names, seed=seed, scene=load_catalogue_scene(base),
-        name=f"{base}:{'+'.join(names) or 'fragments'}",
-    )

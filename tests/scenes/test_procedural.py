@@ -267,11 +267,11 @@ def test_bad_kind_and_room_count_raise():
 
 
 def test_flat_shading_matches_the_array_shading_bit_for_bit():
-    from naruto_gym.scenes.procedural import _flat_shade, _shade
+    from naruto_gym.scenes.procedural.mesh_builder import flat_shade, shade
 
     rng = np.random.default_rng(0)
     normals = _unit_directions(300, 1)
     normals[:6] = np.concatenate([np.eye(3), -np.eye(3)])
     for normal in normals:
         colour = tuple(int(c) for c in rng.integers(0, 256, 3))
-        assert _flat_shade(colour, normal) == tuple(_shade(colour, normal[None])[0])
+        assert flat_shade(colour, normal) == tuple(shade(colour, normal[None])[0])

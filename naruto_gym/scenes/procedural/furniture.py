@@ -4,7 +4,7 @@ Every builder draws its sizes and colours from the generator's random stream and
 ``(width, depth, height, parts)`` in a local frame: x runs along the wall the object backs
 onto, y points from that wall into the room, z up, origin at the back-left corner of the
 footprint ``[0, width] x [0, depth]``. Parts are ``(kind, data, colours)`` tuples, with the
-same meaning as :class:`naruto_gym.scenes.procedural.Part` but in the local frame.
+same meaning as :class:`naruto_gym.scenes.procedural.plan.Part` but in the local frame.
 """
 
 from __future__ import annotations
