@@ -336,8 +336,10 @@ class HashGridEncoding(nn.Module):
             torch.mul(xy_weight[i, j], weights_per_side[k][2], out=weights[c])
         return indices.view(8, -1), weights.view(8, -1)
 
-    def _uses_cpu_kernel(self, unit_positions: torch.Tensor) -> bool:
-        """Whether this call can take the compiled no-gradient loop."""
+    def uses_cpu_kernel(self, unit_positions: torch.Tensor) -> bool:
+        """Whether a call on ``unit_positions`` takes the compiled no-gradient loop
+        (:mod:`cpu_kernels`): on a CPU, float32, published layout, no gradient wanted, and
+        ``cpu_kernel`` on. A caller that fuses more work into that loop asks this first."""
         return (
             self.cpu_kernel
             and cpu_kernels.supports(self.features_per_level)
@@ -376,7 +378,7 @@ class HashGridEncoding(nn.Module):
         """(N, 3) positions in [0, 1] -> (N, num_levels * features_per_level) features."""
         count = unit_positions.shape[0]
         unit_positions = unit_positions.clamp(0.0, 1.0).to(self.table.dtype)
-        if self._uses_cpu_kernel(unit_positions):
+        if self.uses_cpu_kernel(unit_positions):
             return self._cpu_kernel_features(unit_positions)
         features = _HashGridFunction.apply(self.table, unit_positions, self)
         # (F, L, N) -> (N, L * F), level-major like tiny-cuda-nn's output.

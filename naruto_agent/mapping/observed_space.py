@@ -141,10 +141,7 @@ class ObservedSpace:
         self, depth: np.ndarray, camera_to_world: np.ndarray, camera: PinholeCamera
     ) -> None:
         """Integrate a pinhole z-depth frame (0 = no hit) seen from ``camera_to_world``."""
-        stride = self._stride(camera)
-        if stride != self.grid.pixel_stride:
-            self.grid.pixel_stride = stride
-            self.grid._ray_cache = None
+        self.grid.pixel_stride = self._stride(camera)  # drops the grid's rays if it changed
         self.grid.integrate(depth, camera_to_world, camera)
         if self.config.look_weight > 0:
             self._count_looks(depth, np.asarray(camera_to_world, np.float64), camera)

@@ -210,6 +210,11 @@ class TsdfUncertaintyMapper:
         """(nx, ny, nz) derived variance on the count grid."""
         return self.config.initial_variance / (1.0 + self.counts.astype(np.float64))
 
+    def variance_volume(self) -> SdfVolume:
+        """The derived variance on the count grid, placed in the world (every voxel, not
+        only surface ones: see :meth:`planner_view` for the planner's volume)."""
+        return SdfVolume(self.variance_grid(), self._grid_origin, self.config.uncertainty_voxel_m)
+
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """(N,) fused SDF in metres; unobserved space reads as +truncation (see
         :meth:`TsdfFusionMapper.sdf`)."""
@@ -221,11 +226,9 @@ class TsdfUncertaintyMapper:
         if math.isclose(voxel_size, self.config.uncertainty_voxel_m):
             values = self.variance_grid()  # the same grid: no interpolation needed
         else:
-            variance = SdfVolume(self.variance_grid(), self._grid_origin,
-                                 self.config.uncertainty_voxel_m)
-            values = variance.sample(sdf_volume.grid_points(), outside_value=0.0).reshape(
-                sdf_volume.shape
-            )
+            values = self.variance_volume().sample(
+                sdf_volume.grid_points(), outside_value=0.0
+            ).reshape(sdf_volume.shape)
         # Surface voxels by the sampled SDF: the bound reaches voxels behind a surface,
         # which no frame can see (they would stay targets at the initial variance).
         on_surface = (sampled.values >= 0.0) & (
@@ -284,7 +287,7 @@ class TsdfUncertaintyMapper:
         """The fused grid (Open3D's own file format, as bytes), counts and settings."""
         with tempfile.TemporaryDirectory() as folder:
             path = os.path.join(folder, "grid.npz")
-            self.tsdf._grid.save(path)
+            self.tsdf.save(path)
             with open(path, "rb") as handle:
                 grid_bytes = handle.read()
         return {
@@ -306,9 +309,7 @@ class TsdfUncertaintyMapper:
             path = os.path.join(folder, "grid.npz")
             with open(path, "wb") as handle:
                 handle.write(state["grid"])
-            self.tsdf._grid = o3d.t.geometry.VoxelBlockGrid.load(path).to(self.tsdf.device)
-        self.tsdf._sdf_index = None
-        self.tsdf._touched_blocks = []
+            self.tsdf.load(path)
         self._sdf_view = None
         self.tsdf.num_frames = int(state["tsdf_frames"])
         self.counts = np.asarray(state["counts"], dtype=np.float32).copy()
