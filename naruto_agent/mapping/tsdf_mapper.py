@@ -75,9 +75,8 @@ class TsdfMapperConfig:
             (:meth:`~naruto_gym.evaluation.TsdfFusionMapper.behind_surface_bounds`). A wall
             seen from one side fuses into a band of negative values 2-6 cm thick with unknown
             space behind it, which the planner's 10 cm samples straddle more often than not:
-            the wall vanished from the planner's map, and on ``two_rooms`` with holes (seed 2)
-            the agent tried 13 moves through the partition wall next to it. False: the SDF
-            sampled at the planner voxels only.
+            the wall would vanish from the planner's map, and the agent would try to move
+            through it. False: the SDF sampled at the planner voxels only.
     """
 
     voxel_size_m: float = 0.02
