@@ -95,15 +95,9 @@ def main(args: Args) -> dict:
     for index, rgb, depth in frames:
         mapper.integrate(rgb, depth, poses[index], index)
     index, rgb, depth = frames[-1]
-    pose = torch.tensor(poses[index], dtype=torch.float32)
     pixels = torch.randperm(depth.size, generator=torch.Generator().manual_seed(args.seed))
     pixels = pixels[: config.current_frame_rays * config.active_oversample]
-    current = NeuralMapper._world_rays(
-        pose,
-        mapper._directions[pixels],
-        torch.from_numpy(rgb.reshape(-1, 3)[pixels.numpy()]),
-        torch.from_numpy(depth.reshape(-1)[pixels.numpy()]),
-    )
+    current = mapper.frame_rays(rgb, depth, poses[index], pixels.numpy())
     mapper.generator.manual_seed(args.seed)
     pool, _ = mapper.active_ray_pool(current)
     batch = pool.select(torch.arange(config.rays_per_iteration + config.current_frame_rays))

@@ -133,13 +133,7 @@ def time_iteration(
         )
         kwargs = {"hash_encoding_cls": encoding} if encoding is not None else {}
         mapper = NeuralMapper(bounds, camera, config, **kwargs)
-        pose = torch.tensor(poses[0], dtype=torch.float32, device=mapper.device)
-        rays = NeuralMapper._world_rays(
-            pose,
-            mapper._directions,
-            torch.from_numpy(rgb.reshape(-1, 3)).to(mapper.device),
-            torch.from_numpy(depth.reshape(-1)).to(mapper.device),
-        )
+        rays = mapper.frame_rays(rgb, depth, poses[0])
         generator = torch.Generator().manual_seed(args.seed)
         durations = []
         for _ in range(args.speed_iterations + 2):
@@ -172,16 +166,10 @@ def time_active_scoring(
     mapper = NeuralMapper(bounds, camera, config)
     for index, rgb, depth in frames:
         mapper.integrate(rgb, depth, poses[index], index)
-    pose = torch.tensor(poses[frames[-1][0]], dtype=torch.float32, device=mapper.device)
     rgb, depth = frames[-1][1], frames[-1][2]
     pixels = torch.randperm(depth.size, generator=torch.Generator().manual_seed(args.seed))
     pixels = pixels[: config.current_frame_rays * config.active_oversample]
-    current = NeuralMapper._world_rays(
-        pose,
-        mapper._directions[pixels.to(mapper.device)],
-        torch.from_numpy(rgb.reshape(-1, 3)[pixels.numpy()]).to(mapper.device),
-        torch.from_numpy(depth.reshape(-1)[pixels.numpy()]).to(mapper.device),
-    )
+    current = mapper.frame_rays(rgb, depth, poses[frames[-1][0]], pixels.numpy())
     for score in ("rendered", "surface", "grid"):
         mapper.config.active_score = score
         durations = []

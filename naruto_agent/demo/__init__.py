@@ -15,8 +15,9 @@ runs one episode and writes into ``--out`` (default ``outputs/demo``):
 * ``viewer.html``: a 3D view to open in a browser and turn (reconstruction, ground-truth
   outline, trajectory, camera frustums); needs the ``viewer`` extra (plotly).
 
-Modules: :mod:`.run` (arguments and the episode loop), :mod:`.outputs` (files and pictures),
-:mod:`.viewer` (the 3D page and its reader).
+Modules: :mod:`.run` (arguments and the episode loop), :mod:`.episode` (the record of what an
+episode produced), :mod:`.outputs` (files and pictures), :mod:`.viewer` (the 3D page and its
+reader).
 """
 
 from naruto_agent.demo.run import DemoArgs, main, parse_args, run_demo

@@ -1,6 +1,6 @@
 """The demo's files: mesh, metrics, curves, the trajectory picture and the animated GIF.
 
-Every writer takes what the episode produced (:class:`naruto_agent.demo.run.Episode`) and a
+Every writer takes what the episode produced (:class:`naruto_agent.demo.episode.Episode`) and a
 path, and returns the path it wrote; :func:`write_all` writes them all into one folder.
 """
 
@@ -10,7 +10,7 @@ import csv
 import json
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import matplotlib
 
@@ -20,8 +20,7 @@ import numpy as np  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from PIL import Image, ImageDraw  # noqa: E402
 
-if TYPE_CHECKING:
-    from naruto_agent.demo.run import Episode
+from naruto_agent.demo.episode import Episode  # noqa: E402
 
 #: Metrics of the final score copied to the top level of ``metrics.json``.
 SCORE_KEYS = (

@@ -9,10 +9,13 @@ checkpoints, the goals the policy chose, and subsampled ``rgb_array`` frames.
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
 import json
 import os
 import sys
 import time
+import typing
 from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -21,12 +24,15 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from naruto_agent.demo.episode import Episode
 from naruto_gym.cli_args import parse_dataclass_args
 
-#: The default step budget: about 3 minutes after set-up on a 2-core CPU (README).
+#: The default step budget (the README gives its run time).
 DEFAULT_STEPS = 1000
 #: Cheaper scoring at the checkpoints of the completion curve than at the end.
 CHECKPOINT_CULL_EVERY = 10
+#: Demo settings handed to a policy whose constructor takes them (see :func:`policy_settings`).
+POLICY_SETTINGS = ("mapper", "device")
 
 
 class DemoInputError(ValueError):
@@ -48,9 +54,10 @@ class DemoArgs:
     seed: int = 0
     """seed of the start pose and of the policy"""
     mapper: str = "tsdf"
-    """the NARUTO agent's mapper: tsdf (fast) or neural (the published one; slow on a CPU)"""
+    """the policy's mapper, for a policy that takes one (NARUTO: tsdf, fast, or neural, the
+    published one, slow on a CPU)"""
     device: str = "auto"
-    """device of the NARUTO agent's mapper (auto: CUDA when present)"""
+    """device of the policy's mapper, for a policy that takes one (auto: CUDA when present)"""
     policy_kwargs: str = ""
     """JSON object of further keyword arguments of the policy's constructor"""
     image_scale: float = 0.25
@@ -93,7 +100,8 @@ def check_args(args: DemoArgs) -> None:
 
 
 def build_policy(args: DemoArgs) -> Any:
-    """The policy named by ``--policy`` with ``--policy-kwargs`` (and ``--mapper`` for NARUTO).
+    """The policy named by ``--policy`` with ``--policy-kwargs``, plus the demo's policy
+    settings (``--mapper``, ``--device``) that its constructor takes (:func:`policy_settings`).
 
     Raises:
         ValueError: an unknown policy name, an import path that is not a ``Policy``, or
@@ -108,17 +116,51 @@ def build_policy(args: DemoArgs) -> Any:
         raise ValueError(f"--policy-kwargs is not valid JSON: {error}") from error
     if not isinstance(kwargs, dict):
         raise ValueError(f"--policy-kwargs must be a JSON object, got {args.policy_kwargs!r}")
-    if _is_naruto(cls):
-        kwargs = {"mapper": args.mapper, "device": args.device, **kwargs}
+    kwargs = {**policy_settings(cls, args), **kwargs}
     try:
         return cls(**kwargs)
     except TypeError as error:  # a keyword the constructor does not take
         raise ValueError(f"cannot build policy {args.policy!r} with {kwargs}: {error}") from error
 
 
-def _is_naruto(cls: type) -> bool:
-    # Compared by name so that other policies never import the agent (and torch).
-    return any(base.__name__ == "NarutoPolicy" for base in cls.__mro__)
+def policy_settings(cls: type, args: DemoArgs) -> dict[str, Any]:
+    """The demo settings of :data:`POLICY_SETTINGS` that ``cls`` takes, with their values
+    in ``args`` (name -> value).
+
+    A policy takes a setting when its constructor has a keyword parameter of that name, or
+    a ``config`` parameter typed as a dataclass with a field of that name together with
+    ``**`` keyword overrides. Any policy can so opt in (by name, not by class), and one that
+    does not is never handed a keyword it would refuse.
+    """
+    try:
+        parameters = inspect.signature(cls).parameters
+    except (TypeError, ValueError):  # no introspectable constructor: pass nothing
+        return {}
+    named = {
+        name
+        for name, parameter in parameters.items()
+        if parameter.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD,
+                              inspect.Parameter.KEYWORD_ONLY)
+    }
+    overrides = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values())
+    if overrides and "config" in named:
+        named |= _config_fields(cls)
+    return {name: getattr(args, name) for name in POLICY_SETTINGS if name in named}
+
+
+def _config_fields(cls: type) -> set[str]:
+    """Field names of the dataclass(es) that ``cls``'s ``config`` parameter is typed as."""
+    try:
+        hint = typing.get_type_hints(cls.__init__).get("config")
+    except Exception:  # annotations that do not resolve: no fields known
+        return set()
+    candidates = typing.get_args(hint) or (hint,)
+    return {
+        field.name
+        for candidate in candidates
+        if isinstance(candidate, type) and dataclasses.is_dataclass(candidate)
+        for field in dataclasses.fields(candidate)
+    }
 
 
 def chosen_goals(policy: Any) -> np.ndarray:
@@ -134,42 +176,6 @@ def chosen_goals(policy: Any) -> np.ndarray:
     elif isinstance(getattr(policy, "visited_goals", None), list):
         goals = list(policy.visited_goals)
     return np.asarray(goals, dtype=np.float64).reshape(-1, 3)
-
-
-@dataclass
-class Episode:
-    """What one demo episode produced.
-
-    Attributes:
-        steps_run: steps taken.
-        coverage: coverage (fraction of the observable surface seen) after reset and each step.
-        completion_curve: ``{"step", "completion_ratio_pct", ...}`` at the checkpoints.
-        poses: (steps_run + 1, 4, 4) camera-to-world poses, start included.
-        goals: (G, 3) goals the policy chose.
-        frames: (step, picture) of the subsampled ``rgb_array`` frames.
-        collisions: refused or shortened moves, by reason.
-        path_length_m: distance travelled.
-        times_s: seconds per phase (``policy``, ``env``, ``mapping``, ``pictures``,
-            ``checkpoints``).
-        mesh: the reconstruction scored at the end.
-        map_source: where ``mesh`` comes from.
-        camera_size: (width, height) of the frames.
-        policy_detail_s: the policy's own per-phase seconds, when it keeps them.
-    """
-
-    steps_run: int
-    coverage: list[float]
-    completion_curve: list[dict[str, Any]]
-    poses: np.ndarray
-    goals: np.ndarray
-    frames: list[tuple[int, np.ndarray]]
-    collisions: Counter[str]
-    path_length_m: float
-    times_s: dict[str, float]
-    mesh: trimesh.Trimesh
-    map_source: str
-    camera_size: tuple[int, int]
-    policy_detail_s: dict[str, float]
 
 
 class _MapSource:

@@ -1,7 +1,7 @@
 """Settings of the neural mapper; every default is the published system's number.
 
-Sources: NARUTO (CVPR 2024) and its Co-SLAM mapping back end, as collected in
-``NARUTO_NOTES.md`` sections 2-4. Settings that exist only to make a CPU fast enough say so.
+Sources: NARUTO (Feng et al., CVPR 2024) and its mapping back end, Co-SLAM (Wang et al.,
+CVPR 2023). Settings that exist only to make a CPU fast enough say so.
 """
 
 from __future__ import annotations
@@ -61,9 +61,8 @@ class NeuralMapperConfig:
             weights sit there), "grid" reads the uncertainty grid's sigma^2 at the measured
             surface point, with no field query (where the field renders the measured
             surface, the rendered variance is that sigma^2 times the ray's sum w^2).
-            CPU time against one mapping iteration (``benchmarks/active_scoring_speed.py``):
-            about 1, 0.45 and 0.002; their top 500 rays share 75-92 % ("surface") and
-            41-88 % ("grid") with the published pick, depending on how far mapping is.
+            ``benchmarks/active_scoring_speed.py`` measures what each costs against a
+            mapping iteration and how many of the published pick's rays it shares.
 
     Unexplored space (planner view):
         unknown_space: frontier voxels (measured free space next to space no frame has
@@ -77,8 +76,8 @@ class NeuralMapperConfig:
         device: "auto" (CUDA when present), "cpu", "cuda[:N]".
         seed: seeds the parameter initialisation and every ray draw.
         tune_cpu_allocator: on a CPU, let glibc keep freed tensor memory for reuse
-            (:mod:`naruto_agent.mapping.cpu_allocator`; process-wide, about 10 % faster
-            iterations). A CPU speed-up.
+            (:mod:`naruto_agent.mapping.cpu_allocator`; process-wide: an iteration no
+            longer page-faults its temporaries in). A CPU speed-up.
     """
 
     one_blob_bins: int = 16

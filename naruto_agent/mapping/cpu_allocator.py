@@ -2,9 +2,9 @@
 
 A mapping iteration allocates and frees a few hundred MB of temporaries of 1-30 MB each (the
 hash grid's corner indices and weights, the MLP activations). glibc serves every block above
-its mmap threshold with fresh pages from the kernel and hands them back on free, so each
-iteration touches about 28,000 new pages; on the 2-core benchmark machine those faults cost
-10-15 % of the iteration. Raising the mmap threshold to glibc's maximum (32 MiB) and the trim
+its mmap threshold with fresh pages from the kernel and hands them back on free, so every
+iteration page-faults all of its temporaries in again, a share of the iteration's time that
+matters on a CPU. Raising the mmap threshold to glibc's maximum (32 MiB) and the trim
 threshold keeps those blocks on the heap, where the next iteration reuses them.
 
 This is glibc's documented ``mallopt`` tuning (the same as setting ``MALLOC_MMAP_THRESHOLD_``

@@ -6,9 +6,10 @@ materialises the eight corners' table rows and weights of every hashed level as 
 (``8 x levels x N`` of each, about 90 MB for 100,000 points) before it gathers and blends
 them: memory traffic, not arithmetic, bounds it. The loop here walks each point's levels and
 corners once, keeps the blend in registers and writes only the ``levels x features`` output
-(about 1.2x-2x less CPU time than the PyTorch path, most on spatially coherent points such as
-the samples along rays). It computes the same function (the same corners, rows and trilinear
-weights, in float32; results agree to float rounding).
+(less CPU time than the PyTorch path, most on spatially coherent points such as the samples
+along rays; ``benchmarks/active_scoring_speed.py`` measures it). It computes the same
+function (the same corners, rows and trilinear weights, in float32; results agree to float
+rounding).
 
 The loops are serial and release the GIL (``nogil``); :func:`hash_grid_features` splits the
 points over a few Python threads (the project's shared pool, ``run_parallel``). (A numba

@@ -18,8 +18,8 @@ PyTorch, so they run on a CPU and on CUDA with nothing to compile.
   gathered with one 1-D ``index_select`` per feature and blended corner by corner.
   Only the multipliers' low bits matter after the mask, so the products run in int32.
   The backward pass scatters with ``torch.bincount`` (one weighted histogram per feature),
-  which on a CPU is several times faster than ``index_add_`` or the stock ``embedding_bag``
-  backward (that one sorts the indices); on CUDA ``index_add_`` is used.
+  which on a CPU is faster than ``index_add_`` or the stock ``embedding_bag`` backward (that
+  one sorts the indices); on CUDA ``index_add_`` is used.
 
 No gradient flows to the positions: the mapper has known poses, so none is needed.
 
@@ -107,7 +107,7 @@ class OneBlobEncoding(nn.Module):
         offset = (unit_positions[:, :, None] - self.centres) * (1.0 / self.sigma)
         squared = offset * offset
         # Far tails are set to exactly 0: exp() of them would be float32 denormals, and a
-        # matrix product with denormal inputs runs up to 10x slower on x86 CPUs.
+        # matrix product with denormal inputs runs far slower on x86 CPUs.
         values = torch.exp(-0.5 * squared).masked_fill_(squared > ONE_BLOB_CUTOFF**2, 0.0)
         return values.reshape(unit_positions.shape[0], -1)
 
@@ -134,8 +134,7 @@ class _HashGridFunction(torch.autograd.Function):
             hashed = out[:, num_dense:].view(features, -1)
             for f in range(features):
                 corners = table[f].index_select(0, flat).view_as(weights)
-                # Accumulating corner by corner is about 2x faster than an einsum (a strided
-                # bmm) here.
+                # Accumulating corner by corner is faster than an einsum (a strided bmm) here.
                 torch.mul(corners[0], weights[0], out=hashed[f])
                 for c in range(1, corners.shape[0]):
                     hashed[f].addcmul_(corners[c], weights[c])
@@ -166,9 +165,9 @@ class _HashGridFunction(torch.autograd.Function):
                 for f, value in enumerate(values):
                     grad_table[f].index_add_(0, flat.long(), value)
             else:
-                # A weighted histogram per feature: on a CPU several times faster than
-                # index_add_. (Running the features' histograms in Python threads was tried:
-                # slower, as the threads fight the idle-spinning OpenMP workers for the cores.)
+                # A weighted histogram per feature: on a CPU faster than index_add_. Serial,
+                # not in Python threads, which would fight the idle-spinning OpenMP workers
+                # for the cores.
                 grad_table = torch.stack(
                     [
                         torch.bincount(flat, weights=value, minlength=ctx.table_rows).to(
@@ -336,8 +335,10 @@ class HashGridEncoding(nn.Module):
             torch.mul(xy_weight[i, j], weights_per_side[k][2], out=weights[c])
         return indices.view(8, -1), weights.view(8, -1)
 
-    def _uses_cpu_kernel(self, unit_positions: torch.Tensor) -> bool:
-        """Whether this call can take the compiled no-gradient loop."""
+    def uses_cpu_kernel(self, unit_positions: torch.Tensor) -> bool:
+        """Whether a call on ``unit_positions`` takes the compiled no-gradient loop
+        (:mod:`cpu_kernels`): on a CPU, float32, published layout, no gradient wanted, and
+        ``cpu_kernel`` on. A caller that fuses more work into that loop asks this first."""
         return (
             self.cpu_kernel
             and cpu_kernels.supports(self.features_per_level)
@@ -376,7 +377,7 @@ class HashGridEncoding(nn.Module):
         """(N, 3) positions in [0, 1] -> (N, num_levels * features_per_level) features."""
         count = unit_positions.shape[0]
         unit_positions = unit_positions.clamp(0.0, 1.0).to(self.table.dtype)
-        if self._uses_cpu_kernel(unit_positions):
+        if self.uses_cpu_kernel(unit_positions):
             return self._cpu_kernel_features(unit_positions)
         features = _HashGridFunction.apply(self.table, unit_positions, self)
         # (F, L, N) -> (N, L * F), level-major like tiny-cuda-nn's output.

@@ -79,7 +79,7 @@ class NeuralField(nn.Module):
     def sdf(self, points: torch.Tensor) -> torch.Tensor:
         """(N,) SDF in truncation units (skips the colour decoder)."""
         unit = self.normalise(points)
-        if not torch.is_grad_enabled() and self.hash_grid._uses_cpu_kernel(unit):
+        if not torch.is_grad_enabled() and self.hash_grid.uses_cpu_kernel(unit):
             return self._sdf_compiled(unit)
         geometry = self.geometry_mlp(torch.cat([self.one_blob(unit), self.hash_grid(unit)], 1))
         return geometry[:, 0]

@@ -270,7 +270,7 @@ class NeuralMapper:
         self.frames_integrated += 1
         mapped = False
         if plan.iteration_pixels:
-            current = [self._world_rays(pose, *rays_of(p)) for p in plan.iteration_pixels]
+            current = [_world_rays(pose, *rays_of(p)) for p in plan.iteration_pixels]
             self._mapping_step(current, first_frame=plan.first_frame)
             mapped = True
         if len(plan.keyframe_pixels):
@@ -278,15 +278,37 @@ class NeuralMapper:
             self.keyframes.add(pose, directions, colours, depths)
         return mapped
 
-    @staticmethod
-    def _world_rays(
-        pose: torch.Tensor, directions: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor
+    def frame_rays(
+        self,
+        rgb: np.ndarray,
+        depth: np.ndarray,
+        camera_to_world: np.ndarray,
+        pixels: np.ndarray | None = None,
     ) -> RayBatch:
-        return RayBatch(
-            origins=pose[:3, 3].expand(len(depth), 3),
-            directions=directions @ pose[:3, :3].T,
-            rgb=rgb.float() / 255.0,
-            depth=depth,
+        """World rays of a frame's pixels, on the mapper's device, as a mapping iteration
+        reads them (for benchmarks and tests that feed :meth:`active_ray_pool` or
+        :meth:`train_iteration` themselves).
+
+        Args:
+            rgb: (H, W, 3) or (H * W, 3) uint8 colours of the whole frame.
+            depth: (H, W) or (H * W,) z-depth in metres (0 = missing).
+            camera_to_world: 4x4 pose.
+            pixels: flat pixel indices (``v * width + u``) to take, in this order; None
+                takes every pixel.
+        """
+        pose = torch.tensor(np.asarray(camera_to_world), dtype=torch.float32, device=self._device)
+        rgb = np.asarray(rgb, dtype=np.uint8).reshape(-1, 3)
+        depth = np.asarray(depth, dtype=np.float32).reshape(-1)
+        directions = self._directions
+        if pixels is not None:
+            pixels = np.asarray(pixels, dtype=np.int64)
+            directions = directions[torch.from_numpy(pixels).to(self._device)]
+            rgb, depth = rgb[pixels], depth[pixels]
+        return _world_rays(
+            pose,
+            directions,
+            torch.from_numpy(rgb).to(self._device),
+            torch.from_numpy(depth).to(self._device),
         )
 
     # -- optimisation ---------------------------------------------------------------------
@@ -506,6 +528,19 @@ class NeuralMapper:
         mapper = cls(np.asarray(state["bounds"]), PinholeCamera(**state["camera"]), config)
         mapper.load_state_dict(state)
         return mapper
+
+
+def _world_rays(
+    pose: torch.Tensor, directions: torch.Tensor, rgb: torch.Tensor, depth: torch.Tensor
+) -> RayBatch:
+    """Rays of camera-frame ``directions`` (z = 1) seen from ``pose`` (4x4 camera-to-world),
+    with uint8 colours and z-depths."""
+    return RayBatch(
+        origins=pose[:3, 3].expand(len(depth), 3),
+        directions=directions @ pose[:3, :3].T,
+        rgb=rgb.float() / 255.0,
+        depth=depth,
+    )
 
 
 def select_active_rays(

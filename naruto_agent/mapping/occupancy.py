@@ -129,7 +129,7 @@ class OccupancyGrid:
         self.voxel_size_m = float(voxel_size_m)
         self.shape = tuple(int(n) for n in np.ceil((bounds[1] - bounds[0]) / voxel_size_m))
         self.max_range_m = float(max_range_m)
-        self.pixel_stride = int(pixel_stride)
+        self._pixel_stride = int(pixel_stride)
         self.hit_log_odds = float(hit_log_odds)
         self.miss_log_odds = float(miss_log_odds)
         self.clamp = (-float(clamp[0]), float(clamp[1]))
@@ -140,6 +140,21 @@ class OccupancyGrid:
         self._ray_cache: tuple[PinholeCamera, np.ndarray] | None = None
         self._marks: np.ndarray | None = None  # per-voxel stamp of the frame that touched it
         self._frame = 0
+
+    @property
+    def pixel_stride(self) -> int:
+        """Every n-th pixel of a depth frame, in each image direction, is integrated."""
+        return self._pixel_stride
+
+    @pixel_stride.setter
+    def pixel_stride(self, stride: int) -> None:
+        # The cached camera rays are those of the old stride's pixels.
+        stride = int(stride)
+        if stride < 1:
+            raise ValueError(f"pixel_stride must be at least 1, got {stride}")
+        if stride != self._pixel_stride:
+            self._pixel_stride = stride
+            self._ray_cache = None
 
     # -- coordinates ---------------------------------------------------------------------
     def world_to_cell(self, points: np.ndarray) -> np.ndarray:

@@ -125,8 +125,8 @@ class SdfVolume:
         index = (np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.origin) / (
             self.voxel_size
         )
-        # scipy's order-1 spline is exactly trilinear interpolation, in C: several times
-        # faster than numpy for the few dozen points of a collision check. Its "constant" mode
+        # scipy's order-1 spline is exactly trilinear interpolation, in C: faster than
+        # numpy for the few dozen points of a collision check. Its "constant" mode
         # returns cval for every point outside [0, n - 1] on any axis and never blends it in.
         return ndimage.map_coordinates(
             self.values, index.T, order=1, mode="constant", cval=outside_value, prefilter=False,

@@ -75,9 +75,8 @@ class TsdfMapperConfig:
             (:meth:`~naruto_gym.evaluation.TsdfFusionMapper.behind_surface_bounds`). A wall
             seen from one side fuses into a band of negative values 2-6 cm thick with unknown
             space behind it, which the planner's 10 cm samples straddle more often than not:
-            the wall vanished from the planner's map, and on ``two_rooms`` with holes (seed 2)
-            the agent tried 13 moves through the partition wall next to it. False: the SDF
-            sampled at the planner voxels only.
+            the wall would vanish from the planner's map, and the agent would try to move
+            through it. False: the SDF sampled at the planner voxels only.
     """
 
     voxel_size_m: float = 0.02
@@ -210,6 +209,11 @@ class TsdfUncertaintyMapper:
         """(nx, ny, nz) derived variance on the count grid."""
         return self.config.initial_variance / (1.0 + self.counts.astype(np.float64))
 
+    def variance_volume(self) -> SdfVolume:
+        """The derived variance on the count grid, placed in the world (every voxel, not
+        only surface ones: see :meth:`planner_view` for the planner's volume)."""
+        return SdfVolume(self.variance_grid(), self._grid_origin, self.config.uncertainty_voxel_m)
+
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """(N,) fused SDF in metres; unobserved space reads as +truncation (see
         :meth:`TsdfFusionMapper.sdf`)."""
@@ -221,11 +225,9 @@ class TsdfUncertaintyMapper:
         if math.isclose(voxel_size, self.config.uncertainty_voxel_m):
             values = self.variance_grid()  # the same grid: no interpolation needed
         else:
-            variance = SdfVolume(self.variance_grid(), self._grid_origin,
-                                 self.config.uncertainty_voxel_m)
-            values = variance.sample(sdf_volume.grid_points(), outside_value=0.0).reshape(
-                sdf_volume.shape
-            )
+            values = self.variance_volume().sample(
+                sdf_volume.grid_points(), outside_value=0.0
+            ).reshape(sdf_volume.shape)
         # Surface voxels by the sampled SDF: the bound reaches voxels behind a surface,
         # which no frame can see (they would stay targets at the initial variance).
         on_surface = (sampled.values >= 0.0) & (
@@ -284,7 +286,7 @@ class TsdfUncertaintyMapper:
         """The fused grid (Open3D's own file format, as bytes), counts and settings."""
         with tempfile.TemporaryDirectory() as folder:
             path = os.path.join(folder, "grid.npz")
-            self.tsdf._grid.save(path)
+            self.tsdf.save(path)
             with open(path, "rb") as handle:
                 grid_bytes = handle.read()
         return {
@@ -306,9 +308,7 @@ class TsdfUncertaintyMapper:
             path = os.path.join(folder, "grid.npz")
             with open(path, "wb") as handle:
                 handle.write(state["grid"])
-            self.tsdf._grid = o3d.t.geometry.VoxelBlockGrid.load(path).to(self.tsdf.device)
-        self.tsdf._sdf_index = None
-        self.tsdf._touched_blocks = []
+            self.tsdf.load(path)
         self._sdf_view = None
         self.tsdf.num_frames = int(state["tsdf_frames"])
         self.counts = np.asarray(state["counts"], dtype=np.float32).copy()

@@ -13,6 +13,8 @@ voxel size, so ``truncation_m / voxel_size_m`` need not be an integer.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import open3d as o3d
 import open3d.core as o3c
@@ -238,6 +240,25 @@ class TsdfFusionMapper:
                                    self.block_resolution)
             spans.append((base, base + 1))
         return _mark_block_spans(shape, blocks, spans)
+
+    # -- persistence -------------------------------------------------------------------
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the fused grid to ``path`` in Open3D's ``VoxelBlockGrid`` format (``.npz``).
+
+        The file holds the grid only: :attr:`num_frames` and the settings stay with the caller,
+        which restores them next to :meth:`load`.
+        """
+        self._grid.save(os.fspath(path))
+
+    def load(self, path: str | os.PathLike[str]) -> None:
+        """Replace the fused grid with one written by :meth:`save`, on this mapper's device.
+
+        The blocks touched before are forgotten (:meth:`pop_touched_blocks` starts empty),
+        since a user's coarse view of the old grid is no guide to the new one.
+        """
+        self._grid = o3d.t.geometry.VoxelBlockGrid.load(os.fspath(path)).to(self.device)
+        self._sdf_index = None
+        self._touched_blocks = []
 
     # -- outputs -----------------------------------------------------------------------
     @property

@@ -135,23 +135,23 @@ def test_compiled_no_gradient_path_matches_the_torch_path(log2_table_size) -> No
     points = torch.rand(40_000, 3)
     points[:4] = torch.tensor([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [1.0, 0.0, 0.5], [-0.2, 1.3, 0.5]])
     with torch.no_grad():
-        assert grid._uses_cpu_kernel(points)
+        assert grid.uses_cpu_kernel(points)
         compiled = grid(points)
         grid.cpu_kernel = False
-        assert not grid._uses_cpu_kernel(points)
+        assert not grid.uses_cpu_kernel(points)
         reference = grid(points)
     # The dense levels' grid_sampler maps coordinates through [-1, 1] and back: float32
     # rounding of about 1e-5 of the table's scale (0.5 here).
     torch.testing.assert_close(compiled, reference, rtol=1e-4, atol=5e-5)
     # With gradients the autograd path runs (the compiled loop has no backward).
     grid.cpu_kernel = True
-    assert not grid._uses_cpu_kernel(points)
+    assert not grid.uses_cpu_kernel(points)
     grid(points[:10]).sum().backward()
     assert grid.table.grad is not None and grid.table.grad.abs().sum() > 0
     # Layouts the loop does not cover take the torch path.
     wide = HashGridEncoding(num_levels=3, features_per_level=3, log2_table_size=8)
     with torch.no_grad():
-        assert not wide._uses_cpu_kernel(points)
+        assert not wide.uses_cpu_kernel(points)
         assert wide(points[:10]).shape == (10, 9)
 
 
@@ -172,7 +172,7 @@ def test_compiled_field_sdf_matches_the_torch_path() -> None:
         reference = field.sdf(points)
         field.hash_grid.cpu_kernel = True
         unit = field.normalise(points)
-        assert field.hash_grid._uses_cpu_kernel(unit)
+        assert field.hash_grid.uses_cpu_kernel(unit)
     torch.testing.assert_close(compiled, reference, rtol=1e-4, atol=1e-5)
     # With gradients enabled the SDF takes the autograd path and can be trained.
     field.sdf(points[:50]).sum().backward()

@@ -158,11 +158,7 @@ def test_active_sampling_picks_rays_into_the_uncertain_region(
         mapper.uncertainty.raw[cells_x > 1.5] = 8.0
     rgb, depth = room_renderer.render(poses[0])
     pixels = np.arange(small_camera.width * small_camera.height)
-    pose = torch.tensor(poses[0], dtype=torch.float32)
-    current = NeuralMapper._world_rays(
-        pose, mapper._directions, torch.from_numpy(rgb.reshape(-1, 3)),
-        torch.from_numpy(depth.reshape(-1)),
-    ).select(torch.from_numpy(pixels[:256]))
+    current = mapper.frame_rays(rgb, depth, poses[0]).select(torch.from_numpy(pixels[:256]))
     rays = mapper._select_rays(current)
     cfg = mapper.config
     assert len(rays) == cfg.rays_per_iteration + cfg.current_frame_rays

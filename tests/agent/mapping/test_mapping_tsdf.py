@@ -108,7 +108,7 @@ def test_uncertainty_falls_with_observations(tsdf_room) -> None:
     # Voxel centres on the +x wall (x = 2.0) and on the unseen -x wall.
     seen = np.array([[2.0, y, z] for y in (-0.5, 0.0, 0.5) for z in (0.8, 1.2)])
     unseen = seen * np.array([-1.0, 1.0, 1.0])
-    variance = SdfVolume(tsdf_room.variance_grid(), tsdf_room._grid_origin, 0.1)
+    variance = tsdf_room.variance_volume()
     assert variance.sample(seen).max() < 0.5 * variance.sample(unseen).min()
     assert variance.sample(unseen).min() == pytest.approx(tsdf_room.config.initial_variance)
 

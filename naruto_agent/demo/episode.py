@@ -1,0 +1,50 @@
+"""The record of one demo episode: what the loop (:mod:`.run`) produced and the writers
+(:mod:`.outputs`) turn into files.
+
+It lives in its own module so that both depend on it and neither on the other.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import trimesh
+
+
+@dataclass
+class Episode:
+    """What one demo episode produced.
+
+    Attributes:
+        steps_run: steps taken.
+        coverage: coverage (fraction of the observable surface seen) after reset and each step.
+        completion_curve: ``{"step", "completion_ratio_pct", ...}`` at the checkpoints.
+        poses: (steps_run + 1, 4, 4) camera-to-world poses, start included.
+        goals: (G, 3) goals the policy chose.
+        frames: (step, picture) of the subsampled ``rgb_array`` frames.
+        collisions: refused or shortened moves, by reason.
+        path_length_m: distance travelled.
+        times_s: seconds per phase (``policy``, ``env``, ``mapping``, ``pictures``,
+            ``checkpoints``).
+        mesh: the reconstruction scored at the end.
+        map_source: where ``mesh`` comes from.
+        camera_size: (width, height) of the frames.
+        policy_detail_s: the policy's own per-phase seconds, when it keeps them.
+    """
+
+    steps_run: int
+    coverage: list[float]
+    completion_curve: list[dict[str, Any]]
+    poses: np.ndarray
+    goals: np.ndarray
+    frames: list[tuple[int, np.ndarray]]
+    collisions: Counter[str]
+    path_length_m: float
+    times_s: dict[str, float]
+    mesh: trimesh.Trimesh
+    map_source: str
+    camera_size: tuple[int, int]
+    policy_detail_s: dict[str, float]
