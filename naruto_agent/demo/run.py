@@ -9,6 +9,7 @@ checkpoints, the goals the policy chose, and subsampled ``rgb_array`` frames.
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import sys
@@ -93,7 +94,8 @@ def check_args(args: DemoArgs) -> None:
 
 
 def build_policy(args: DemoArgs) -> Any:
-    """The policy named by ``--policy`` with ``--policy-kwargs`` (and ``--mapper`` for NARUTO).
+    """The policy named by ``--policy`` with ``--policy-kwargs`` (and ``--mapper`` and
+    ``--device`` where its constructor takes them: the NARUTO agent).
 
     Raises:
         ValueError: an unknown policy name, an import path that is not a ``Policy``, or
@@ -108,17 +110,23 @@ def build_policy(args: DemoArgs) -> Any:
         raise ValueError(f"--policy-kwargs is not valid JSON: {error}") from error
     if not isinstance(kwargs, dict):
         raise ValueError(f"--policy-kwargs must be a JSON object, got {args.policy_kwargs!r}")
-    if _is_naruto(cls):
-        kwargs = {"mapper": args.mapper, "device": args.device, **kwargs}
+    taken = _named_parameters(cls)
+    defaults = {"mapper": args.mapper, "device": args.device}
+    kwargs = {**{name: value for name, value in defaults.items() if name in taken}, **kwargs}
     try:
         return cls(**kwargs)
     except TypeError as error:  # a keyword the constructor does not take
         raise ValueError(f"cannot build policy {args.policy!r} with {kwargs}: {error}") from error
 
 
-def _is_naruto(cls: type) -> bool:
-    # Compared by name so that other policies never import the agent (and torch).
-    return any(base.__name__ == "NarutoPolicy" for base in cls.__mro__)
+def _named_parameters(cls: type) -> set[str]:
+    """The keyword names a policy's constructor declares (``--mapper`` and ``--device`` go
+    to a policy that takes them, the NARUTO agent)."""
+    try:
+        parameters = inspect.signature(cls).parameters.values()
+    except (TypeError, ValueError):  # no signature to read
+        return set()
+    return {p.name for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
 
 
 def chosen_goals(policy: Any) -> np.ndarray:
