@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import naruto_gym  # noqa: F401
-from naruto_agent.policies import EnvContext, FrontierPolicy, make_policy
 from naruto_agent.guards import RefusedMoves
 from naruto_agent.guards.panorama_clearance import sees_all_around_below
+from naruto_agent.policies import EnvContext, FrontierPolicy, make_policy
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 from tests.agent.synthetic_panoramas import floor_panorama, wall_panorama
 
