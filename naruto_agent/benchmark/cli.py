@@ -37,7 +37,7 @@ class Args:
     scenes: list[str] = field(default_factory=lambda: ["replica_like_room"])
     """catalogue names or mesh paths (PATH@AXIS for a y-up file)"""
     policies: list[str] = field(default_factory=lambda: ["passive", "random", "frontier"])
-    """policy names (passive, random, frontier) or package.module:Class"""
+    """registered policy names (listed below) or package.module:Class"""
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
     """episode seeds"""
     steps: int = 500
@@ -75,8 +75,13 @@ class Args:
 
 def build_parser() -> argparse.ArgumentParser:
     """An ``argparse`` parser made from the fields of :class:`Args`."""
+    from naruto_agent.policies import policy_names
+
     description = __doc__.split("\n\n")[1].replace("\n", " ")
-    return dataclass_parser(Args, description=description, prog="naruto-benchmark")
+    parser = dataclass_parser(Args, description=description, prog="naruto-benchmark")
+    parser.epilog = (f"registered policies: {', '.join(policy_names())}; any other Policy "
+                     "subclass as package.module:ClassName")
+    return parser
 
 
 def parse_args(argv: list[str] | None = None) -> Args:

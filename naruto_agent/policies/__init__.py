@@ -5,17 +5,20 @@
 * :class:`PassivePolicy`: the "human scan" (replay a trajectory, or a scripted scan loop).
 * :class:`RandomPolicy`: seeded random walk that turns when blocked.
 * :class:`FrontierPolicy`: nearest-frontier exploration on a depth-built occupancy map.
+* :class:`PassiveConfig`, :class:`RandomConfig`, :class:`FrontierConfig`: their settings;
+  the open-scan guard they share is :class:`~naruto_agent.guards.ScanGuard`.
 * :class:`CallablePolicy`, :class:`SB3Policy`, :func:`as_policy`: wrap a function or a
   Stable-Baselines3 model.
-* :func:`make_policy`: build one by registry name (``"passive"``, ``"random"``,
-  ``"frontier"``) or by import path ``"package.module:ClassName"``.
+* :func:`register_policy`, :func:`make_policy`, :func:`policy_class`, :func:`policy_names`:
+  the registry (``"passive"``, ``"random"``, ``"frontier"``, ``"naruto"``, and any
+  ``"package.module:ClassName"``).
+
+See docs/policies.md for the interface and how to add a policy.
 """
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
-
+from naruto_agent.guards.scan_guard import ScanGuard, ScanGuardConfig
 from naruto_agent.mapping.occupancy import OccupancyGrid
 from naruto_agent.policies.adapters import (
     CallablePolicy,
@@ -24,60 +27,45 @@ from naruto_agent.policies.adapters import (
     as_policy,
 )
 from naruto_agent.policies.base import EnvContext, OwnReconstruction, Policy, pose_action
+from naruto_agent.policies.config import FrontierConfig, PassiveConfig, RandomConfig
 from naruto_agent.policies.frontier import FrontierPolicy
 from naruto_agent.policies.passive import PassivePolicy, load_trajectory, subsample_poses
 from naruto_agent.policies.random_policy import RandomPolicy
-
-POLICIES: dict[str, type[Policy]] = {
-    "passive": PassivePolicy,
-    "random": RandomPolicy,
-    "frontier": FrontierPolicy,
-}
-
-#: Registry names resolved by import path on first use (their modules import torch).
-LAZY_POLICIES: dict[str, str] = {"naruto": "naruto_agent.naruto:NarutoPolicy"}
-
-
-def policy_class(name: str) -> type[Policy]:
-    """The policy class of a registry name or a ``"package.module:ClassName"`` import path."""
-    if name in POLICIES:
-        return POLICIES[name]
-    name = LAZY_POLICIES.get(name, name)
-    if ":" in name:
-        module_name, _, attribute = name.partition(":")
-        try:
-            cls = getattr(importlib.import_module(module_name), attribute)
-        except (ImportError, AttributeError) as error:
-            raise ValueError(f"cannot import policy {name!r}: {error}") from error
-        if not (isinstance(cls, type) and issubclass(cls, Policy)):
-            raise ValueError(f"{name!r} is not a naruto_agent.policies.Policy subclass")
-        return cls
-    raise ValueError(
-        f"unknown policy {name!r}; use one of {sorted(POLICIES)} or 'package.module:ClassName'"
-    )
-
-
-def make_policy(name: str, **kwargs: Any) -> Policy:
-    """Build a policy by registry name or import path, with constructor keyword arguments."""
-    return policy_class(name)(**kwargs)
-
+from naruto_agent.policies.registry import (
+    LAZY_POLICIES,
+    POLICIES,
+    make_policy,
+    policy_class,
+    policy_names,
+    register_lazy_policy,
+    register_policy,
+)
 
 __all__ = [
+    "LAZY_POLICIES",
     "POLICIES",
     "CallablePolicy",
     "EnvContext",
+    "FrontierConfig",
     "FrontierPolicy",
     "OccupancyGrid",
     "OwnReconstruction",
+    "PassiveConfig",
     "PassivePolicy",
     "Policy",
+    "RandomConfig",
     "RandomPolicy",
     "SB3Policy",
+    "ScanGuard",
+    "ScanGuardConfig",
     "action_mode_of_space",
     "as_policy",
     "load_trajectory",
     "make_policy",
     "policy_class",
+    "policy_names",
     "pose_action",
+    "register_lazy_policy",
+    "register_policy",
     "subsample_poses",
 ]

@@ -21,17 +21,20 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
-from naruto_agent.policies.panorama_clearance import (
-    RefusedMoves,
+from naruto_agent.guards.panorama_clearance import (
     floor_edge_profile,
     horizontal_profile,
     profile_clearance,
 )
+from naruto_agent.guards.refused_moves import RefusedMoves
+from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
+from naruto_agent.policies.config import PassiveConfig, build_config
+from naruto_agent.policies.registry import register_policy
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, validate_pose
 
 
@@ -67,41 +70,27 @@ def subsample_poses(poses: np.ndarray, step_budget: int) -> np.ndarray:
     return poses[index]
 
 
+@register_policy("passive")
 class PassivePolicy(Policy):
     """Replays a pose sequence, or follows a scripted wall-following scan when none is given.
 
     Args:
         trajectory: (N, 4, 4) poses or a path to a ``traj.txt``-style file; None for the
             scripted scan.
-        fit_to_budget: subsample a longer trajectory uniformly to the episode's step budget.
-        position_tolerance_m, rotation_tolerance_deg: a replayed pose counts as reached within
-            these.
-        max_blocked_steps: skip a replayed pose after this many steps without progress.
-        scan_height_fraction: scripted scan height as a fraction of the bounds' height.
-        wall_distance_m: distance kept to the wall on the right.
-        front_clearance_m: turn left when a wall is this close ahead.
-        lost_wall_m: the wall counts as lost (turn right, around a corner or into a doorway)
-            when nothing is this close on the right.
-        sweep_yaw_deg: the camera's heading sweeps between this far right of the walking
-            direction (the wall) and 150 degrees further left (ahead and across the room).
-        sweep_pitch_deg: amplitude of the camera's up/down sweep.
-        sweep_period_steps: period of the sideways sweep (the pitch sweep uses 1.6 times it).
+        config: the settings (default :class:`PassiveConfig`).
+        **settings: :class:`PassiveConfig` fields, overriding ``config``'s.
+
+    Attributes:
+        config: the settings.
+        poses: the trajectory's poses, or None (scripted scan).
     """
 
     def __init__(
         self,
         trajectory: np.ndarray | str | Path | None = None,
-        fit_to_budget: bool = True,
-        position_tolerance_m: float = 1e-3,
-        rotation_tolerance_deg: float = 0.5,
-        max_blocked_steps: int = 3,
-        scan_height_fraction: float = 0.45,
-        wall_distance_m: float = 0.6,
-        front_clearance_m: float = 0.5,
-        lost_wall_m: float = 1.2,
-        sweep_yaw_deg: float = 100.0,
-        sweep_pitch_deg: float = 30.0,
-        sweep_period_steps: int = 50,
+        *,
+        config: PassiveConfig | None = None,
+        **settings: Any,
     ) -> None:
         super().__init__()
         if trajectory is None:
@@ -114,21 +103,7 @@ class PassivePolicy(Policy):
                 raise ValueError(
                     f"trajectory must be (N, 4, 4) camera-to-world poses, got {self.poses.shape}"
                 )
-        if not 0.0 < scan_height_fraction < 1.0:
-            raise ValueError(f"scan_height_fraction must lie in (0, 1), got {scan_height_fraction}")
-        if front_clearance_m <= 0.0 or wall_distance_m >= lost_wall_m:
-            raise ValueError("need 0 < front_clearance_m and wall_distance_m < lost_wall_m")
-        self.fit_to_budget = fit_to_budget
-        self.position_tolerance_m = position_tolerance_m
-        self.rotation_tolerance_rad = float(np.deg2rad(rotation_tolerance_deg))
-        self.max_blocked_steps = max_blocked_steps
-        self.scan_height_fraction = scan_height_fraction
-        self.wall_distance_m = wall_distance_m
-        self.front_clearance_m = front_clearance_m
-        self.lost_wall_m = lost_wall_m
-        self.sweep_yaw_rad = float(np.deg2rad(sweep_yaw_deg))
-        self.sweep_pitch_rad = float(np.deg2rad(sweep_pitch_deg))
-        self.sweep_period_steps = sweep_period_steps
+        self.config = build_config(PassiveConfig, config, **settings)
         self.required_observations = ("pose",) if self.poses is not None else ("pose", "panorama")
         self._replay: np.ndarray | None = None
         self._index = 0
@@ -139,6 +114,7 @@ class PassivePolicy(Policy):
         self._heading = 0.0
         self._found_wall = False
         self._recent: list[np.ndarray] = []
+        self._position = np.zeros(3)
         self._refused = RefusedMoves()
         self._last_target: np.ndarray | None = None
 
@@ -152,7 +128,7 @@ class PassivePolicy(Policy):
         if self.poses is None:
             raise ValueError("this PassivePolicy has no trajectory; it follows a scripted scan")
         budget = self.context.step_budget if self._context is not None else None
-        if self.fit_to_budget and budget is not None:
+        if self.config.fit_to_budget and budget is not None:
             return subsample_poses(self.poses, budget)
         return self.poses
 
@@ -180,10 +156,10 @@ class PassivePolicy(Policy):
 
     # -- replay ------------------------------------------------------------------------
     def _reached(self, pose: np.ndarray, target: np.ndarray) -> bool:
-        if np.linalg.norm(pose[:3, 3] - target[:3, 3]) > self.position_tolerance_m:
+        if np.linalg.norm(pose[:3, 3] - target[:3, 3]) > self.config.position_tolerance_m:
             return False
         relative = Rotation.from_matrix(pose[:3, :3].T @ target[:3, :3])
-        return relative.magnitude() <= self.rotation_tolerance_rad
+        return relative.magnitude() <= float(np.deg2rad(self.config.rotation_tolerance_deg))
 
     def _act_replay(self, observation: Observation) -> np.ndarray:
         assert self._replay is not None
@@ -199,7 +175,7 @@ class PassivePolicy(Policy):
         ):
             # The last step aimed here and made no progress: the body is blocked.
             self._blocked += 1
-            if self._blocked > self.max_blocked_steps:
+            if self._blocked > self.config.max_blocked_steps:
                 self._index += 1
                 self._blocked = 0
         self._last_sent = self._index
@@ -214,16 +190,16 @@ class PassivePolicy(Policy):
         front = profile_clearance(profile, self._heading, cone)
         right = profile_clearance(profile, self._heading - np.pi / 2.0, np.deg2rad(30.0))
         if not self._found_wall:
-            if front < self.wall_distance_m + 0.2 or collided:
+            if front < self.config.wall_distance_m + 0.2 or collided:
                 self._found_wall = True
             else:
                 return
-        if front < self.front_clearance_m or collided:
+        if front < self.config.front_clearance_m or collided:
             self._heading += np.deg2rad(30.0)  # wall ahead: turn left, keeping it on the right
-        elif right > self.lost_wall_m:
+        elif right > self.config.lost_wall_m:
             self._heading -= np.deg2rad(15.0)  # around a corner or into a doorway
         else:
-            error = right - self.wall_distance_m
+            error = right - self.config.wall_distance_m
             self._heading -= float(np.clip(0.5 * error, -np.deg2rad(15.0), np.deg2rad(15.0)))
         # Going in circles without progress (an island, a dead end): break away to the left.
         self._recent.append(np.array(self._position[:2]))
@@ -247,7 +223,7 @@ class PassivePolicy(Policy):
         profile = self._refused.overlay(profile, position)
         self._steer(profile, collided)
         bounds = self.context.bounds
-        height = bounds[0, 2] + self.scan_height_fraction * (bounds[1, 2] - bounds[0, 2])
+        height = bounds[0, 2] + self.config.scan_height_fraction * (bounds[1, 2] - bounds[0, 2])
         step = self.context.max_translation_m
         direction = np.array([np.cos(self._heading), np.sin(self._heading)])
         next_position = position.copy()
@@ -256,10 +232,11 @@ class PassivePolicy(Policy):
             next_position[:2] += direction * step
         next_position[2] += float(np.clip(height - position[2], -step, step))
         # Camera: sweep between the wall on the right and across the room, and up and down.
-        phase = 2.0 * np.pi * self._step / self.sweep_period_steps
-        offset = -self.sweep_yaw_rad + (np.deg2rad(150.0)) * (0.5 - 0.5 * np.cos(phase))
+        phase = 2.0 * np.pi * self._step / self.config.sweep_period_steps
+        sweep_yaw = float(np.deg2rad(self.config.sweep_yaw_deg))
+        offset = -sweep_yaw + (np.deg2rad(150.0)) * (0.5 - 0.5 * np.cos(phase))
         yaw = self._heading + offset
-        pitch = self.sweep_pitch_rad * np.sin(phase / 1.6)
+        pitch = float(np.deg2rad(self.config.sweep_pitch_deg)) * np.sin(phase / 1.6)
         look = np.array([np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch)])
         rotation = look_at_rotation(next_position, next_position + look)
         self._last_target = next_position

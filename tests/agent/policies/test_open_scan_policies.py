@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import naruto_gym  # noqa: F401
+from naruto_agent.guards import RefusedMoves
+from naruto_agent.guards.panorama_clearance import sees_all_around_below
 from naruto_agent.policies import EnvContext, FrontierPolicy, make_policy
-from naruto_agent.policies.panorama_clearance import RefusedMoves, sees_all_around_below
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 from tests.agent.synthetic_panoramas import floor_panorama, wall_panorama
 
@@ -88,7 +89,7 @@ def test_wall_follower_follows_the_edge_of_a_missing_wall():
 
 
 def test_floor_edge_profile_finds_where_the_floor_ends():
-    from naruto_agent.policies.panorama_clearance import floor_edge_profile
+    from naruto_agent.guards.panorama_clearance import floor_edge_profile
 
     # A floor 1 m below the agent that ends 0.8 m away towards +x, and goes on elsewhere.
     edge = floor_edge_profile(floor_panorama(edge_x_m=0.8))
@@ -156,7 +157,7 @@ def test_frontier_counts_only_frontier_inside_the_scan():
     _, kept = policy._frontier_clusters(position)
     outside = centres[kept][:, 0] > 4.0
     assert outside.any()  # without the test the frontier past the floor's edge counts
-    policy.scanned_space_support = True
+    policy.config.scanned_space_support = True
     policy.scan_open = True
     _, kept = policy._frontier_clusters(position)
     assert kept.any() and not (centres[kept][:, 0] > 3.5).any()
@@ -177,7 +178,7 @@ def test_frontier_under_an_open_top_does_not_count_the_sky():
     grid.observed[:] = True  # all measured, but for the sky and the pocket below
     walls = (centres[..., 0] < 0.15) & (centres[..., 2] < 2.5)  # measured up to 2.5 m
     grid.log_odds[walls] = 3.0
-    top = grid.occupied_top_z(policy.scan_top_quantile)
+    top = grid.occupied_top_z(policy.config.scan_top_quantile)
     assert 1.5 < top <= 2.5
     grid.observed[centres[..., 2] > top] = False  # the open sky above the wall tops
     pocket = (np.abs(centres[..., 0] - 2.5) < 0.25) & (np.abs(centres[..., 1] - 2.5) < 0.25)
@@ -191,7 +192,7 @@ def test_frontier_under_an_open_top_does_not_count_the_sky():
     policy.scan_open = False  # a closed scan, held to the test too (the default)
     _, kept = policy._frontier_clusters(position)
     assert np.linalg.norm(centres[kept] - [2.5, 2.5, 1.2], axis=1).max() < 0.6
-    policy.support_on_closed_scans = False  # the unknown above is a ceiling still to see
+    policy.config.support_on_closed_scans = False  # the unknown above is a ceiling still to see
     _, kept = policy._frontier_clusters(position)
     assert (centres[kept][:, 2] > top - 0.1).any()
     assert (grid.frontier(unknown_below_z=top) <= grid.frontier()).all()
@@ -242,7 +243,8 @@ def test_frontier_plans_without_inflation_when_its_map_boxes_it_in():
     grid.observed[i + 8 :, :, :] = False  # unknown space beyond: the frontier
     position = grid.cell_to_world(centre[None])[0]
     labels, kept = policy._frontier_clusters(position)
-    assert not policy._plan_through(position, labels, kept, policy.inflation_voxels, False)
+    assert not policy._plan_through(position, labels, kept, policy.config.inflation_voxels,
+                                   False)
     assert policy._plan(position)
     path_cells = grid.world_to_cell(policy._path)
     assert np.any(np.all(path_cells == [i + 3, j, k], axis=1))  # through the gap
@@ -290,7 +292,7 @@ def test_frontier_does_not_send_a_move_towards_the_scans_edge():
     policy = _open_frontier_over_floor(floor_x_max=3.5)
 
     def leaves(start: np.ndarray, end: np.ndarray) -> bool:
-        return policy.grid.move_leaves_support(start, end, policy.edge_probe_m)
+        return policy.guard.map_leaves_scan(policy.grid, start, end)
 
     assert not leaves(np.array([2.0, 2.0, 1.0]), np.array([2.1, 2.0, 1.0]))
     start, end = np.array([3.35, 2.0, 1.0]), np.array([3.45, 2.0, 1.0])
@@ -327,7 +329,7 @@ def test_first_contact_reads_the_way_ahead_from_the_panorama():
     """A sphere 7 cm from a wall: a move that takes it within its radius of the wall is
     blocked at the wall; moving along the wall or away from it is not, and (as the env's
     sweep) an agent already closer than its radius may move as long as it gets no closer."""
-    from naruto_agent.policies.panorama_clearance import first_contact
+    from naruto_agent.guards.panorama_clearance import first_contact
 
     panorama = wall_panorama(-0.07)
     contact = first_contact(panorama, np.array([0.06, -0.05, 0.07]), 0.06)
@@ -345,7 +347,7 @@ def test_clear_part_of_move_slides_along_a_surface_or_stops_short_of_it():
     component towards the wall removed); a move straight at a wall 0.2 m ahead stops a
     centimetre short of touching it; a clear move is returned as it is, and one with no clear
     part worth sending gives None."""
-    from naruto_agent.policies.panorama_clearance import clear_part_of_move, first_contact
+    from naruto_agent.guards.panorama_clearance import clear_part_of_move, first_contact
 
     beside = wall_panorama(-0.07)
     move = np.array([0.06, -0.05, 0.0])
@@ -365,7 +367,7 @@ def test_cone_supported_reads_the_envs_cone_test_from_the_panorama():
     """A floor 1 m below that ends 0.8 m away towards +x: points well inside are supported,
     points at or past the edge are not (a sector of their cone sees nothing); a closed floor
     supports everything, an empty panorama nothing."""
-    from naruto_agent.policies.panorama_clearance import cone_supported
+    from naruto_agent.guards.panorama_clearance import cone_supported
 
     points = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.85, 0.0, 0.0], [0.5, 0.0, -0.9]])
     supported = cone_supported(floor_panorama(edge_x_m=0.8), points)
@@ -379,7 +381,7 @@ def test_move_leaves_scan_probes_the_cube_around_the_moves_end():
     supported, as does a point a radius further on, but a corner of the cube a radius around
     the end lies past the edge, where the env's lattice refuses; a move away from the edge
     stays inside."""
-    from naruto_agent.policies.panorama_clearance import cone_supported, move_leaves_scan
+    from naruto_agent.guards.panorama_clearance import cone_supported, move_leaves_scan
 
     panorama = floor_panorama(edge_x_m=0.06)
     along_edge = np.array([0.0, 0.1, 0.0])
@@ -403,11 +405,11 @@ def test_frontier_holds_back_a_move_the_panorama_shows_blocked_and_marks_the_sur
     towards = position + [0.06, -0.05, 0.0]
     assert policy._panorama_shows_surface(position, towards, panorama)
     assert grid.occupied[tuple(wall)]
-    for _ in range(policy.max_held_moves - 1):
+    for _ in range(policy.config.guard.max_held_moves - 1):
         assert policy._panorama_shows_surface(position, towards, panorama)
     assert not policy._panorama_shows_surface(position, towards, panorama)  # the env decides
-    policy._held_for_surface = 0
-    policy.panorama_move_check = False
+    policy.guard.moved()
+    policy.config.guard.panorama_check = False
     assert not policy._panorama_shows_surface(position, towards, panorama)
 
 
@@ -419,12 +421,12 @@ def test_frontier_edge_holds_do_not_let_a_move_into_a_surface():
     policy = _open_frontier_over_floor(floor_x_max=3.5)
     position = np.array([2.0, 2.0, 1.0])
     towards = position + [0.06, -0.05, 0.0]
-    policy._held_for_edge = policy.max_held_moves
+    policy.guard.edge_holds.count = policy.config.guard.max_held_moves
     assert policy._panorama_shows_surface(position, towards, wall_panorama(-0.07))
-    assert policy._held_for_surface == 1
+    assert policy.guard.holds.count == 1
     edge = floor_panorama(edge_x_m=0.3)
     assert not policy._probe_refuses(np.zeros(3), np.array([0.25, 0.0, 0.0]), edge)
-    policy._held_for_edge = 0
+    policy.guard.edge_holds.reset()
     assert policy._probe_refuses(np.zeros(3), np.array([0.25, 0.0, 0.0]), edge)
 
 
@@ -434,7 +436,7 @@ def test_frontier_leaves_a_move_from_the_scans_margin_to_the_env():
     env decides; holding every such move back gave up every goal in reach over a floor
     hole), while NARUTO's reading holds it; 0.25 m back from the edge a move towards it is
     held back by both."""
-    from naruto_agent.policies.panorama_clearance import move_leaves_scan
+    from naruto_agent.guards.panorama_clearance import move_leaves_scan
 
     along_edge = np.array([0.0, 0.1, 0.0])
     margin = floor_panorama(edge_x_m=0.06)

@@ -167,8 +167,8 @@ def test_random_walk_reads_its_way_from_the_panorama_and_bumps_far_less():
 
 def test_random_walk_turns_in_place_where_every_way_looks_blocked_then_lets_the_env_decide():
     """Surfaces all around, closer than a step: no redrawn run is clear. The walk turns in
-    place for ``max_held_steps`` steps (drawing new runs at each), then sends a move."""
-    policy = RandomPolicy(seed=3, max_held_steps=2)
+    place for ``max_held_moves`` steps (drawing new runs at each), then sends a move."""
+    policy = RandomPolicy(seed=3, max_held_moves=2)
     context = _context()
     policy.bind(context)
     pose = np.eye(4)
@@ -180,7 +180,7 @@ def test_random_walk_turns_in_place_where_every_way_looks_blocked_then_lets_the_
     np.testing.assert_allclose(targets[0], pose[:3, 3], atol=1e-6)
     np.testing.assert_allclose(targets[1], pose[:3, 3], atol=1e-6)
     assert np.linalg.norm(targets[2] - pose[:3, 3]) > 0.5 * context.max_translation_m
-    assert policy.turns_before_block == 3 * policy.max_redraws
+    assert policy.turns_before_block == 3 * policy.config.max_redraws
     assert policy.held_steps == 0  # the count starts again after the move is sent
     # Without the panorama the walk never holds.
     policy.reset({"pose": pose.astype(np.float32)}, {}, seed=3)
@@ -217,7 +217,7 @@ def test_random_walk_sweeps_all_around_for_the_one_clear_way_before_it_holds():
         assert np.linalg.norm(move) > 0.5 * context.max_translation_m, seed
         assert abs(np.degrees(np.arctan2(move[1], move[0]))) < 20.0, (seed, move)
         assert policy.held_steps == 0
-        if policy.turns_before_block == policy.max_redraws:
+        if policy.turns_before_block == policy.config.max_redraws:
             swept += 1
             unswept = RandomPolicy(seed=seed, sweep_headings=0)
             unswept.bind(context)
@@ -230,7 +230,7 @@ def test_random_walk_sweeps_all_around_for_the_one_clear_way_before_it_holds():
 def test_surface_top_is_the_height_under_most_of_the_surface_area_shown():
     """A floor 1 m below: its height. A small patch 3 m up (a stray fragment) barely raises
     the quantile; the highest point it shows would."""
-    from naruto_agent.policies.panorama_clearance import surface_top
+    from naruto_agent.guards.panorama_clearance import surface_top
 
     panorama = floor_panorama()
     assert surface_top(panorama) == pytest.approx(-1.0, abs=1e-3)

@@ -1,0 +1,138 @@
+"""The policy registry, the policies' configs and the keywords that fill them."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from naruto_agent.benchmark.cli import build_parser
+from naruto_agent.guards import ScanGuardConfig
+from naruto_agent.policies import (
+    LAZY_POLICIES,
+    POLICIES,
+    FrontierConfig,
+    FrontierPolicy,
+    PassiveConfig,
+    PassivePolicy,
+    Policy,
+    RandomConfig,
+    RandomPolicy,
+    make_policy,
+    policy_class,
+    policy_names,
+    register_lazy_policy,
+    register_policy,
+)
+
+
+class _StandStill(Policy):
+    def act(self, observation, info=None):
+        return np.zeros(7, np.float32)
+
+
+@pytest.fixture
+def registry():
+    """The registry as it is, restored after the test."""
+    policies, lazy = dict(POLICIES), dict(LAZY_POLICIES)
+    yield
+    POLICIES.clear()
+    POLICIES.update(policies)
+    LAZY_POLICIES.clear()
+    LAZY_POLICIES.update(lazy)
+
+
+def test_the_baselines_register_themselves_and_naruto_stays_lazy():
+    assert policy_class("frontier") is FrontierPolicy
+    assert policy_class("random") is RandomPolicy
+    assert policy_class("passive") is PassivePolicy
+    assert policy_names() == sorted({"frontier", "naruto", "passive", "random"} | set(POLICIES))
+    # Looking the names up never imports the agent (its module imports torch).
+    assert "naruto" in LAZY_POLICIES or "naruto_agent.naruto" in sys.modules
+
+
+def test_register_policy_decorator_names_a_class(registry):
+    decorated = register_policy("stand_still")(_StandStill)
+    assert decorated is _StandStill
+    assert isinstance(make_policy("stand_still"), _StandStill)
+    assert "stand_still" in policy_names()
+    register_policy("stand_still")(_StandStill)  # the same class again: fine
+    with pytest.raises(ValueError, match="taken"):
+        register_policy("frontier")(_StandStill)
+    register_policy("frontier", replace=True)(_StandStill)
+    assert policy_class("frontier") is _StandStill
+    with pytest.raises(TypeError, match="Policy subclass"):
+        register_policy("dict")(dict)
+
+
+def test_a_lazy_entry_is_imported_on_first_lookup(registry):
+    register_lazy_policy("lazy_frontier", "naruto_agent.policies.frontier:FrontierPolicy")
+    assert "lazy_frontier" in policy_names() and "lazy_frontier" not in POLICIES
+    assert policy_class("lazy_frontier") is FrontierPolicy
+    assert POLICIES["lazy_frontier"] is FrontierPolicy and "lazy_frontier" not in LAZY_POLICIES
+    # A module that registers its class itself takes the lazy entry's place.
+    register_lazy_policy("stand_still", f"{__name__}:_StandStill")
+    register_policy("stand_still")(_StandStill)
+    assert "stand_still" not in LAZY_POLICIES and policy_class("stand_still") is _StandStill
+    with pytest.raises(ValueError, match="package.module:ClassName"):
+        register_lazy_policy("bad", "no_colon")
+
+
+def test_lookup_errors_are_clear():
+    with pytest.raises(ValueError, match="unknown policy 'nope'.*frontier"):
+        policy_class("nope")
+    with pytest.raises(ValueError, match="cannot import"):
+        policy_class("no_such_module_x:Thing")
+    with pytest.raises(ValueError, match="not a naruto_agent.policies.Policy subclass"):
+        policy_class("json:dumps")
+
+
+def test_benchmark_help_lists_every_registered_policy():
+    text = build_parser().format_help()
+    for name in ("passive", "random", "frontier", "naruto"):
+        assert name in text.split("registered policies:")[1]
+
+
+def test_keywords_fill_the_config_and_its_guard_section():
+    policy = FrontierPolicy(voxel_size_m=0.2, max_held_moves=5, panorama_check=False)
+    assert policy.config.voxel_size_m == 0.2
+    assert policy.config.guard.max_held_moves == 5 and not policy.config.guard.panorama_check
+    assert policy.config.guard.margin_start_passes  # frontier's own guard defaults stay
+    assert policy.guard.config is policy.config.guard
+    base = FrontierConfig(inflation_voxels=2)
+    policy = FrontierPolicy(config=base, guard={"panorama_margin_m": 0.02}, replan_every=5)
+    assert policy.config.inflation_voxels == 2 and policy.config.replan_every == 5
+    assert policy.config.guard.panorama_margin_m == 0.02
+    assert policy.config is not base and base.replan_every == 10  # the policy owns a copy
+    guard = ScanGuardConfig(max_held_moves=1)
+    assert RandomPolicy(guard=guard).config.guard == guard
+    assert RandomPolicy(7).config.seed == 7 and RandomPolicy(7).seed == 7
+    assert PassivePolicy(lost_wall_m=2.0).config == PassiveConfig(lost_wall_m=2.0)
+    assert RandomPolicy(config=RandomConfig(max_redraws=2)).config.max_redraws == 2
+
+
+def test_unknown_and_invalid_settings_are_refused():
+    with pytest.raises(TypeError, match="no setting \\['nope'\\]"):
+        FrontierPolicy(nope=1)
+    with pytest.raises(TypeError, match="no setting"):
+        PassivePolicy(max_held_moves=2)  # passive has no guard
+    with pytest.raises(ValueError, match="look-around heading"):
+        FrontierPolicy(look_around_headings=0)
+    with pytest.raises(ValueError, match="min_run_steps"):
+        RandomConfig(min_run_steps=0)
+    with pytest.raises(ValueError, match="open_sky_share"):
+        ScanGuardConfig(open_sky_share=0.0)
+    with pytest.raises(TypeError, match="guard must be"):
+        FrontierPolicy(guard=3)
+
+
+def test_former_names_still_work_with_a_deprecation_warning():
+    with pytest.warns(DeprecationWarning, match="'panorama_move_check' is now called"):
+        policy = FrontierPolicy(panorama_move_check=False)
+    assert not policy.config.guard.panorama_check
+    with pytest.warns(DeprecationWarning, match="'max_held_steps' is now called"):
+        policy = RandomPolicy(max_held_steps=2)
+    assert policy.config.guard.max_held_moves == 2
+    with pytest.raises(TypeError, match="give 'max_held_moves' only"):
+        RandomPolicy(max_held_steps=2, max_held_moves=3)
