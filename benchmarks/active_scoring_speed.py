@@ -1,5 +1,7 @@
-"""Cost of NARUTO's active ray scoring against the mapping iteration it serves, per scoring
-mode, and how many of the published scoring's picks each cheaper mode shares.
+"""Cost of NARUTO's active ray scoring per mode. Results: docs/benchmarks/mapping.md
+
+Times each scoring mode against the mapping iteration it serves, and counts how many of the
+published scoring's picks each cheaper mode shares.
 
 Maps the first frames of the Replica office0 sample (ground-truth poses, a keyframe every 5
 frames, without active sampling, so the map does not depend on the mode), then scores the

@@ -1,4 +1,4 @@
-"""Mapping quality and speed on the Replica office0 sample along its real trajectory.
+"""Mapping quality and speed on the Replica trajectory. Results: docs/benchmarks/mapping.md
 
 Maps the sample scene from its 2000 ground-truth poses with:
 

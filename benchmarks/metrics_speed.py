@@ -1,4 +1,6 @@
-"""Metrics speed: accuracy / completion / ratio / F-score of a 200k-sample pair, beside a bare
+"""Speed of the reconstruction metrics and of culling. Results: docs/benchmarks/metrics.md
+
+Times accuracy / completion / ratio / F-score of a 200k-sample pair beside a bare
 ``scipy.spatial.cKDTree`` build + query of the same points in the same run.
 
 Goal (evaluation issue): the metrics of a 200,000 vs 200,000 sample pair in under 2 s on the

@@ -1,4 +1,4 @@
-"""One NARUTO episode in the env: coverage, reconstruction metrics, path length, timings.
+"""One NARUTO episode in the env. Results: docs/benchmarks/naruto-episode.md
 
 Runs :class:`~naruto_agent.naruto.NarutoPolicy` for a step budget on a scene and reports
 
@@ -13,7 +13,7 @@ Runs :class:`~naruto_agent.naruto.NarutoPolicy` for a step budget on a scene and
 * the time per step by phase: mapping (frame integration + reading the planner view),
   planning (goal search + E-RRT + the state machine) and the env (motion, rendering,
   coverage, and the reference TSDF fusion that ``reconstruct=True`` adds), next to the
-  published per-frame figures on a V100 (NARUTO_NOTES.md section 1) for scale;
+  published per-frame figures on a V100 (NARUTO, Feng et al., CVPR 2024) for scale;
 * the wall time by phase as in the paper's Figure 8 (``phases_s``, printed as a table):
   simulation (motion and rendering of the RGB-D frame and the panorama), mapping (the
   mapper's iterations and keyframes, without the active ray scoring), active ray scoring

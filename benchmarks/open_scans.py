@@ -1,5 +1,7 @@
-"""Open scans: do policies keep moving, and stay inside, when the scan has no ceiling, holes and
-a missing wall? Closed scenes against their open variants, through the benchmark harness.
+"""Closed scenes against their open variants. Results: docs/benchmarks/open-scans.md
+
+Do policies keep moving, and stay inside, when the scan has no ceiling, holes and a missing
+wall? Every policy on closed scenes and their open variants, through the benchmark harness.
 
 For every base scene (catalogue names) the script runs the closed scan (``NAME:fragments``) and
 its open variants (``NAME:OPENINGS``, see ``naruto_gym.scenes.open_scans``: ceiling removed,
@@ -19,7 +21,7 @@ With ``--published-policies`` the same policies also run under the published esc
 (``escape_rule="published"``, whole-sphere no-hit share above 50 %) in a subfolder, for the
 before/after comparison.
 
-Example (the README run; naruto last, it is the slowest)::
+Example (the run of the docs page; naruto last, it is the slowest)::
 
     python benchmarks/open_scans.py --policies passive random frontier --workers 1
     python benchmarks/open_scans.py --policies naruto --workers 1

@@ -1,4 +1,6 @@
-"""Per-episode procedural scenes: what a new scene costs at reset, and memory over a long run.
+"""New procedural scenes: cost at reset, memory. Results: docs/benchmarks/throughput.md
+
+What a new per-episode procedural scene costs at reset, and memory over a long run.
 
 1. Cost of one new scene, per kind (room, apartment) and coverage sample count: generating the
    mesh, and building what the env needs of it (ray-casting structure, coverage samples, the

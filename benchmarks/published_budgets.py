@@ -1,4 +1,6 @@
-"""The comparison at the published budgets in one report: the paper's Tables 1, 2 and 6, our data.
+"""The paper's Tables 1, 2 and 6 on our data. Results: docs/benchmarks/policies.md
+
+The comparison at the published budgets in one report.
 
 Reads the ``naruto-benchmark`` records of the three runs at the published budgets (the Replica
 sample and ``replica_like_room`` at 2000 steps, the apartment at 5000, the MP3D budget) and the
@@ -10,8 +12,7 @@ published references beside them, which policy has the best completion ratio, an
 coverage curves at ten checkpoints with the check of the issue "The NARUTO agent that wins"
 (NARUTO at least as high as frontier at every checkpoint after step 500, in the mean over
 seeds and per seed). It runs
-no episode; the commands that make the records are in the README ("At the published
-budgets").
+no episode; the commands that make the records are on its docs page.
 
 Example::
 

@@ -1,6 +1,7 @@
-"""Render speed: the pinhole RGB-D frame by ray casting and by rasterizing, the panorama and a
-whole env.step, side by side with a bare Open3D ``RaycastingScene.cast_rays`` of the same rays
-in the same run.
+"""Render speed of the pinhole RGB-D frame. Results: docs/benchmarks/rendering.md
+
+The pinhole RGB-D frame by ray casting and by rasterizing, the panorama and a whole env.step,
+side by side with a bare Open3D ``RaycastingScene.cast_rays`` of the same rays in the same run.
 
 Goals:
 * env issue: a ray-cast RGB-D frame costs at most 1.25x the bare depth cast;

@@ -1,5 +1,7 @@
-"""Real-data check: replay the 2000-pose Replica office0 scan in the env, fuse it with the
-reference TSDF mapper and score it the way every policy is scored.
+"""The real Replica office0 scan, replayed and scored. Results: docs/benchmarks/metrics.md
+
+Replays the 2000-pose Replica office0 scan in the env, fuses it with the reference TSDF mapper
+and scores it the way every policy is scored.
 
 The trajectory (``../shared/scenes/replica_office0/traj.txt``) is the standard human-style
 "passive" scan of office0 (18.20 m). It is replayed with pose actions in ``NarutoRecon-v0``

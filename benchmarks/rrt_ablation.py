@@ -1,6 +1,7 @@
-"""The paper's Table 3: RRT vs E-RRT and its two ablations, on the same start/goal pairs.
+"""The paper's Table 3, RRT against E-RRT. Results: docs/benchmarks/planning.md
 
-NARUTO (CVPR 2024) Table 3 reports, per planning request on Replica room0 (on a V100 GPU):
+RRT, E-RRT and its two ablations on the same start/goal pairs. NARUTO (Feng et al., CVPR 2024)
+Table 3 reports, per planning request on Replica room0 (on a V100 GPU):
 
     RRT                 19 x 10^3 ms   19 x 10^3 nodes   28 x 10^3 iterations
     without direct line 17 x 10^3 ms   20 x 10^3 nodes   21 x 10^3 iterations

@@ -1,4 +1,6 @@
-"""PPO that learns to explore: Stable-Baselines3 on the batched vector env, procedural rooms.
+"""PPO that learns to explore generated rooms. Results: docs/benchmarks/ppo.md
+
+Stable-Baselines3 PPO on the batched vector env, a new procedural room every episode.
 
 One readable file in the manner of CleanRL: the arguments are the dataclass below (each field a
 ``--flag``). The agent sees low-resolution frames (the default camera at ``image_scale``,

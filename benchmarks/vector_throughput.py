@@ -1,4 +1,6 @@
-"""Throughput of the batched ``NarutoReconVectorEnv`` against Gymnasium's vector envs, for RL.
+"""Throughput of the batched env for RL. Results: docs/benchmarks/throughput.md
+
+Steps/s of the batched ``NarutoReconVectorEnv`` against Gymnasium's vector envs.
 
 Settings (issue "RL researchers' path"): a 64 x 64 pinhole camera
 (``PinholeCamera(64, 64, 32, 32, 31.5, 31.5)``), the observation panorama off, discrete random
@@ -20,8 +22,8 @@ Reported, all in one run and process (load average printed beside every figure):
   rays in one call;
 * the 5x comparison in rounds (``goal_rounds``): the AsyncVectorEnv and the batched env with 64
   envs made afresh and timed back to back in each round, the goal's ratio the median of the
-  rounds' (timed minutes apart, as the table's rows are, the machine's drift of up to 10-20 %
-  in that time moved the ratio by as much);
+  rounds' (rows timed minutes apart, as the table's are, would carry the machine's drift into
+  the ratio);
 * the batched env on a scene stream (``scene="procedural:room"``, a new generated room for
   every agent at every reset, as ``benchmarks/train_ppo.py`` trains, with its 5,000 coverage
   samples) with 16 and 64 envs and episodes of ``stream_episode_steps``, timed over
