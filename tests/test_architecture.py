@@ -22,9 +22,13 @@ LAYERS: dict[str, tuple[str, ...]] = {
     "naruto_gym": (),
     "naruto_agent.mapping": ("naruto_gym",),
     "naruto_agent.planning": ("naruto_gym", "naruto_agent.mapping"),
-    "naruto_agent.policies": ("naruto_gym", "naruto_agent.mapping", "naruto_agent.planning"),
+    "naruto_agent.guards": ("naruto_gym", "naruto_agent.mapping"),
+    "naruto_agent.policies": (
+        "naruto_gym", "naruto_agent.mapping", "naruto_agent.planning", "naruto_agent.guards",
+    ),
     "naruto_agent.naruto": (
-        "naruto_gym", "naruto_agent.mapping", "naruto_agent.planning", "naruto_agent.policies",
+        "naruto_gym", "naruto_agent.mapping", "naruto_agent.planning", "naruto_agent.guards",
+        "naruto_agent.policies",
     ),
 }
 
