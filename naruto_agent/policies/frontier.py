@@ -140,9 +140,10 @@ class FrontierPolicy(Policy):
         scan_top_quantile: with ``scanned_space_support``, paths stay ``scan_top_margin_m``
             below the height under which this share of the occupied voxels lies.
         scan_top_margin_m: see ``scan_top_quantile``.
-        support_below_m, support_reach_m: with ``scanned_space_support``, while no frontier
-            passes the full test, a frontier voxel counts with measured surface below it, at
-            most this far down and this far sideways.
+        support_below_m: with ``scanned_space_support``, while no frontier passes the full
+            test, a frontier voxel counts with measured surface below it, at most this far
+            down.
+        support_reach_m: see ``support_below_m``: at most this far sideways.
     """
 
     required_observations = ("depth", "pose")

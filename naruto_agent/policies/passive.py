@@ -74,8 +74,8 @@ class PassivePolicy(Policy):
         trajectory: (N, 4, 4) poses or a path to a ``traj.txt``-style file; None for the
             scripted scan.
         fit_to_budget: subsample a longer trajectory uniformly to the episode's step budget.
-        position_tolerance_m, rotation_tolerance_deg: a replayed pose counts as reached within
-            these.
+        position_tolerance_m: distance within which a replayed pose counts as reached.
+        rotation_tolerance_deg: angle within which a replayed pose counts as reached.
         max_blocked_steps: skip a replayed pose after this many steps without progress.
         scan_height_fraction: scripted scan height as a fraction of the bounds' height.
         wall_distance_m: distance kept to the wall on the right.

@@ -44,7 +44,8 @@ class RandomPolicy(Policy):
 
     Args:
         seed: seed of the policy's generator (``reset(seed=...)`` overrides it).
-        min_run_steps, max_run_steps: a run lasts a uniform number of steps in this range.
+        min_run_steps: shortest run in steps (a run's length is uniform in the range).
+        max_run_steps: longest run in steps.
         max_climb: largest vertical component of a run's (unit) direction.
         max_pitch_deg: the camera's pitch is drawn uniformly within +-this per run.
         height_margin_m: runs turn back vertically within this distance of the bounds'
