@@ -33,6 +33,7 @@ POLICIES: dict[str, type[Policy]] = {
     "random": RandomPolicy,
     "frontier": FrontierPolicy,
 }
+"""Registry names of the baselines and their classes (see :func:`make_policy`)."""
 
 #: Registry names resolved by import path on first use (their modules import torch).
 LAZY_POLICIES: dict[str, str] = {"naruto": "naruto_agent.naruto:NarutoPolicy"}
