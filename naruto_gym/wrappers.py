@@ -128,8 +128,10 @@ class EgocentricMap(_TransformObservation, gym.utils.RecordConstructorArgs):
 
     Args:
         env: the env.
-        cells, cell_m, stride, obstacle_m: see
-            :class:`naruto_gym.rl.observations.MapTransform`.
+        cells: map side in cells.
+        cell_m: cell side in metres.
+        stride: every ``stride``-th pixel of the depth frame is projected.
+        obstacle_m: height above the floor estimate from which a hit is an obstacle.
     """
 
     def __init__(self, env: gym.Env, cells: int = 32, cell_m: float = 0.15, stride: int = 2,

@@ -103,9 +103,11 @@ class OccupancyGrid:
         voxel_size_m: voxel edge (0.1 m).
         max_range_m: depth beyond this is not integrated (5 m, the mapping range).
         pixel_stride: integrate every n-th pixel in each image direction.
-        hit_log_odds, miss_log_odds: log-odds increments of a hit and a pass-through.
+        hit_log_odds: log-odds increment of a hit.
+        miss_log_odds: log-odds increment of a pass-through.
         clamp: log-odds are kept within (-clamp[0], clamp[1]).
-        occupied_threshold, free_threshold: log-odds thresholds of the two states.
+        occupied_threshold: log-odds above which a voxel is occupied.
+        free_threshold: log-odds below which a voxel is free.
     """
 
     def __init__(

@@ -123,6 +123,7 @@ from naruto_agent.policies.panorama_clearance import (
 )
 
 MAPPERS = ("tsdf", "neural")
+"""Names of the mappers the agent can run on (``NarutoPolicy(mapper=...)``)."""
 _MIN_CLIMB_M = 0.02  # a climb out of an open scan's margin shorter than this is not worth it
 
 

@@ -43,8 +43,6 @@ class State(str, Enum):
     ROTATING_AT_GOAL = "rotating_at_goal"
 
 
-#: Allowed successors of every state (staying in a state is a successor too, where a state
-#: lasts several frames).
 TRANSITIONS: dict[State, frozenset[State]] = {
     State.STAYING: frozenset({State.STAYING, State.PLANNING}),
     State.PLANNING: frozenset({State.ROTATING_AT_START, State.STAYING}),
@@ -52,6 +50,8 @@ TRANSITIONS: dict[State, frozenset[State]] = {
     State.MOVING: frozenset({State.MOVING, State.ROTATING_AT_GOAL, State.STAYING}),
     State.ROTATING_AT_GOAL: frozenset({State.ROTATING_AT_GOAL, State.PLANNING}),
 }
+"""Allowed successors of every state (staying in a state is a successor too, where a state
+lasts several frames)."""
 
 # Closer than this to target 0, a node keeps the camera's rotation (looking at a point from
 # on top of it is undefined).

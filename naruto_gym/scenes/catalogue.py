@@ -43,6 +43,7 @@ from naruto_gym.scenes.procedural import (
 from naruto_gym.scenes.stream import parse_procedural_name
 
 DEFAULT_SCENE = "replica_like_room"
+"""The catalogue scene an env uses when given no ``scene``."""
 ASSETS_DIR_ENV = "NARUTO_GYM_ASSETS_DIR"
 CACHE_DIR_ENV = "NARUTO_GYM_CACHE_DIR"
 CATALOGUE_FILE = "catalogue.json"

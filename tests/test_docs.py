@@ -1,0 +1,80 @@
+"""The documentation: the MkDocs site builds in strict mode, its API reference lists every
+public name, and the README stays a short front page."""
+
+from __future__ import annotations
+
+import importlib
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README_MAX_LINES = 250
+
+# Package -> the API page (docs/api/<page>.md) that renders it with mkdocstrings.
+API_PAGES = {
+    "naruto_gym": "env",
+    "naruto_gym.vector": "vector",
+    "naruto_gym.wrappers": "wrappers",
+    "naruto_gym.scenes": "scenes",
+    "naruto_gym.evaluation": "evaluation",
+    "naruto_agent.policies": "policies",
+    "naruto_agent.naruto": "naruto",
+    "naruto_agent.mapping": "mapping",
+    "naruto_agent.planning": "planning",
+    "naruto_agent.benchmark": "benchmark",
+}
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The site built by ``mkdocs build --strict`` (any warning fails the build)."""
+    pytest.importorskip("mkdocs", reason="needs the docs extra: pip install -e '.[docs]'")
+    pytest.importorskip("mkdocstrings", reason="needs the docs extra: pip install -e '.[docs]'")
+    out = tmp_path_factory.mktemp("site")
+    result = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(ROOT / "mkdocs.yml"),
+         "-d", str(out)],
+        cwd=ROOT, capture_output=True, text=True, timeout=600,
+        env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
+    )
+    if result.returncode != 0:
+        pytest.fail(
+            "mkdocs build --strict failed (a warning is an error in strict mode):\n"
+            f"{result.stdout}\n{result.stderr}",
+            pytrace=False,
+        )
+    return out
+
+
+def test_mkdocs_build_strict(site: Path) -> None:
+    assert (site / "index.html").is_file()
+    assert (site / "api" / "index.html").is_file()
+
+
+@pytest.mark.parametrize("package", sorted(API_PAGES))
+def test_every_public_name_is_in_the_api_reference(site: Path, package: str) -> None:
+    module = importlib.import_module(package)
+    names = getattr(module, "__all__", None)
+    if names is None:
+        pytest.skip(f"{package} defines no __all__")
+    page = site / "api" / API_PAGES[package] / "index.html"
+    assert page.is_file(), f"no API page for {package}: add docs/api/{API_PAGES[package]}.md"
+    anchors = set(re.findall(r'id="([^"]+)"', page.read_text(encoding="utf-8")))
+    missing = [name for name in names if f"{package}.{name}" not in anchors]
+    assert not missing, (
+        f"public names of {package} missing from docs/api/{API_PAGES[package]}.md: {missing} "
+        "(give them a docstring, or check the page's mkdocstrings options)"
+    )
+
+
+def test_readme_is_short() -> None:
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= README_MAX_LINES, (
+        f"README.md has {len(lines)} lines; keep it at most {README_MAX_LINES} and move detail "
+        "to docs/"
+    )
