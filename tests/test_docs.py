@@ -23,6 +23,7 @@ API_PAGES = {
     "naruto_gym.scenes": "scenes",
     "naruto_gym.evaluation": "evaluation",
     "naruto_agent.policies": "policies",
+    "naruto_agent.guards": "guards",
     "naruto_agent.naruto": "naruto",
     "naruto_agent.mapping": "mapping",
     "naruto_agent.planning": "planning",

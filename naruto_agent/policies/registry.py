@@ -22,12 +22,12 @@ from naruto_agent.policies.base import Policy
 
 PolicyT = TypeVar("PolicyT", bound=type[Policy])
 
-#: Registered policy classes by name.
 POLICIES: dict[str, type[Policy]] = {}
+"""Registered policy classes by name."""
 
-#: Registered names resolved by import path on first lookup (their modules are costly to
-#: import).
 LAZY_POLICIES: dict[str, str] = {"naruto": "naruto_agent.naruto:NarutoPolicy"}
+"""Registered names resolved by import path on first lookup (their modules are costly to
+import)."""
 
 
 def register_policy(name: str, *, replace: bool = False) -> Callable[[PolicyT], PolicyT]:
