@@ -252,6 +252,31 @@ class NarutoPolicy(Policy):
             raise RuntimeError("call reset() with the first observation before checking moves")
         return self.move_checker.is_free(start, end)
 
+    def learn_refusal(self, position: np.ndarray, target: np.ndarray,
+                      reason: str | None = None) -> None:
+        """The env refused the move from ``position`` to ``target``: block the target in the
+        agent's map and fail the current plan's goal. :meth:`act` calls it from the step
+        info (``collided``, ``collision_reason``).
+
+        Args:
+            position: where the agent stands.
+            target: where the refused move went.
+            reason: the env's ``collision_reason``; ``"escape"`` (the move left an open
+                scan) marks the scan open and blocks the space past the scan's edge, or, for
+                a climb refused at the open top, everything above the agent.
+        """
+        if self.agent_map is None:
+            raise RuntimeError("call reset() with the first observation before act()")
+        if reason == "escape":
+            self.scan_guard.mark_open()
+            if self.scan_guard.refused_climb(position, target):
+                self.agent_map.lower_ceiling(position[2])
+            else:
+                self.agent_map.block_past_edge(position, target)
+        else:
+            self.agent_map.block(target)
+        self._fail_current_goal()
+
     def wrap_move_check(self, wrapper: Callable[[MoveCheck], MoveCheck]) -> None:
         """Wrap the move check the state machine calls, e.g. to time it.
 
@@ -279,22 +304,13 @@ class NarutoPolicy(Policy):
                 self.agent_map.refresh()
 
     def _learn_from_refusal(self, position: np.ndarray, info: Info) -> None:
-        """A move the env refused blocks its target in the agent's map and fails the plan's
-        goal: for an escape refusal (the scan is open) the space past the scan's edge, or,
-        for a climb refused at the open top, everything above the agent."""
+        """The step info says the env refused the move the agent commanded last: learn it
+        (:meth:`learn_refusal`); a move that arrived was not refused."""
         if self._commanded is None or not info.get("collided", False):
             return
         if np.linalg.norm(self._commanded - position) <= self.config.arrival_tolerance_m:
             return
-        if info.get("collision_reason") == "escape":
-            self.scan_guard.mark_open()
-            if self.scan_guard.refused_climb(position, self._commanded):
-                self.agent_map.lower_ceiling(position[2])
-            else:
-                self.agent_map.block_past_edge(position, self._commanded)
-        else:
-            self.agent_map.block(self._commanded)
-        self._fail_current_goal()
+        self.learn_refusal(position, self._commanded, info.get("collision_reason"))
 
     def _fail_current_goal(self) -> None:
         """The current plan's goal failed (a recovery's plan has no goal to fail)."""
