@@ -133,7 +133,7 @@ def target_snapshot(env: gym.Env, policy: NarutoPolicy, step: int) -> tuple[np.n
     base = env.unwrapped
     if base._top_down is None:
         env.render()
-    policy._read_view()
+    policy.refresh_view()
     uncertainty = policy.uncertainty
     values = uncertainty.values.reshape(-1)
     points = uncertainty.grid_points()
@@ -224,22 +224,23 @@ def instrument(env: gym.Env, policy: NarutoPolicy, clock: PhaseClock) -> None:
     base.coverage.update = clock.wrap("coverage", base.coverage.update)
     if base.reconstruction is not None:
         base.reconstruction.add_frame = clock.wrap("reference_map", base.reconstruction.add_frame)
-    check = policy._move_is_free
+    def timed_check(check):  # noqa: ANN001, ANN202
+        def move_check(start, end):  # noqa: ANN001, ANN202
+            # A check may read a stale planner view first: that time is the planner view's.
+            view_before = policy.timings["planner_view"]
+            started = time.perf_counter()
+            try:
+                return check(start, end)
+            finally:
+                spent = time.perf_counter() - started
+                clock.seconds["collision_checks"] += spent - (
+                    policy.timings["planner_view"] - view_before
+                )
 
-    def move_check(start, end):  # noqa: ANN001, ANN202
-        # A check may read a stale planner view first: that time is the planner view's.
-        view_before = policy.timings["planner_view"]
-        started = time.perf_counter()
-        try:
-            return check(start, end)
-        finally:
-            spent = time.perf_counter() - started
-            clock.seconds["collision_checks"] += spent - (
-                policy.timings["planner_view"] - view_before
-            )
+        return move_check
 
     clock.seconds.setdefault("collision_checks", 0.0)
-    policy._move_is_free = move_check
+    policy.wrap_move_check(timed_check)
 
 
 #: Figure 8's phases, in order, then what the env does beyond the agent's loop.

@@ -3,6 +3,10 @@
 * :class:`NarutoPolicy` / :class:`NarutoConfig`: the agent (mapper + goal search + E-RRT +
   rotation planning), acting in the env's ``"pose"`` action mode; ``policy.mesh()`` is its
   reconstruction.
+* Its parts, one job each: :class:`AgentMap` (the mapper and the planner view),
+  :class:`ScanGuard` (panorama and open-scan checks), :class:`MoveChecker` (the check of a
+  move before it is sent), :class:`GoalPlanner` (the planning step) and
+  :class:`RecoveryPlanner` (the recovery steps as plans).
 * :func:`uncertainty_aware_goal_search` and its parts (:func:`candidate_goals`,
   :func:`safe_goal_mask`, :func:`select_targets`, :func:`visibility`, :func:`search_goals`):
   the goal search as pure functions.
@@ -20,7 +24,9 @@ Run it like any policy::
     env.unwrapped.evaluate(policy.mesh())
 """
 
-from naruto_agent.naruto.agent import MAPPERS, NarutoConfig, NarutoPolicy, build_config
+from naruto_agent.naruto.agent_map import AgentMap
+from naruto_agent.naruto.config import MAPPERS, NarutoConfig, build_config
+from naruto_agent.naruto.goal_planning import GoalPlanner
 from naruto_agent.naruto.goal_search import (
     GoalSearchConfig,
     GoalSearchResult,
@@ -31,17 +37,26 @@ from naruto_agent.naruto.goal_search import (
     uncertainty_aware_goal_search,
     visibility,
 )
+from naruto_agent.naruto.move_checks import MoveChecker
+from naruto_agent.naruto.policy import NarutoPolicy
+from naruto_agent.naruto.recovery_plans import RecoveryPlanner
+from naruto_agent.naruto.scan_guard import ScanGuard
 from naruto_agent.naruto.state_machine import TRANSITIONS, NarutoStateMachine, Plan, State
 
 __all__ = [
     "MAPPERS",
     "TRANSITIONS",
+    "AgentMap",
+    "GoalPlanner",
     "GoalSearchConfig",
     "GoalSearchResult",
+    "MoveChecker",
     "NarutoConfig",
     "NarutoPolicy",
     "NarutoStateMachine",
     "Plan",
+    "RecoveryPlanner",
+    "ScanGuard",
     "State",
     "build_config",
     "candidate_goals",

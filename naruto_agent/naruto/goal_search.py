@@ -1,4 +1,4 @@
-"""NARUTO's uncertainty-aware goal search (CVPR 2024, Sec. 3.4; NARUTO_NOTES.md section 5).
+"""NARUTO's uncertainty-aware goal search (Feng et al., NARUTO, CVPR 2024, Sec. 3.4).
 
 Given the planner's view of the map (an SDF volume and an uncertainty volume that is zero
 except on surface voxels), find the position from which the agent would see the most

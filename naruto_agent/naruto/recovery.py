@@ -42,11 +42,8 @@ class RecoveryConfig:
         failed_goal_radius_m: candidate goals this close to a goal that failed are skipped.
         failed_goal_memory_frames: ... for this many frames.
         blocked_radius_m: a refused move blocks the agent's map this far around its target
-            (0.05 m, the agent's radius). 0.1 m was measured too: on the apartment (5000
-            steps, seeds 0-2) it cut the env's refusals from 13.7 to 11.7 per episode (the
-            next path had passed close enough to the same surface to bump again), but the
-            coverage in the middle of the episode fell (mean 96.7 / 97.6 % at steps 2000 /
-            2500 against 97.1 / 98.4 %) for the same end (99.3 %).
+            (0.05 m, the agent's radius; see ``docs/agent-config.md`` for the larger radius
+            and what it costs).
         escape_blocked_radius_m: when the env refused the move for leaving the scanned
             space (``collision_reason`` "escape", open scans only), the refused point lies
             in an opening (a window, a floor hole, a wall's missing edge) that the scan ends

@@ -1,4 +1,4 @@
-"""NARUTO's planner state machine (NARUTO_NOTES.md section 1), one frame per call.
+"""NARUTO's planner state machine (Feng et al., NARUTO, CVPR 2024), one frame per call.
 
 | state | goes to | does |
 |---|---|---|

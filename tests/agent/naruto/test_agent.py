@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import naruto_gym  # noqa: F401  (registers the env)
-from naruto_agent.naruto import TRANSITIONS, NarutoPolicy, State, build_config
+from naruto_agent.naruto import TRANSITIONS, NarutoPolicy, Plan, State, build_config
 from naruto_agent.policies import EnvContext, make_policy, pose_action
 from naruto_gym.geometry.transforms import rotation_angle_between
 
@@ -29,12 +29,13 @@ class Episode:
     collisions: int
 
 
-def run_episode(steps: int, seed: int = 0, **settings) -> Episode:
+def run_episode(steps: int, seed: int = 0, policy: NarutoPolicy | None = None,
+                **settings) -> Episode:
     # One step more than run, so no truncation triggers the 200,000-sample final scoring;
     # reconstruct=True fuses the env's reference TSDF map to compare the agent's own with.
     env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=SCALE, panorama_shape=None,
                    max_episode_steps=steps + 1, reconstruct=True)
-    policy = NarutoPolicy(mapper="tsdf", device="cpu", **settings)
+    policy = policy or NarutoPolicy(mapper="tsdf", device="cpu", **settings)
     policy.bind(EnvContext.from_env(env))
     observation, info = env.reset(seed=seed, options=policy.reset_options())
     policy.reset(observation, info, seed=seed)
@@ -145,6 +146,37 @@ def test_settings_and_errors():
         NarutoPolicy().bind(EnvContext.from_env(env))
 
 
+def test_public_seams_wrap_the_move_check_refresh_the_view_and_learn_refusals(episode):
+    """A wrapped move check sees every check and changes nothing; the view can be read on
+    demand; a refusal told by hand blocks its target, which only a trusted plan passes."""
+    checked = []
+
+    def counting(check):
+        def wrapped(start, end):
+            checked.append(end.copy())
+            return check(start, end)
+        return wrapped
+
+    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy.wrap_move_check(counting)
+    run = run_episode(60, policy=policy)
+    assert np.array_equal(run.actions, episode.actions[:60])
+    moves = np.linalg.norm(np.diff(run.poses[:, :3, 3], axis=0), axis=1) > 1e-6
+    assert len(checked) >= moves.sum() > 0
+    policy.refresh_view()
+    assert policy.sdf is not None and policy.uncertainty is not None
+    position = run.poses[-1, :3, 3].astype(np.float64)
+    target = position + np.array([0.05, 0.0, 0.0])
+    policy.learn_refusal(position, target, "surface")
+    assert np.allclose(policy.blocked.points[-1], target) and not policy.scan_open
+    policy.machine.plan = Plan(np.array([position, target]), target[None], target, {})
+    assert not policy.move_is_free(position, target)
+    policy.machine.plan.info["trusted"] = True  # a retreat or a climb: checked already
+    assert policy.move_is_free(position, target)
+    with pytest.raises(RuntimeError, match="reset"):
+        NarutoPolicy().move_is_free(position, target)
+
+
 @pytest.mark.parametrize("looks", [4.0, 0.0])
 def test_a_reached_goal_counts_looks_at_every_target_it_was_chosen_for(looks):
     """When the agent starts a new plan at the goal of the last one, the targets the goal
@@ -167,7 +199,7 @@ def test_a_reached_goal_counts_looks_at_every_target_it_was_chosen_for(looks):
     # The damping applies to whatever the mapper's view holds there, surface or frontier.
     _, raw = policy.mapper.planner_view(policy.config.planner_voxel_m)
     weight = policy.mapper.observed_space.config.look_weight
-    damped = policy._damp_visited(raw)
+    damped = policy.agent_map.damp_visited(raw)
     index = tuple(looked.T)
     np.testing.assert_allclose(
         damped.values[index],

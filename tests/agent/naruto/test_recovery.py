@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-from types import SimpleNamespace
-
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -23,7 +20,6 @@ from naruto_agent.naruto.recovery import (
 )
 from naruto_agent.policies import EnvContext
 from naruto_gym.scenes import make_random_scene
-from tests.agent.synthetic_panoramas import floor_panorama, wall_panorama
 
 
 def test_standing_still_without_new_space_is_a_stall() -> None:
@@ -147,11 +143,13 @@ def _first_move(reason: str, offset: np.ndarray | None = None):
         if np.linalg.norm(action[:3] - position) > 1e-3:
             break
     target = action[:3].astype(np.float64)
-    if offset is not None:
+    if offset is None:
+        # Tell the agent the env refused that move.
+        policy.act(observation, {**info, "collided": True, "collision_reason": reason})
+    else:
         target = position + offset
-        policy._commanded = target.copy()
-    # Tell the agent the env refused that move.
-    policy.act(observation, {**info, "collided": True, "collision_reason": reason})
+        policy.learn_refusal(position.astype(np.float64), target, reason)
+        policy.act(observation, info)  # the agent did not arrive: the machine stays
     env.close()
     return policy, observation, info, position, target
 
@@ -192,11 +190,10 @@ def test_an_agent_hemmed_in_by_its_own_edge_guesses_forgets_them_and_plans_again
     policy, observation, info, position, _ = _first_move("surface")
     refused = len(policy.blocked.points)
     for way in np.vstack([np.eye(3), -np.eye(3)]):
-        policy._block_past_edge(position, position + 0.05 * way, goal_failed=False,
-                                guessed=True)
+        policy.agent_map.block_past_edge(position, position + 0.05 * way, guessed=True)
     assert policy.sdf.sample(position[None])[0] <= policy.config.planner.clearance_m
-    assert policy._escape(position) is None  # hemmed in, as the agent was
-    plan = policy._plan(position, np.asarray(observation["pose"])[:3, :3])
+    assert policy.goal_planner.escape(position) is None  # hemmed in, as the agent was
+    plan = policy.goal_planner.plan(position)
     assert policy.plans[-1].get("forgot_guesses")
     assert policy.plans[-1]["outcome"] != "start not free"
     assert plan is not None
@@ -216,9 +213,9 @@ def test_a_refused_climb_sets_a_ceiling_above_the_agent() -> None:
         action = policy.act(observation, info)
         assert action[2] <= position[2] + 0.02
     # A steep sideways climb from over measured floor is the top too; a level move is not.
-    assert policy._refused_climb(position, position + [0.1, 0.0, 0.05]) == bool(
+    assert policy.scan_guard.refused_climb(position, position + [0.1, 0.0, 0.05]) == bool(
         policy.mapper.observed_space.sectors_seen_below(position[None])[0])
-    assert not policy._refused_climb(position, position + [0.1, 0.0, 0.0])
+    assert not policy.scan_guard.refused_climb(position, position + [0.1, 0.0, 0.0])
 
 
 def _scenes() -> list:
@@ -281,28 +278,6 @@ def test_on_an_open_scan_goals_stay_inside_the_scanned_space() -> None:
     env.close()
 
 
-def test_escape_from_inside_a_blocked_ball_takes_a_line_the_move_check_accepts() -> None:
-    """The agent stands within its clearance, next to the blocked ball of a move refused a
-    step ahead (+x), with a wall close behind it (-x): the escape ends well inside free
-    space and every node of it passes the agent's own move check (else it is refused at
-    every try and the agent never moves)."""
-    values = np.full((30, 30, 30), 0.5)
-    values[:10] = -0.1  # a wall up to x = 0.95 m
-    values[10] = 0.04  # the voxels at x = 1.0 m: inside the agent's clearance
-    sdf = SdfVolume(values, np.zeros(3), 0.1)
-    agent = np.array([1.02, 1.5, 1.0])
-    blocked = BlockedSpace(radius_m=0.05)
-    blocked.add(agent + [0.1, 0.0, 0.0])
-    policy = NarutoPolicy(mapper="tsdf", device="cpu")
-    policy.sdf = blocked.apply(sdf)
-    start = float(policy.sdf.sample(agent[None])[0])
-    assert start <= policy.config.planner.clearance_m  # trapped, as the agent was
-    path = policy._escape(agent)
-    assert path is not None and np.allclose(path[0], agent)
-    assert policy.sdf.sample(path[-1][None])[0] > policy.config.planner.clearance_m
-    assert all(policy._move_is_free(a, b) for a, b in zip(path[:-1], path[1:], strict=True))
-
-
 def test_goals_may_stay_as_high_as_the_agent_stands_over_a_low_scan() -> None:
     """Goals lie ``scan_top_margin_m`` below the measured top, but never lower than the
     agent stands: over a scan that is mostly floor the top can lie below the agent, and
@@ -320,9 +295,9 @@ def test_goals_may_stay_as_high_as_the_agent_stands_over_a_low_scan() -> None:
     top = observed.scan_top_z() - policy.config.scan_top_margin_m
     column = np.array([[position[0], position[1], z] for z in np.arange(0.2, 6.0, 0.1)])
     supported = observed.sample(observed.supported(), column)
-    low = policy._inside_scan(column, np.array([*position[:2], 0.0]))
+    low = policy.scan_guard.inside_scan(column, np.array([*position[:2], 0.0]))
     assert np.array_equal(low, supported & (column[:, 2] <= top))
-    high = policy._inside_scan(column, np.array([*position[:2], top + 1.0]))
+    high = policy.scan_guard.inside_scan(column, np.array([*position[:2], top + 1.0]))
     assert np.array_equal(high, supported & (column[:, 2] <= top + 1.0))
     assert (high & ~low).any()  # the agent's own height admits more
     env.close()
@@ -334,12 +309,12 @@ def test_after_an_escape_refusal_goals_need_measured_surface_in_every_sector_bel
     the coarse test alone."""
     for reason, strict in (("escape", True), ("surface", False)):
         policy, observation, _, position, _ = _first_move(reason)
-        assert policy._scan_open == strict
+        assert policy.scan_open == strict
         observed = policy.mapper.observed_space
         points = policy.sdf.grid_points()
         top = max(observed.scan_top_z() - policy.config.scan_top_margin_m, position[2])
         coarse = observed.sample(observed.supported(), points) & (points[:, 2] <= top)
-        inside = policy._inside_scan(points, position)
+        inside = policy.scan_guard.inside_scan(points, position)
         if strict:
             expected = coarse.copy()
             expected[coarse] = observed.sectors_seen_below(points[coarse])
@@ -379,12 +354,12 @@ def _agent_after(scene: str, steps: int) -> NarutoPolicy:
 def test_the_sky_in_a_depth_frame_tells_the_scan_is_open() -> None:
     """Without a ceiling the first look-around's upward pixels hit nothing; a closed room's
     never miss, so the agent there is as before."""
-    assert _agent_after("replica_like_room:no_ceiling", 12)._scan_open
-    assert not _agent_after("replica_like_room:fragments", 12)._scan_open
+    assert _agent_after("replica_like_room:no_ceiling", 12).scan_open
+    assert not _agent_after("replica_like_room:fragments", 12).scan_open
 
 
 def test_steep_miss_share_counts_only_steep_pixels() -> None:
-    from naruto_agent.policies.panorama_clearance import steep_miss_share
+    from naruto_agent.guards.panorama_clearance import steep_miss_share
     from naruto_gym.geometry.transforms import look_at_rotation, make_pose
     from naruto_gym.sensors.pinhole import PinholeCamera
 
@@ -416,16 +391,16 @@ def test_a_move_towards_the_scans_edge_is_refused_on_the_agents_map() -> None:
     observed.grid.observed[:] = False
     xs = np.arange(0.05, 2.0, 0.1)
     observed.grid.mark_occupied(np.array([[x, y, 0.05] for x in xs for y in xs]))
-    policy._scan_open = True
+    policy.scan_guard.mark_open()
     blocked = len(policy.blocked.points)
-    assert policy._stays_in_scan(np.array([1.0, 1.0, 1.0]), np.array([1.1, 1.0, 1.0]))
+    assert policy.scan_guard.stays_in_scan(np.array([1.0, 1.0, 1.0]), np.array([1.1, 1.0, 1.0]))
     assert len(policy.blocked.points) == blocked
     start, end = np.array([1.8, 1.0, 1.0]), np.array([1.9, 1.0, 1.0])
-    assert not policy._stays_in_scan(start, end)
+    assert not policy.scan_guard.stays_in_scan(start, end)
     assert len(policy.blocked.points) == blocked + 1
     assert policy.blocked.points[-1][0] > end[0]  # beyond the move's end, not behind it
     # From a point the test already fails, the agent may move (it has to get back in).
-    assert policy._stays_in_scan(np.array([2.5, 1.0, 1.0]), np.array([2.6, 1.0, 1.0]))
+    assert policy.scan_guard.stays_in_scan(np.array([2.5, 1.0, 1.0]), np.array([2.6, 1.0, 1.0]))
 
 
 def test_config_rejects_bad_open_scan_settings() -> None:
@@ -437,173 +412,3 @@ def test_config_rejects_bad_open_scan_settings() -> None:
         NarutoConfig(edge_probe_m=-0.1)
     with pytest.raises(ValueError, match="margin_climb_m"):
         NarutoConfig(margin_climb_m=-0.1)
-
-
-def _agent_on_a_free_map(panorama: np.ndarray, agent: np.ndarray) -> NarutoPolicy:
-    """An agent bound to two_rooms whose map is free everywhere (kept: no planner view is
-    read) and whose last panorama, ``panorama``, was taken at ``agent``."""
-    policy = NarutoPolicy(mapper="tsdf", device="cpu")
-    env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1)
-    policy.bind(EnvContext.from_env(env.unwrapped))
-    env.close()
-    policy.sdf = SdfVolume(np.full((30, 30, 30), 0.5), np.zeros(3), 0.1)
-    policy._read_view = lambda: None
-    policy._panorama = (panorama, agent.copy())
-    return policy
-
-
-def test_a_move_the_panorama_shows_blocked_is_not_sent_and_its_surface_is_blocked() -> None:
-    """The agent stands 7 cm from a surface that its 0.1 m map does not show in the way: the
-    panorama taken where it stands shows it, so the move towards it is refused before the env
-    sees it, the surface point is blocked in the map, and the goal stays."""
-    agent = np.array([1.5, 1.5, 1.0])
-    policy = _agent_on_a_free_map(wall_panorama(-0.07), agent)  # a wall at y = 1.43 m
-    assert policy._move_is_free(agent, agent + [0.1, 0.0, 0.0])  # along the wall
-    assert len(policy.blocked.points) == 0
-    assert not policy._move_is_free(agent, agent + [0.06, -0.05, 0.07])
-    assert len(policy.blocked.points) == 1
-    assert policy.blocked.points[0][1] == pytest.approx(1.43, abs=1e-3)
-    assert policy.sdf.sample(policy.blocked.points[0][None])[0] < 0
-    # Taken elsewhere, the panorama says nothing about this move.
-    assert policy._move_is_free(agent + [1.0, 0.02, 0.0], agent + [1.0, -0.03, 0.0])
-    policy.config = replace(policy.config, check_moves_on_panorama=False)
-    assert policy._move_is_free(agent, agent + [0.06, -0.05, 0.07])
-
-
-def test_on_an_open_scan_a_move_the_panorama_shows_leaving_the_scan_is_refused() -> None:
-    """The floor under the agent ends 0.3 m ahead (+x): once the scan is known open, a move
-    to 5 cm before that edge is refused on the panorama and the space past it blocked; a
-    move back inside passes, and on a closed scan the check does not run."""
-    agent = np.array([1.5, 1.5, 1.0])
-    policy = _agent_on_a_free_map(floor_panorama(edge_x_m=0.3), agent)
-    towards_edge = agent + [0.25, 0.0, 0.0]
-    assert policy._panorama_keeps_to_scan(agent, agent + [-0.1, 0.0, 0.0])
-    assert len(policy.blocked.points) == 0
-    policy._scan_open = False
-    assert policy._move_is_free(agent, towards_edge)  # closed: no cone check
-    policy._scan_open = True
-    assert not policy._panorama_keeps_to_scan(agent, towards_edge)
-    assert len(policy.blocked.points) == 1 and policy.blocked.points[0][0] > towards_edge[0]
-
-
-def test_on_an_open_scan_a_climb_above_the_scans_top_is_refused_and_lowers_the_ceiling() -> None:
-    """Walls measured up to about 2.6 m and no ceiling: once the scan is known open, a climb
-    that ends above the measured top less the agent's radius is refused (the map alone let
-    such nodes through) and sets the flight ceiling there; level and descending moves pass,
-    and on a closed scan the check does not run."""
-    space = ObservedSpace(np.array([[0.0, 0.0, 0.0], [3.0, 3.0, 3.0]]))
-    heights = np.arange(0.05, 2.6, 0.1)
-    space.grid.mark_occupied(np.array([[x, 0.05, z] for x in np.arange(0.05, 3.0, 0.1)
-                                       for z in heights]))
-    agent = np.array([1.5, 1.5, 2.0])
-    policy = _agent_on_a_free_map(floor_panorama(height_m=2.0), agent)
-    policy.mapper = SimpleNamespace(observed_space=space)  # the agent's measured space only
-    limit = space.scan_top_z() - policy.context.agent_radius_m
-    assert 2.5 < limit < 2.7
-    below, above = agent + [0.0, 0.0, limit - 2.01], agent + [0.0, 0.0, limit - 1.95]
-    policy._scan_open = False
-    assert policy._move_is_free(agent, above)  # closed: the top is the ceiling the map shows
-    policy._scan_open = True
-    assert policy._stays_below_top(agent, below)
-    assert not policy._stays_below_top(agent, above)
-    assert policy.blocked.ceiling_z == pytest.approx(limit)
-    assert policy.sdf.sample(above[None])[0] < 0  # the next plan stays under it
-    assert policy._stays_below_top(above, above + [0.1, 0.0, 0.0])  # level, already above
-    assert policy._stays_below_top(above, below)
-
-
-def test_in_a_tight_spot_a_move_held_for_a_surface_goes_to_the_env_after_max_held_moves():
-    """7 cm from a wall, within the panorama's margin of it: moves towards it are held
-    (the surface blocked in the map, the goal kept), but after ``max_held_moves`` holds in a
-    row at one spot the next is sent and the env decides, then the count starts again."""
-    agent = np.array([1.5, 1.5, 1.0])
-    policy = _agent_on_a_free_map(wall_panorama(-0.07), agent)
-    towards_wall = agent + [0.06, -0.05, 0.07]
-    for _ in range(policy.config.max_held_moves):
-        assert not policy._move_is_free(agent, towards_wall)
-    assert len(policy.blocked.points) == policy.config.max_held_moves
-    assert policy._move_is_free(agent, towards_wall)
-    assert not policy._move_is_free(agent, towards_wall)
-
-
-def test_naruto_hands_a_move_to_the_env_after_max_held_moves_holds_at_one_spot() -> None:
-    """Low over a floor hole every way out can look like leaving the scan on the panorama:
-    after ``max_held_moves`` moves held back in a row at one spot the next is sent (the env
-    decides) when the agent cannot climb out of the margin (``margin_climb_m=0`` here), and
-    a new spot starts counting again. A held move blocks the space past the edge but keeps
-    the plan's goal (the env never refused it)."""
-    agent = np.array([1.5, 1.5, 1.0])
-    policy = _agent_on_a_free_map(floor_panorama(edge_x_m=0.3), agent)
-    policy.config = replace(policy.config, margin_climb_m=0.0)
-    policy._scan_open = True
-    failed: list[np.ndarray] = []
-    policy.monitor.goal_failed = failed.append
-    policy.machine.plan = SimpleNamespace(goal=agent + [1.0, 0.0, 0.0], info={})
-    towards_edge = agent + [0.25, 0.0, 0.0]
-    for _ in range(policy.config.max_held_moves):
-        assert not policy._panorama_keeps_to_scan(agent, towards_edge)
-    assert policy._panorama_keeps_to_scan(agent, towards_edge)
-    assert len(policy.blocked.points) == policy.config.max_held_moves
-    assert failed == []
-    # The count starts again: the next move from here is checked (and held) again.
-    assert not policy._panorama_keeps_to_scan(agent, towards_edge)
-    elsewhere = agent + [0.0, 0.05, 0.0]
-    policy._panorama = (floor_panorama(edge_x_m=0.3), elsewhere)
-    assert not policy._panorama_keeps_to_scan(elsewhere, elsewhere + [0.25, 0.0, 0.0])
-
-
-def _agent_under_walls_to(top_m: float, panorama: np.ndarray, agent: np.ndarray) -> NarutoPolicy:
-    """:func:`_agent_on_a_free_map` on an open scan whose measured walls reach ``top_m``."""
-    space = ObservedSpace(np.array([[0.0, 0.0, 0.0], [3.0, 3.0, 3.0]]))
-    space.grid.mark_occupied(np.array([[x, 0.05, z] for x in np.arange(0.05, 3.0, 0.1)
-                                       for z in np.arange(0.05, top_m, 0.1)]))
-    policy = _agent_on_a_free_map(panorama, agent)
-    policy.mapper = SimpleNamespace(observed_space=space)
-    policy._scan_open = True
-    policy.plans.append({})  # past the first plan's look-around
-    return policy
-
-
-def test_when_the_holds_run_out_at_the_scans_edge_naruto_climbs_instead_of_leaving() -> None:
-    """Every way from a spot 1 m over a floor whose edge is 0.3 m ahead reads as leaving
-    the scan: after ``max_held_moves`` holds the flagged move is not sent; the next plan is
-    a climb of ``margin_climb_m`` straight up (the env's support cone reaches further from
-    higher up), trusted, then a look around. Under the scan's top the climb is cut short,
-    and with less than 2 cm left the move goes to the env as before."""
-    agent = np.array([1.5, 1.5, 1.0])
-    towards_edge = agent + [0.25, 0.0, 0.0]
-    policy = _agent_under_walls_to(2.6, floor_panorama(edge_x_m=0.3), agent)
-    for _ in range(policy.config.max_held_moves + 1):
-        assert not policy._panorama_keeps_to_scan(agent, towards_edge)
-    plan = policy._plan(agent, np.eye(3))
-    assert plan.info == {"recovery": "climb", "trusted": True}
-    np.testing.assert_allclose(plan.path[0], agent)
-    np.testing.assert_allclose(plan.path[-1], agent + [0.0, 0.0, policy.config.margin_climb_m])
-    assert np.all(np.diff(plan.path[:, 2]) > 0) and np.allclose(plan.path[:, :2], agent[:2])
-    policy.machine.plan = plan
-    assert policy._move_is_free(plan.path[0], plan.path[1])  # trusted: checked already
-    assert policy._climb is None  # used once
-
-    # A surface 0.2 m overhead (under a table): the climb stops short of it.
-    floor = floor_panorama(edge_x_m=0.3)
-    overhead = np.flipud(floor_panorama(height_m=0.2))
-    policy = _agent_under_walls_to(2.6, np.where(overhead > 0, overhead, floor), agent)
-    for _ in range(policy.config.max_held_moves + 1):
-        assert not policy._panorama_keeps_to_scan(agent, towards_edge)
-    assert 0.1 < policy._climb[-1][2] - agent[2] < 0.2 - policy.context.agent_radius_m
-
-    # The scan's top (measured top 2.6 m less scan_top_margin_m) leaves 0.12 m: cut short.
-    high = np.array([1.5, 1.5, 2.18])
-    policy = _agent_under_walls_to(2.6, floor_panorama(height_m=2.18, edge_x_m=0.3), high)
-    top = policy.mapper.observed_space.scan_top_z() - policy.config.scan_top_margin_m
-    for _ in range(policy.config.max_held_moves + 1):
-        assert not policy._panorama_keeps_to_scan(high, high + [0.25, 0.0, 0.0])
-    assert policy._climb[-1][2] == pytest.approx(top)
-    # No room left to climb: the move is sent and the env decides.
-    policy = _agent_under_walls_to(2.6, floor_panorama(height_m=top - 0.01, edge_x_m=0.3),
-                                   np.array([1.5, 1.5, top - 0.01]))
-    start = np.array([1.5, 1.5, top - 0.01])
-    for _ in range(policy.config.max_held_moves):
-        assert not policy._panorama_keeps_to_scan(start, start + [0.25, 0.0, 0.0])
-    assert policy._panorama_keeps_to_scan(start, start + [0.25, 0.0, 0.0])
-    assert policy._climb is None

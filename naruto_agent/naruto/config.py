@@ -1,0 +1,168 @@
+"""The NARUTO agent's settings (:class:`NarutoConfig`) and their keyword overrides.
+
+Every setting, its default and the reason for it are explained in ``docs/agent-config.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+from naruto_agent.mapping import NeuralMapperConfig, TsdfMapperConfig
+from naruto_agent.naruto.goal_search import GoalSearchConfig
+from naruto_agent.naruto.recovery import RecoveryConfig
+from naruto_agent.planning import PlannerConfig
+
+#: The mappers the agent can build (``NarutoPolicy(mapper=...)``).
+MAPPERS = ("tsdf", "neural")
+"""Names of the mappers the agent can run on (``NarutoPolicy(mapper=...)``)."""
+
+
+def _goal_search_defaults() -> GoalSearchConfig:
+    return GoalSearchConfig(goal_spacing_z_m=0.5, distance_discount_m=3.0,
+                            discount_by_travel=True, explore_first_share=0.75)
+
+
+def _planner_defaults() -> PlannerConfig:
+    return PlannerConfig(time_limit_s=2.0)
+
+
+@dataclass
+class NarutoConfig:
+    """Settings of the NARUTO agent (Feng et al., NARUTO, CVPR 2024).
+
+    Defaults follow the published system except where ``docs/agent-config.md`` gives the
+    reason for another value; every choice beyond the paper can be switched off.
+    """
+
+    planner_voxel_m: float = 0.1
+    """voxel size of the planner's SDF and uncertainty volumes, metres"""
+    view_every_mapping_steps: int = 1
+    """read the planner view after every n-th mapping step"""
+    lazy_planner_view: bool = True
+    """read the planner view only when planning or a move check needs it"""
+    max_rotation_step_deg: float = 20.0
+    """largest turn per frame, degrees (published: 10)"""
+    skip_views_in_image: bool = True
+    """at a goal, skip views whose target is already in the image"""
+    goal_attempts: int = 3
+    """best goals tried in turn with E-RRT before staying (published: 1)"""
+    shortcut_paths: bool = True
+    """replace the E-RRT path's zigzag by the straight free segments it allows"""
+    shortcut_margin_m: float = 0.0
+    """clearance a shortcut segment keeps on top of the planner's, metres"""
+    reachable_iterations: int = 2000
+    """extensions of the goal search's fallback tree (and of the wander recovery's)"""
+    check_moves_on_map: bool = True
+    """check every move against the agent's newest map before sending it"""
+    check_moves_on_panorama: bool = True
+    """also check every move against the depth panorama taken where it starts"""
+    panorama_margin_m: float = 0.01
+    """the panorama check keeps the agent's radius plus this, metres"""
+    max_held_moves: int = 3
+    """moves held back in a row at one spot before the next goes to the env"""
+    margin_climb_m: float = 0.3
+    """height of a climb out of an open scan's margin when the holds run out (0: off)"""
+    escape_radius_m: float = 0.3
+    """how far to look for free space when the map puts the agent in a clearance (0: off)"""
+    arrival_tolerance_m: float = 0.01
+    """a moving agent farther than this from its commanded node was stopped by the env"""
+    use_panorama: bool = True
+    """integrate the env's depth panorama into the map's measure of explored space"""
+    panorama_every: int = 5
+    """integrate the panorama every n-th frame"""
+    goals_in_observed_space: bool = True
+    """candidate goals must lie in space the frames measured free"""
+    stay_in_scanned_space: bool = True
+    """candidate goals and frontier targets must lie over measured surface, below its top"""
+    scan_top_margin_m: float = 0.3
+    """candidate goals lie at least this far below the measured surfaces' top, metres"""
+    sector_support_after_escape: bool = True
+    """once the scan is known open, goals and moves must pass the env's support-cone test"""
+    open_sky_share: float | None = 0.05
+    """share of steep depth pixels that miss at which the scan counts as open (None: off)"""
+    edge_probe_m: float = 0.15
+    """how far past a move's end the open-scan edge test probes, metres"""
+    unresolved_visit_looks: float = 4.0
+    """looks a reached goal adds to every target it was chosen for (0: off)"""
+    initial_look_around: bool = True
+    """the first plan of an episode is a turn in place that looks all around"""
+    seed: int = 0
+    """seed of the agent's randomness when ``reset`` gets none"""
+    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
+    """stall detection and recovery settings"""
+    goal_search: GoalSearchConfig = field(default_factory=_goal_search_defaults)
+    """goal search settings (published, except height spacing, discount and explore-first)"""
+    planner: PlannerConfig = field(default_factory=_planner_defaults)
+    """E-RRT settings (time limit 2 s; the seed is redrawn for every request)"""
+    tsdf: TsdfMapperConfig = field(default_factory=TsdfMapperConfig)
+    """settings of the TSDF mapper (``mapper="tsdf"``)"""
+    neural: NeuralMapperConfig = field(default_factory=NeuralMapperConfig)
+    """settings of the neural mapper (``mapper="neural"``)"""
+
+    def __post_init__(self) -> None:
+        if not self.planner_voxel_m > 0:
+            raise ValueError(f"planner_voxel_m must be positive, got {self.planner_voxel_m}")
+        if (self.view_every_mapping_steps < 1 or self.goal_attempts < 1
+                or self.panorama_every < 1):
+            raise ValueError("view_every_mapping_steps, goal_attempts and panorama_every must "
+                             "be at least 1")
+        if not 0 < self.max_rotation_step_deg <= 180:
+            raise ValueError(f"max_rotation_step_deg must be in (0, 180], got "
+                             f"{self.max_rotation_step_deg}")
+        if (self.escape_radius_m < 0 or self.arrival_tolerance_m < 0
+                or self.unresolved_visit_looks < 0 or self.scan_top_margin_m < 0
+                or self.shortcut_margin_m < 0 or self.margin_climb_m < 0):
+            raise ValueError("escape_radius_m, arrival_tolerance_m, unresolved_visit_looks, "
+                             "scan_top_margin_m, shortcut_margin_m and margin_climb_m must "
+                             "be >= 0")
+        if self.open_sky_share is not None and not 0 < self.open_sky_share <= 1:
+            raise ValueError(f"open_sky_share must be in (0, 1] or None, got "
+                             f"{self.open_sky_share}")
+        if self.edge_probe_m < 0:
+            raise ValueError(f"edge_probe_m must be >= 0, got {self.edge_probe_m}")
+        if self.max_held_moves < 0:
+            raise ValueError(f"max_held_moves must be >= 0, got {self.max_held_moves}")
+        self.planner.validate()
+
+
+#: The settings that are sections of their own, by field name.
+SECTIONS: dict[str, type] = {"goal_search": GoalSearchConfig, "planner": PlannerConfig,
+                             "recovery": RecoveryConfig,
+                             "tsdf": TsdfMapperConfig, "neural": NeuralMapperConfig}
+
+
+def build_config(config: NarutoConfig | None = None, **settings: Any) -> NarutoConfig:
+    """A :class:`NarutoConfig` with keyword overrides.
+
+    Top-level fields are given by name (``goal_attempts=1``); a section takes a dict of its
+    fields (``goal_search={"top_k": 1}``, ``planner={"time_limit_s": 1.0}``) or an instance.
+    JSON-able, so benchmark specs can carry them.
+
+    Args:
+        config: the settings to start from (the defaults when None).
+        **settings: :class:`NarutoConfig` fields to override.
+
+    Returns:
+        A new config; ``config`` is left as it was.
+
+    Raises:
+        ValueError: for an unknown setting or section field, or an invalid value.
+    """
+    config = config or NarutoConfig()
+    known = {f.name for f in fields(NarutoConfig)}
+    unknown = set(settings) - known
+    if unknown:
+        raise ValueError(f"unknown NARUTO settings {sorted(unknown)}; known: {sorted(known)}")
+    updates: dict[str, Any] = {}
+    for name, value in settings.items():
+        if name in SECTIONS and isinstance(value, dict):
+            section = getattr(config, name)
+            section_fields = {f.name for f in fields(SECTIONS[name])}
+            bad = set(value) - section_fields
+            if bad:
+                raise ValueError(f"unknown {name} settings {sorted(bad)}; known: "
+                                 f"{sorted(section_fields)}")
+            value = replace(section, **value)
+        updates[name] = value
+    return replace(config, **updates)

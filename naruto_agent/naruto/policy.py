@@ -1,0 +1,323 @@
+"""The NARUTO agent as a policy: map every frame, search goals by uncertainty, move by E-RRT.
+
+One :meth:`NarutoPolicy.act` call is one iteration of NARUTO's loop (Feng et al., NARUTO,
+CVPR 2024):
+
+1. The observation's RGB-D frame and pose go to the mapper, which applies its own schedule
+   (a keyframe and a mapping step every 5 frames); see
+   :class:`~naruto_agent.naruto.agent_map.AgentMap`.
+2. After a mapping step the agent's planner view (an SDF volume and an uncertainty volume on
+   a 0.1 m grid over the scene's bounding box) is stale and is read again when next needed.
+3. The :class:`~naruto_agent.naruto.state_machine.NarutoStateMachine` picks the next pose.
+   Its planning step is :class:`~naruto_agent.naruto.goal_planning.GoalPlanner` (goal search
+   and E-RRT); every move is checked first by
+   :class:`~naruto_agent.naruto.move_checks.MoveChecker`.
+
+Mappers (``mapper=``):
+
+* ``"tsdf"`` (default): :class:`~naruto_agent.mapping.TsdfUncertaintyMapper`, TSDF fusion with
+  an uncertainty derived from observation counts; fast on a CPU.
+* ``"neural"``: :class:`~naruto_agent.mapping.NeuralMapper`, the published system (neural
+  field, NLL-trained uncertainty grid, active ray sampling); slow on a CPU, so use it with a
+  GPU (``device="auto"`` picks CUDA).
+
+The agent never gets stuck for good: a move the env refuses (``collided`` /
+``collision_reason`` in the step info) blocks its target in the agent's own map, and when
+plans keep failing it recovers (:mod:`naruto_agent.naruto.recovery`). On an open scan its
+:class:`~naruto_agent.naruto.scan_guard.ScanGuard` keeps it inside the scanned space.
+
+What the agent knows: the observations (RGB-D, pose, panorama), the env's step info and the
+scene's bounding box from the :class:`~naruto_agent.policies.EnvContext`; never the mesh.
+Every setting and the reason for its default: ``docs/agent-config.md``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any, Literal
+
+import numpy as np
+import trimesh
+
+from naruto_agent.mapping import NeuralMapper, SdfVolume, TsdfUncertaintyMapper
+from naruto_agent.naruto.agent_map import AgentMap, build_mapper
+from naruto_agent.naruto.config import MAPPERS, NarutoConfig, build_config
+from naruto_agent.naruto.goal_planning import GoalPlanner
+from naruto_agent.naruto.move_checks import MoveChecker
+from naruto_agent.naruto.recovery import BlockedSpace, ProgressMonitor
+from naruto_agent.naruto.scan_guard import ScanGuard
+from naruto_agent.naruto.state_machine import MoveCheck, NarutoStateMachine, Plan, State
+from naruto_agent.planning.rotation import image_view_test
+from naruto_agent.policies.base import (
+    EnvContext,
+    Info,
+    Observation,
+    OwnReconstruction,
+    Policy,
+    clip_pose_action,
+    pose_action,
+)
+
+#: The phases whose seconds ``NarutoPolicy.timings`` holds.
+PHASES = ("mapping", "planner_view", "goal_search", "rrt", "control")
+
+
+class NarutoPolicy(Policy):
+    """NARUTO: uncertainty-aware goal search + E-RRT on the agent's own map ("pose" actions).
+
+    Args:
+        mapper: ``"tsdf"`` (fast, default) or ``"neural"`` (the published mapper; slow on a
+            CPU).
+        config: full settings; ``settings`` override its fields (see
+            :func:`~naruto_agent.naruto.config.build_config`).
+        device: device of the mapper and the planner's nearest-neighbour search ("auto":
+            CUDA when present).
+        **settings: :class:`~naruto_agent.naruto.config.NarutoConfig` fields.
+
+    Attributes:
+        config: the settings.
+        machine: the state machine (``machine.history`` holds the state of every action).
+        monitor: progress, failed plans and goals of the episode.
+        agent_map: the episode's map and planner view (None before ``reset``).
+        scan_guard: the episode's panorama and open-scan checks (None before ``reset``).
+        move_checker: the episode's move check (None before ``reset``).
+        goal_planner: the episode's planning step (None before ``reset``).
+        timings: seconds spent per phase (``mapping``, ``planner_view``, ``goal_search``,
+            ``rrt``, ``control``) this episode.
+    """
+
+    action_modes = ("pose",)
+    required_observations = ("rgb", "depth", "pose")
+
+    def __init__(
+        self,
+        mapper: Literal["tsdf", "neural"] = "tsdf",
+        config: NarutoConfig | None = None,
+        device: str = "auto",
+        **settings: Any,
+    ) -> None:
+        super().__init__()
+        if mapper not in MAPPERS:
+            raise ValueError(f"mapper must be one of {MAPPERS}, got {mapper!r}")
+        self.mapper_name = mapper
+        self.device = device
+        self.config = build_config(config, **settings)
+        self.machine = NarutoStateMachine(self.config.max_rotation_step_deg,
+                                          self.config.arrival_tolerance_m)
+        self.timings: dict[str, float] = dict.fromkeys(PHASES, 0.0)
+        self.monitor = ProgressMonitor(self.config.recovery)
+        self.agent_map: AgentMap | None = None
+        self.scan_guard: ScanGuard | None = None
+        self.move_checker: MoveChecker | None = None
+        self.goal_planner: GoalPlanner | None = None
+        self._rng = np.random.default_rng(self.config.seed)
+        self._move_check: MoveCheck = self.move_is_free
+        self._frame_index = 0
+        self._new_map = False
+        self._commanded: np.ndarray | None = None
+
+    # -- the episode's state, read-only ------------------------------------------------------
+    @property
+    def mapper(self) -> TsdfUncertaintyMapper | NeuralMapper | None:
+        """The map of the current episode (None before ``reset``)."""
+        return None if self.agent_map is None else self.agent_map.mapper
+
+    @property
+    def sdf(self) -> SdfVolume | None:
+        """The planner view's SDF, blocked space applied (None before it is first read)."""
+        return None if self.agent_map is None else self.agent_map.sdf
+
+    @property
+    def uncertainty(self) -> SdfVolume | None:
+        """The planner view's uncertainty (None before it is first read)."""
+        return None if self.agent_map is None else self.agent_map.uncertainty
+
+    @property
+    def blocked(self) -> BlockedSpace | None:
+        """Where the agent learned not to go (None before ``reset``)."""
+        return None if self.agent_map is None else self.agent_map.blocked
+
+    @property
+    def visit_looks(self) -> np.ndarray | None:
+        """Looks per planner voxel counted by reached goals (``unresolved_visit_looks``),
+        None before the first."""
+        return None if self.agent_map is None else self.agent_map.visit_looks
+
+    @property
+    def plans(self) -> list[dict[str, Any]]:
+        """One dict of diagnostics per planning request this episode."""
+        return [] if self.goal_planner is None else self.goal_planner.plans
+
+    @property
+    def recoveries(self) -> list[tuple[int, str]]:
+        """(frame, kind) of every recovery this episode."""
+        return [] if self.goal_planner is None else self.goal_planner.recoveries
+
+    @property
+    def scan_open(self) -> bool:
+        """Whether the agent knows the scan is open (an escape refusal, or the sky)."""
+        return self.scan_guard is not None and self.scan_guard.scan_open
+
+    @property
+    def state(self) -> State:
+        """The state machine's current state."""
+        return self.machine.state
+
+    # -- episode -----------------------------------------------------------------------------
+    def bind(self, context: EnvContext) -> None:
+        super().bind(context)
+        camera = context.camera
+        self.machine.in_view = (
+            image_view_test(camera.width, camera.height, camera.fx, camera.fy, camera.cx,
+                            camera.cy, margin=0.1)
+            if self.config.skip_views_in_image else None
+        )
+
+    def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
+        super().reset(observation, info, seed)
+        self._rng = np.random.default_rng(self.config.seed if seed is None else seed)
+        mapper = build_mapper(self.mapper_name, self.context, self.config, self.device,
+                              self._rng)
+        if not self.config.stay_in_scanned_space:
+            mapper.observed_space.configure(support_below_m=None)
+        self.machine.reset()
+        self.timings = dict.fromkeys(PHASES, 0.0)
+        self.monitor = ProgressMonitor(self.config.recovery)
+        self.agent_map = AgentMap(mapper, self.config, self.timings)
+        self.scan_guard = ScanGuard(self.config, self.context, self.agent_map,
+                                    self._fail_current_goal)
+        self.move_checker = MoveChecker(self.config, self.agent_map, self.scan_guard)
+        self.goal_planner = GoalPlanner(self.config, self.agent_map, self.scan_guard,
+                                        self.move_checker, self.monitor, self._rng,
+                                        self.device, self.timings)
+        self._frame_index = 0
+        self._new_map = False
+        self._commanded = None
+        self._integrate(observation)
+
+    def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
+        if self.agent_map is None:
+            raise RuntimeError("call reset() with the first observation before act()")
+        self._frame_index += 1
+        self._integrate(observation)
+        clock = time.perf_counter()
+        position = np.asarray(observation["pose"], dtype=np.float64)[:3, 3]
+        self._learn_from_refusal(position, info or {})
+        self.monitor.record(position, self.agent_map.observed_space.observed_fraction)
+        inner = ("goal_search", "rrt", "planner_view")
+        before = sum(self.timings[name] for name in inner)
+        new_map, self._new_map = self._new_map, False
+        pose = self.machine.step(
+            np.asarray(observation["pose"], dtype=np.float64),
+            new_map=new_map,
+            collided=bool((info or {}).get("collided", False)),
+            plan=self._plan,
+            move_is_free=self._move_check,
+        )
+        # Control is the state machine's own work; the phases it called are timed apart.
+        called = sum(self.timings[name] for name in inner) - before
+        self.timings["control"] += time.perf_counter() - clock - called
+        moved = np.linalg.norm(pose[:3, 3] - position) > 1e-9
+        self._commanded = pose[:3, 3].copy() if moved else None
+        return clip_pose_action(pose_action(pose), self.context.action_space)
+
+    def mesh(self, voxel_size: float = 0.02) -> trimesh.Trimesh:
+        """The agent's reconstruction (for ``env.unwrapped.evaluate(policy.mesh())``)."""
+        if self.agent_map is None:
+            raise RuntimeError("the agent has no map yet: call reset() first")
+        return self.mapper.extract_mesh(voxel_size)
+
+    def reconstruction(self) -> OwnReconstruction | None:
+        """The agent's map (mesh and SDF) for the benchmark harness; None before reset()."""
+        if self.agent_map is None:
+            return None
+        return OwnReconstruction(self.mesh(), self.mapper.sdf)
+
+    # -- public seams ------------------------------------------------------------------------
+    def refresh_view(self) -> None:
+        """Read the planner view (:attr:`sdf`, :attr:`uncertainty`) again if a mapping step
+        made it stale; the agent itself reads it only when it needs it."""
+        if self.agent_map is not None:
+            self.agent_map.refresh()
+
+    def move_is_free(self, start: np.ndarray, end: np.ndarray) -> bool:
+        """The agent's own check of the move from ``start`` to ``end`` before it sends it
+        (:meth:`~naruto_agent.naruto.move_checks.MoveChecker.is_free`); a recovery's retreat
+        or climb passes unchecked (space the agent has been in, or checked already)."""
+        plan = self.machine.plan
+        if plan is not None and plan.info.get("trusted"):
+            return True
+        if self.move_checker is None:
+            raise RuntimeError("call reset() with the first observation before checking moves")
+        return self.move_checker.is_free(start, end)
+
+    def learn_refusal(self, position: np.ndarray, target: np.ndarray,
+                      reason: str | None = None) -> None:
+        """The env refused the move from ``position`` to ``target``: block the target in the
+        agent's map and fail the current plan's goal. :meth:`act` calls it from the step
+        info (``collided``, ``collision_reason``).
+
+        Args:
+            position: where the agent stands.
+            target: where the refused move went.
+            reason: the env's ``collision_reason``; ``"escape"`` (the move left an open
+                scan) marks the scan open and blocks the space past the scan's edge, or, for
+                a climb refused at the open top, everything above the agent.
+        """
+        if self.agent_map is None:
+            raise RuntimeError("call reset() with the first observation before act()")
+        if reason == "escape":
+            self.scan_guard.mark_open()
+            if self.scan_guard.refused_climb(position, target):
+                self.agent_map.lower_ceiling(position[2])
+            else:
+                self.agent_map.block_past_edge(position, target)
+        else:
+            self.agent_map.block(target)
+        self._fail_current_goal()
+
+    def wrap_move_check(self, wrapper: Callable[[MoveCheck], MoveCheck]) -> None:
+        """Wrap the move check the state machine calls, e.g. to time it.
+
+        Args:
+            wrapper: takes the check in use (``check(start, end) -> bool``) and returns the
+                one to use instead; it holds across episodes.
+        """
+        self._move_check = wrapper(self._move_check)
+
+    # -- the loop's parts --------------------------------------------------------------------
+    def _integrate(self, observation: Observation) -> None:
+        """One frame into the map and the scan guard; a mapping step makes a new map for the
+        state machine (read at once unless ``lazy_planner_view``)."""
+        clock = time.perf_counter()
+        pose = np.asarray(observation["pose"], dtype=np.float64)
+        panorama = observation.get("panorama")
+        new_map = self.agent_map.integrate(observation["rgb"], observation["depth"], pose,
+                                           self._frame_index, panorama)
+        self.scan_guard.observe_frame(observation["depth"], pose)
+        self.scan_guard.observe_panorama(panorama, pose[:3, 3])
+        self.timings["mapping"] += time.perf_counter() - clock
+        if new_map:
+            self._new_map = True
+            if not self.config.lazy_planner_view:
+                self.agent_map.refresh()
+
+    def _learn_from_refusal(self, position: np.ndarray, info: Info) -> None:
+        """The step info says the env refused the move the agent commanded last: learn it
+        (:meth:`learn_refusal`); a move that arrived was not refused."""
+        if self._commanded is None or not info.get("collided", False):
+            return
+        if np.linalg.norm(self._commanded - position) <= self.config.arrival_tolerance_m:
+            return
+        self.learn_refusal(position, self._commanded, info.get("collision_reason"))
+
+    def _fail_current_goal(self) -> None:
+        """The current plan's goal failed (a recovery's plan has no goal to fail)."""
+        plan = self.machine.plan
+        if plan is not None and not plan.info.get("recovery"):
+            self.monitor.goal_failed(plan.goal)
+
+    def _plan(self, position: np.ndarray, rotation: np.ndarray) -> Plan | None:
+        """The state machine's planning step (the rotation is not needed)."""
+        return self.goal_planner.plan(position, self._frame_index)
