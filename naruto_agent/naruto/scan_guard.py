@@ -38,9 +38,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from naruto_agent.naruto.agent_map import AgentMap
-from naruto_agent.naruto.config import NarutoConfig
-from naruto_agent.policies.base import EnvContext
 from naruto_agent.guards.panorama_clearance import (
     clear_part_of_move,
     first_contact,
@@ -48,6 +45,9 @@ from naruto_agent.guards.panorama_clearance import (
     refused_at_top,
     steep_miss_share,
 )
+from naruto_agent.naruto.agent_map import AgentMap
+from naruto_agent.naruto.config import NarutoConfig
+from naruto_agent.policies.base import EnvContext
 
 #: A climb out of an open scan's margin shorter than this is not worth it (metres).
 MIN_CLIMB_M = 0.02
