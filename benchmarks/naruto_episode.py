@@ -131,8 +131,7 @@ def save_curve(coverage: list[float], path: Path, title: str) -> None:
 def target_snapshot(env: gym.Env, policy: NarutoPolicy, step: int) -> tuple[np.ndarray, dict]:
     """The top-down map and, in world x-y, the agent's targets, goals and trajectory."""
     base = env.unwrapped
-    if base._top_down is None:
-        env.render()
+    top_down = base.top_down_map
     policy.refresh_view()
     uncertainty = policy.uncertainty
     values = uncertainty.values.reshape(-1)
@@ -150,11 +149,11 @@ def target_snapshot(env: gym.Env, policy: NarutoPolicy, step: int) -> tuple[np.n
         "goals": goals,
         "trajectory": base.trajectory,
     }
-    return base._top_down.image.copy(), {"step": step, **layers}
+    return top_down.image.copy(), {"step": step, **layers}
 
 
 def save_target_pictures(env: gym.Env, snapshots: list, path: Path, title: str) -> None:
-    top_down = env.unwrapped._top_down
+    top_down = env.unwrapped.top_down_map
     figure, axes = plt.subplots(
         1, len(snapshots), figsize=(4.2 * len(snapshots), 3.8), squeeze=False
     )

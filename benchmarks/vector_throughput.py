@@ -147,7 +147,7 @@ def bare_cast_rate(count: int, size: int, seconds: float) -> dict[str, float]:
     camera = CAMERAS[size]
     pixels = camera.width * camera.height
     rays = np.empty((count * pixels, 6), np.float32)
-    for i, pose in enumerate(vector._poses.astype(np.float32)):
+    for i, pose in enumerate(vector.poses.astype(np.float32)):
         fill_world_rays(camera.ray_directions, np.ascontiguousarray(pose[:3, :3]),
                         np.ascontiguousarray(pose[:3, 3]), rays[i * pixels:(i + 1) * pixels])
     raycaster = vector.scene_envs[0].raycaster

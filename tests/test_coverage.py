@@ -45,7 +45,7 @@ def test_culling_by_cells_marks_what_the_numpy_reference_sees(scene, camera):
     unseen = coverage.cell_sizes.copy()
     for episode in range(25):
         env.reset(seed=int(rng.integers(1 << 30)))
-        pose = env.unwrapped._pose.copy()
+        pose = env.unwrapped.pose
         if episode % 2:  # any rotation, not only the start poses' upright ones
             pose[:3, :3] = Rotation.random(random_state=episode).as_matrix()
         _, depth = env.renderer.render(pose)

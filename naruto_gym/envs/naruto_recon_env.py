@@ -7,29 +7,23 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
 from naruto_gym.coverage import CoverageTracker
-from naruto_gym.evaluation.scoring import EpisodeReconstruction, evaluate_reconstruction
-from naruto_gym.geometry.transforms import look_at_rotation, make_pose, validate_pose
+from naruto_gym.envs.scene_runtime import SceneRuntime
+from naruto_gym.envs.settings import EnvSettings
+from naruto_gym.evaluation.scoring import EpisodeReconstruction
+from naruto_gym.geometry.transforms import make_pose, validate_pose
 from naruto_gym.motion.actions import (
-    ACTION_MODES,
-    DISCRETE_ACTIONS,
     delta_target_from_action,
     discrete_target_from_action,
     limit_pose_step,
     pose_target_from_action,
 )
-from naruto_gym.motion.collision import CollisionChecker
-from naruto_gym.observability import ObservableSurface, sample_free_positions
+from naruto_gym.observability import ObservableSurface
 from naruto_gym.rendering.topdown import TopDownMap, compose_frame
 from naruto_gym.scenes.mesh_scene import Scene
-from naruto_gym.sensors.panorama import EquirectangularCamera, no_hit_share, render_panorama
-from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
-from naruto_gym.sensors.raycaster import RayCaster
-from naruto_gym.wrappers import time_limit_ends_this_step
-
-START_CANDIDATES = 2048
+from naruto_gym.sensors.panorama import no_hit_share, render_panorama
+from naruto_gym.sensors.pinhole import PinholeCamera
 
 
 class NarutoReconEnv(gym.Env):
@@ -75,12 +69,22 @@ class NarutoReconEnv(gym.Env):
     * ``panorama`` (when ``panorama_shape`` is not None): ``Box(0, inf, (h, w), float32)``,
       world-aligned equirectangular radial distance, 0 for no hit.
 
+    The info of every reset and step holds ``coverage`` (0..1), ``coverage_gain``,
+    ``collided``, ``collision_reason`` ("", "surface", "bounds", "escape"),
+    ``path_length_m``, ``intrinsics`` (dict of width, height, fx, fy, cx, cy), ``step``, and
+    ``panorama_no_hit_share`` when the panorama is on.
+
     ## Rewards
     ``100 * (coverage_t - coverage_{t-1}) - collision_penalty * collided``: the coverage gain in
     percentage points of the ground-truth surface, minus a penalty for a blocked move.
     Coverage counts area-uniform surface samples that have been inside the frustum, within
     ``coverage_range_m`` and not occluded, out of the observable ones (see
     ``observable_only``).
+
+    Reconstruction quality is scored apart from the reward: ``env.unwrapped.evaluate(mesh)``
+    scores a policy's own mesh against the ground truth, culled to what the episode's frames
+    saw, and with ``reconstruct=True`` ``env.unwrapped.reconstruction_metrics()`` scores the
+    env's reference map (see ``reconstruct`` and ``step_budget``).
 
     ## Starting State
     ``reset(seed=...)`` draws a position in free space at least ``start_clearance_m`` from every
@@ -91,13 +95,9 @@ class NarutoReconEnv(gym.Env):
     further out are still allowed).
 
     ## Episode End
-    The env never terminates by itself; ``gymnasium.make`` adds a ``TimeLimit`` of 2000 steps
-    (the published Replica budget), which truncates.
-
-    ## Info
-    ``coverage`` (0..1), ``coverage_gain``, ``collided``, ``collision_reason`` ("", "surface",
-    "bounds", "escape"), ``path_length_m``, ``intrinsics`` (dict of width, height, fx, fy, cx,
-    cy), ``step``, and ``panorama_no_hit_share`` when the panorama is on.
+    The env never terminates. ``gymnasium.make`` adds a ``TimeLimit`` (2000 steps for the
+    default ids, the published Replica budget), which truncates. Given ``step_budget``, the
+    env also truncates by itself on the step that reaches it.
 
     ## Arguments
     * ``scene``: a catalogue name (see ``naruto_gym.scenes.available_scenes()``), a mesh path
@@ -133,27 +133,27 @@ class NarutoReconEnv(gym.Env):
       range within which a sample counts as seen (5 m, the mapping range).
     * ``observable_only``: count coverage over the observable surface only (default True):
       samples that some free viewpoint inside the scene can see. Solid walls, floor slabs and
-      furniture bottoms otherwise hold surface nobody can see, which caps coverage near 60 %
-      on the shipped scenes. Scoring reports completion over it beside the standard metrics.
+      furniture bottoms otherwise hold surface nobody can see, so coverage could never reach
+      100 %. Scoring reports completion over it beside the standard metrics.
     * ``start_clearance_m``: free space around a random start (0.3 m).
     * ``raycaster_backend``: ``"open3d"`` (default) or ``"embreex"``.
     * ``pinhole_backend``: how the pinhole frame is made: ``"raycast"`` (default, Embree ray
       casting, the reference), ``"raster"`` (the rasterizer: the same depth, triangles and
-      colours up to exact edge ties, 9-10x faster than the bare cast on full frames of the
-      shipped scenes and the Replica sample) or ``"auto"`` (the rasterizer unless the mesh
-      has more than 4 triangles per pixel). The panorama, collisions and coverage always
+      colours up to exact edge ties, and faster) or ``"auto"`` (the rasterizer unless the
+      mesh has more than 4 triangles per pixel). The panorama, collisions and coverage always
       ray-cast.
     * ``reconstruct``: fuse every frame into a reference TSDF map (2 cm voxels) so that any
-      policy gets accuracy / completion / completion ratio: the info of the step on which
-      the episode's ``TimeLimit`` truncates carries them under ``"reconstruction"`` (the env
-      adds them itself, so the registered ids need no extra wrapper and also work with
-      ``gymnasium.make_vec``'s vector entry point); ``env.unwrapped.reconstruction_metrics()``
-      gives them at any time.
+      policy gets accuracy / completion / completion ratio:
+      ``env.unwrapped.reconstruction_metrics()`` gives them at any time, and the info of the
+      step that reaches ``step_budget`` carries them under ``"reconstruction"``.
+    * ``step_budget``: the episode's length in steps, when the env itself should know it
+      (None: it does not). The env truncates on the step that reaches it and, with
+      ``reconstruct=True``, puts the final metrics into that step's info, so that no wrapper
+      is needed (Gymnasium refuses registered wrappers together with the vector entry
+      point). ``gymnasium.make(..., max_episode_steps=N)`` sets only its ``TimeLimit``, which
+      cannot tell the env: pass ``step_budget=N`` as well, or wrap the env in
+      ``naruto_gym.wrappers.FinalReconstructionMetrics``.
     * ``render_mode``: None or ``"rgb_array"``.
-
-    ## Scoring
-    ``env.unwrapped.evaluate(mesh)`` scores a policy's own mesh against the ground truth,
-    culled to what the episode's frames saw.
 
     ## Version History
     * v0: initial release.
@@ -183,82 +183,68 @@ class NarutoReconEnv(gym.Env):
         raycaster_backend: str = "open3d",
         pinhole_backend: str = "raycast",
         reconstruct: bool = False,
+        step_budget: int | None = None,
         render_mode: str | None = None,
     ) -> None:
-        from naruto_gym.scenes.catalogue import DEFAULT_SCENE, resolve_scene
-
-        if action_mode not in ACTION_MODES:
-            raise ValueError(f"action_mode must be one of {ACTION_MODES}, got {action_mode!r}")
+        settings = EnvSettings(
+            up_axis=up_axis,
+            action_mode=action_mode,
+            camera=camera,
+            image_scale=image_scale,
+            max_depth_m=max_depth_m,
+            panorama_shape=panorama_shape,
+            agent_radius_m=agent_radius_m,
+            max_translation_m=max_translation_m,
+            max_rotation_deg=max_rotation_deg,
+            escape_no_hit_threshold=escape_no_hit_threshold,
+            escape_rule=escape_rule,
+            collision_penalty=collision_penalty,
+            coverage_samples=coverage_samples,
+            coverage_range_m=coverage_range_m,
+            observable_only=observable_only,
+            start_clearance_m=start_clearance_m,
+            raycaster_backend=raycaster_backend,
+            pinhole_backend=pinhole_backend,
+        )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode must be None or one of {self.metadata['render_modes']}, "
                 f"got {render_mode!r}"
             )
-        if max_translation_m <= 0 or max_rotation_deg <= 0:
-            raise ValueError("max_translation_m and max_rotation_deg must be positive")
-        if image_scale <= 0:
-            raise ValueError(f"image_scale must be positive, got {image_scale}")
-        self.scene: Scene = resolve_scene(scene if scene is not None else DEFAULT_SCENE, up_axis)
+        if step_budget is not None and (
+            isinstance(step_budget, bool) or not isinstance(step_budget, (int, np.integer))
+            or step_budget < 1
+        ):
+            raise ValueError(f"step_budget must be a positive integer or None, got {step_budget!r}")
+        # The native ray-casting scene, the coverage samples and the observable surface are
+        # built lazily (first reset), after any fork.
+        self.runtime = SceneRuntime.load(scene, settings)
+        self.settings = settings
+        self.scene: Scene = self.runtime.scene
         self.action_mode = action_mode
         self.render_mode = render_mode
-        self.camera = (camera or PinholeCamera()).scaled(image_scale) if image_scale != 1.0 else (
-            camera or PinholeCamera()
-        )
+        self.step_budget = None if step_budget is None else int(step_budget)
+        self.camera = self.runtime.camera
         self.max_depth_m = float(max_depth_m)
         self.agent_radius_m = float(agent_radius_m)
         self.max_translation_m = float(max_translation_m)
-        self.max_rotation_rad = float(np.deg2rad(max_rotation_deg))
+        self.max_rotation_rad = settings.max_rotation_rad
         self.collision_penalty = float(collision_penalty)
         self.start_clearance_m = float(start_clearance_m)
-        self.bounds = self.scene.bounds
-
-        # The native ray-casting scene is built lazily (first reset), after any fork.
-        self.raycaster = RayCaster(self.scene.vertices, self.scene.faces, raycaster_backend)
-        self.renderer = RgbdRenderer(
-            self.scene, self.camera, self.max_depth_m, self.raycaster, backend=pinhole_backend
-        )
-        self.panorama_camera = (
-            EquirectangularCamera(*panorama_shape) if panorama_shape is not None else None
-        )
-        self.collision = CollisionChecker(
-            self.raycaster,
-            self.bounds,
-            self.agent_radius_m,
-            escape_no_hit_threshold,
-            escape_rule=escape_rule,
-            face_normals=self.scene.face_normals,
-        )
         self.coverage_samples = int(coverage_samples)
         self.coverage_range_m = float(coverage_range_m)
         self.observable_only = bool(observable_only)
-        # Built at the first reset: both cast rays, which must not happen before a fork.
-        self._coverage: CoverageTracker | None = None
-        self._observable: ObservableSurface | None = None
-        self._top_down: TopDownMap | None = None
+        self.bounds = self.runtime.bounds
+        self.raycaster = self.runtime.raycaster
+        self.renderer = self.runtime.renderer
+        self.panorama_camera = self.runtime.panorama_camera
+        self.collision = self.runtime.collision
         self._intrinsics = self.camera.as_dict()
         self.reconstruction: EpisodeReconstruction | None = (
             EpisodeReconstruction(self.camera) if reconstruct else None
         )
-
-        height, width = self.camera.height, self.camera.width
-        observation_spaces: dict[str, spaces.Space] = {
-            "rgb": spaces.Box(0, 255, (height, width, 3), np.uint8),
-            "depth": spaces.Box(0.0, self.max_depth_m, (height, width), np.float32),
-            "pose": spaces.Box(-np.inf, np.inf, (4, 4), np.float32),
-        }
-        if self.panorama_camera is not None:
-            observation_spaces["panorama"] = spaces.Box(
-                0.0, np.inf, (self.panorama_camera.height, self.panorama_camera.width), np.float32
-            )
-        self.observation_space = spaces.Dict(observation_spaces)
-        if action_mode == "pose":
-            low = np.concatenate([self.bounds[0], -np.ones(4)]).astype(np.float32)
-            high = np.concatenate([self.bounds[1], np.ones(4)]).astype(np.float32)
-            self.action_space = spaces.Box(low, high, dtype=np.float32)
-        elif action_mode == "delta":
-            self.action_space = spaces.Box(-1.0, 1.0, (6,), np.float32)
-        else:
-            self.action_space = spaces.Discrete(len(DISCRETE_ACTIONS))
+        self.observation_space = self.runtime.observation_space()
+        self.action_space = self.runtime.action_space()
 
         self._pose = np.eye(4)
         self._positions: list[np.ndarray] = []
@@ -273,26 +259,18 @@ class NarutoReconEnv(gym.Env):
     @property
     def coverage(self) -> CoverageTracker:
         """The coverage tracker over the (observable) ground-truth surface samples."""
-        if self._coverage is None:
-            samples = self.scene.sample_surface(self.coverage_samples, seed=0)
-            if self.observable_only:
-                samples = samples[self.observable_surface.mask(samples)]
-            self._coverage = CoverageTracker(samples, self.camera, self.coverage_range_m)
-        return self._coverage
+        return self.runtime.coverage
 
     @property
     def observable_surface(self) -> ObservableSurface:
         """The surface some free viewpoint inside the scene can see (fixed per scene)."""
-        if self._observable is None:
-            self._observable = ObservableSurface(
-                self.raycaster,
-                self.scene.face_normals,
-                self.bounds,
-                max_no_hit_share=self.collision.max_no_hit_share,
-                is_inside=self.collision.start_test(),
-                is_inside_many=self.collision.start_test_many(),
-            )
-        return self._observable
+        return self.runtime.observable_surface
+
+    @property
+    def top_down_map(self) -> TopDownMap:
+        """The scene's top-down map, on which ``render`` draws the trajectory (built on first
+        use)."""
+        return self.runtime.top_down_map
 
     @property
     def pose(self) -> np.ndarray:
@@ -324,19 +302,14 @@ class NarutoReconEnv(gym.Env):
         """
         if not self._poses:
             raise RuntimeError("call reset() and run an episode before evaluate()")
-        kwargs.setdefault("observable_mask", self.observable_surface.mask)
-        metrics = evaluate_reconstruction(
-            mesh, self.scene, poses=self.poses, camera=self.camera, cull=cull,
-            renderer=self.renderer, **kwargs,
-        )
-        return {**metrics.as_dict(), "trajectory_length_m": self._path_length_m}
+        metrics = self.runtime.evaluate(mesh, self.poses, cull=cull, **kwargs)
+        return {**metrics, "trajectory_length_m": self._path_length_m}
 
     def reconstruction_metrics(self, **kwargs: Any) -> dict[str, Any]:
         """Metrics of the reference TSDF reconstruction of this episode (``reconstruct=True``)."""
         if self.reconstruction is None:
             raise RuntimeError("make the env with reconstruct=True to fuse a reference map")
-        kwargs.setdefault("observable_mask", self.observable_surface.mask)
-        return self.reconstruction.evaluate(self.scene, renderer=self.renderer, **kwargs)
+        return self.runtime.reconstruction_metrics(self.reconstruction, **kwargs)
 
     # -- gymnasium API -------------------------------------------------------------------
     def reset(
@@ -349,13 +322,9 @@ class NarutoReconEnv(gym.Env):
             raise ValueError(f"unknown reset options {sorted(unknown)}; supported: ['pose']")
         if "pose" in options:
             pose = validate_pose(options["pose"], "options['pose']")
-            if not np.all((pose[:3, 3] >= self.bounds[0]) & (pose[:3, 3] <= self.bounds[1])):
-                raise ValueError(
-                    f"options['pose'] position {pose[:3, 3].tolist()} lies outside the scene "
-                    f"bounds {self.bounds.tolist()}"
-                )
+            self.runtime.check_start_pose(pose)
         else:
-            pose = self._sample_start_pose()
+            pose = self.runtime.sample_start_pose(self.np_random)
         self._pose = pose
         self._positions = [pose[:3, 3].copy()]
         self._poses = [pose.copy()]
@@ -385,18 +354,17 @@ class NarutoReconEnv(gym.Env):
         gain = self.coverage.update(self._pose, self._depth)
         reward = 100.0 * gain - (self.collision_penalty if move.collided else 0.0)
         info = self._info(gain, move.collided, move.reason)
-        if self.reconstruction is not None and time_limit_ends_this_step(self):
+        truncated = self.step_budget is not None and self._step_count >= self.step_budget
+        if truncated and self.reconstruction is not None:
             info["reconstruction"] = self.reconstruction_metrics()
-        return self._observation(), float(reward), False, False, info
+        return self._observation(), float(reward), False, truncated, info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array":
             return None
         if self._rgb is None:
             raise RuntimeError("call reset() before render()")
-        if self._top_down is None:
-            self._top_down = TopDownMap(self.scene, self.raycaster)
-        top_down = self._top_down.draw(self.trajectory, self._pose)
+        top_down = self.top_down_map.draw(self.trajectory, self._pose)
         return compose_frame(top_down, self._rgb, self._depth, self.max_depth_m)
 
     # -- internals -----------------------------------------------------------------------
@@ -485,27 +453,3 @@ class NarutoReconEnv(gym.Env):
         if self._panorama is not None:
             info["panorama_no_hit_share"] = no_hit_share(self._panorama)
         return info
-
-    def _sample_start_pose(self) -> np.ndarray:
-        found = sample_free_positions(
-            self.raycaster,
-            self.scene.face_normals,
-            self.bounds,
-            1,
-            self.start_clearance_m,
-            self.np_random,
-            self.collision.max_no_hit_share,
-            max_candidates=START_CANDIDATES,
-            is_inside=self.collision.start_test(),
-            is_inside_many=self.collision.start_test_many(),
-        )
-        if len(found) == 0:
-            raise RuntimeError(
-                f"found no free start position in scene {self.scene.name!r} with "
-                f"start_clearance_m={self.start_clearance_m}; lower it or pass "
-                "reset(options={'pose': c2w})"
-            )
-        position = found[0]
-        yaw = self.np_random.uniform(-np.pi, np.pi)
-        target = position + np.array([np.cos(yaw), np.sin(yaw), 0.0])
-        return make_pose(look_at_rotation(position, target), position)

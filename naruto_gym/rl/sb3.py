@@ -22,7 +22,8 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
-from naruto_gym.vector.vector_env import NarutoReconVectorEnv, agent_info
+from naruto_gym.vector.infos import agent_info
+from naruto_gym.vector.vector_env import NarutoReconVectorEnv
 
 
 class Sb3VecEnv(VecEnv):

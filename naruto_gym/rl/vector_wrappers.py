@@ -23,7 +23,7 @@ class VectorTransformObservation(gym.vector.VectorWrapper):
 
     Episode starts are read from the infos' ``step`` (0 on a reset), so per-episode state (the
     egocentric map) restarts with each sub-env's episode; scene bounds come from
-    ``env.unwrapped.scene_envs`` (``NarutoReconVectorEnv``).
+    ``env.unwrapped.scene_runtimes`` (``NarutoReconVectorEnv``).
     """
 
     def __init__(self, env: gym.vector.VectorEnv, transform: ObservationTransform) -> None:
@@ -34,7 +34,7 @@ class VectorTransformObservation(gym.vector.VectorWrapper):
         transform.bind(getattr(env.unwrapped, "camera", None), env.num_envs)
 
     def _bounds(self) -> list[np.ndarray | None]:
-        scenes = getattr(self.env.unwrapped, "scene_envs", None)
+        scenes = getattr(self.env.unwrapped, "scene_runtimes", None)
         if scenes is None:
             return [None] * self.num_envs
         return [scene.bounds if scene is not None else None for scene in scenes]

@@ -9,7 +9,7 @@ import pytest
 from gymnasium.utils import seeding
 
 import naruto_gym  # noqa: F401
-from naruto_gym.envs.naruto_recon_env import START_CANDIDATES
+from naruto_gym.envs.scene_runtime import START_CANDIDATES
 from naruto_gym.observability import sample_free_positions
 from naruto_gym.scenes.catalogue import catalogue_entry
 from naruto_gym.scenes.open_scans import building_envelope

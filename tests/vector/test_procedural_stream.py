@@ -38,14 +38,14 @@ def test_names_splits_and_fixed_scenes():
 def test_stream_draws_a_new_seeded_scene_every_episode():
     env = NarutoReconVectorEnv(2, scene="procedural:room:test", max_episode_steps=2, **STREAM)
     first, _ = env.reset(seed=7)
-    names = [scene.scene.name for scene in env.scene_envs]
+    names = [scene.scene.name for scene in env.scene_runtimes]
     assert names[0] != names[1]
     assert all(split_of_seed(int(name.split("_")[1])) == "test" for name in names)
     for _ in range(3):  # the episode ends after 2 steps; the next step starts a new one
         env.step(np.array([6, 6]))
-    assert [scene.scene.name for scene in env.scene_envs] != names
+    assert [scene.scene.name for scene in env.scene_runtimes] != names
     again, _ = env.reset(seed=7)
-    assert [scene.scene.name for scene in env.scene_envs] == names
+    assert [scene.scene.name for scene in env.scene_runtimes] == names
     np.testing.assert_array_equal(again["pose"], first["pose"])
 
 
@@ -60,7 +60,7 @@ def test_memory_stays_bounded_with_a_new_scene_every_reset():
         env.step(np.array([0, 6]))
         if step % 10 == 9:
             rss.append(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
-    assert len(env._scene_cache) <= 2
+    assert env.scene_pool.cached <= 2
     # Peak resident memory (MiB) may grow while allocators warm up, then levels off.
     assert rss[-1] - rss[1] < 40, rss
 
@@ -74,14 +74,14 @@ def test_a_reset_wave_builds_its_new_scenes_in_threads_with_the_one_by_one_resul
         env = NarutoReconVectorEnv(4, scene="procedural:room", max_episode_steps=2, **STREAM)
         env._threads = threads
         builds = []
-        make = env._make_scene_env
-        env._make_scene_env = lambda scene: builds.append(scene.name) or make(scene)
+        make = env.scene_pool.build
+        env.scene_pool.build = lambda scene: builds.append(scene.name) or make(scene)
         observation, _ = env.reset(seed=3)
-        names = [[scene.scene.name for scene in env.scene_envs]]
+        names = [[scene.scene.name for scene in env.scene_runtimes]]
         observations = [observation]
         for _ in range(3):  # the episodes end after 2 steps; the third step starts new ones
             observations.append(env.step(np.array([6, 6, 2, 2]))[0])
-        names.append([scene.scene.name for scene in env.scene_envs])
+        names.append([scene.scene.name for scene in env.scene_runtimes])
         return names, observations, len(builds)
 
     one_names, one, one_builds = run(1)

@@ -10,12 +10,13 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import naruto_gym  # noqa: F401  (registers the ids)
+from naruto_gym import NarutoReconEnv
 from naruto_gym.scenes.catalogue import resolve_scene
 from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.vector import NarutoReconVectorEnv
-from naruto_gym.vector.vector_env import balanced_shares, share_bounds
-from naruto_gym.wrappers import time_limit_ends_this_step
+from naruto_gym.vector.scheduling import balanced_shares, share_bounds
+from naruto_gym.wrappers import FinalReconstructionMetrics
 
 SMALL: dict[str, Any] = {
     "action_mode": "discrete",
@@ -126,16 +127,16 @@ def test_default_frames_are_rasterized_where_cheaper():
     settings["camera"] = PinholeCamera(16, 16, 8, 8, 7.5, 7.5)
     vector = NarutoReconVectorEnv(2, **settings)
     # 16 x 16 pixels: more than 16 triangles of the default room per pixel, so ray cast.
-    assert vector.scene_envs[0].renderer.frame_backend == "raycast"
+    assert vector.scene_runtimes[0].renderer.frame_backend == "raycast"
     # 24 x 24: 7 per pixel, rasterized when drawn many at once, ray-cast one at a time.
     settings["camera"] = PinholeCamera(24, 24, 12, 12, 11.5, 11.5)
-    assert NarutoReconVectorEnv(2, **settings).scene_envs[0].renderer.frame_backend == "raster"
+    assert NarutoReconVectorEnv(2, **settings).scene_runtimes[0].renderer.frame_backend == "raster"
     single = gym.make("NarutoRecon-v0", pinhole_backend="auto", **{
         k: v for k, v in settings.items() if k != "camera"}, camera=settings["camera"])
     assert single.unwrapped.renderer.frame_backend == "raycast"
     single.close()
     settings["camera"] = PinholeCamera(64, 64, 32, 32, 31.5, 31.5)
-    assert NarutoReconVectorEnv(2, **settings).scene_envs[0].renderer.frame_backend == "raster"
+    assert NarutoReconVectorEnv(2, **settings).scene_runtimes[0].renderer.frame_backend == "raster"
 
 
 def test_matches_sync_with_delta_actions():
@@ -218,31 +219,44 @@ def test_bad_actions_raise_and_leave_env_usable():
         NarutoReconVectorEnv(2, scene="procedural:room", action_mode="pose")
 
 
-class _CountingEnv(gym.Env):
-    """A minimal env that asks, at every step, whether its TimeLimit ends the episode."""
-
-    observation_space = gym.spaces.Discrete(1)
-    action_space = gym.spaces.Discrete(1)
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        return 0, {}
-
-    def step(self, action):
-        return 0, 0.0, False, False, {"last": time_limit_ends_this_step(self)}
+def _cheap_metrics(env: gym.Env) -> gym.Env:
+    """The env with its (slow) reference-map scoring replaced by a marker: these tests check
+    on which step the metrics come, not what they are."""
+    env.unwrapped.reconstruction_metrics = lambda: {"scored": True}
+    return env
 
 
 @pytest.mark.parametrize("budget", [1, 3])
-def test_env_sees_the_step_its_time_limit_truncates(budget):
-    # NarutoReconEnv puts the final reconstruction metrics into the info of that step (the
-    # registered ids no longer add a wrapper for it, which make_vec's entry point forbids).
-    env = gym.wrappers.TimeLimit(gym.wrappers.OrderEnforcing(_CountingEnv()), budget)
-    env.reset()
-    flags = [env.step(0)[4]["last"] for _ in range(budget)]
-    assert flags == [False] * (budget - 1) + [True]
-    env.reset()
-    assert not _CountingEnv().step(0)[4]["last"]  # no TimeLimit around it
+def test_env_truncates_at_its_step_budget_with_the_final_metrics(budget):
+    """Given its step budget, the env ends the episode itself on the step that reaches it and
+    puts the reference map's metrics into that step's info (no wrapper needed, which
+    make_vec's vector entry point forbids); a TimeLimit of the same budget agrees."""
+    env = _cheap_metrics(gym.make("NarutoRecon-v0", max_episode_steps=budget,
+                                  step_budget=budget, reconstruct=True, **SMALL))
+    for _ in range(2):  # a second episode after the reset, too
+        env.reset(seed=0)
+        steps = [env.step(0) for _ in range(budget)]
+        assert [step[3] for step in steps] == [False] * (budget - 1) + [True]
+        assert ["reconstruction" in step[4] for step in steps] == [False] * (budget - 1) + [True]
+    env.close()
+    bare = NarutoReconEnv(step_budget=budget, **SMALL)
+    bare.reset(seed=0)
+    assert [bare.step(0)[3] for _ in range(budget)] == [False] * (budget - 1) + [True]
     assert gym.spec("NarutoRecon-v0").additional_wrappers == ()
+    with pytest.raises(ValueError, match="step_budget"):
+        NarutoReconEnv(step_budget=0, **SMALL)
+
+
+def test_final_metrics_wrapper_sees_the_time_limit_end():
+    """Without a step budget the env cannot know where gymnasium.make's TimeLimit ends the
+    episode; FinalReconstructionMetrics, around it, adds the metrics there."""
+    env = FinalReconstructionMetrics(_cheap_metrics(
+        gym.make("NarutoRecon-v0", max_episode_steps=2, reconstruct=True, **SMALL)
+    ))
+    env.reset(seed=0)
+    infos = [env.step(0)[4] for _ in range(2)]
+    assert ["reconstruction" in info for info in infos] == [False, True]
+    env.close()
 
 
 def test_split_steps_share_the_agents_so_that_the_parts_finish_together():
@@ -278,8 +292,8 @@ def test_the_clearances_carried_between_steps_are_those_a_query_gives(rule):
     for _ in range(60):
         env.step(rng.integers(0, env.single_action_space.n, env.num_envs))
         known = ~np.isnan(env._clearances)
-        positions = env._poses[known, :3, 3]
-        fresh = env._scenes[0].raycaster.unsigned_distance(positions)
+        positions = env.poses[known, :3, 3]
+        fresh = env.scene_runtimes[0].raycaster.unsigned_distance(positions)
         np.testing.assert_array_equal(env._clearances[known], fresh)
         checked += int(known.sum())
     assert checked > 500

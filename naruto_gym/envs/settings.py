@@ -1,0 +1,66 @@
+"""The scene-independent keyword arguments of ``NarutoReconEnv``, checked once.
+
+``NarutoReconEnv`` and the batched ``NarutoReconVectorEnv`` take the same keywords; both turn
+them into an :class:`EnvSettings`, so the checks, the defaults and the derived values (the
+scaled camera, the rotation limit in radians) live in one place.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from naruto_gym.motion.actions import ACTION_MODES
+from naruto_gym.sensors.pinhole import PinholeCamera
+
+
+@dataclass(frozen=True)
+class EnvSettings:
+    """What an env builds its scenes and steps its agents with (see ``NarutoReconEnv``'s
+    Arguments for the meaning of each field).
+
+    Raises:
+        ValueError: for an unknown ``action_mode``, a non-positive step limit or a
+            non-positive ``image_scale``.
+    """
+
+    up_axis: str = "z"
+    action_mode: str = "pose"
+    camera: PinholeCamera | None = None
+    image_scale: float = 1.0
+    max_depth_m: float = 10.0
+    panorama_shape: tuple[int, int] | None = (64, 128)
+    agent_radius_m: float = 0.05
+    max_translation_m: float = 0.1
+    max_rotation_deg: float = 20.0
+    escape_no_hit_threshold: float | None = 0.5
+    escape_rule: str = "scanned_space"
+    collision_penalty: float = 0.1
+    coverage_samples: int = 20_000
+    coverage_range_m: float = 5.0
+    observable_only: bool = True
+    start_clearance_m: float = 0.3
+    raycaster_backend: str = "open3d"
+    pinhole_backend: str = "raycast"
+
+    def __post_init__(self) -> None:
+        if self.action_mode not in ACTION_MODES:
+            raise ValueError(
+                f"action_mode must be one of {ACTION_MODES}, got {self.action_mode!r}"
+            )
+        if self.max_translation_m <= 0 or self.max_rotation_deg <= 0:
+            raise ValueError("max_translation_m and max_rotation_deg must be positive")
+        if self.image_scale <= 0:
+            raise ValueError(f"image_scale must be positive, got {self.image_scale}")
+
+    @property
+    def pinhole_camera(self) -> PinholeCamera:
+        """The camera at ``image_scale`` times its resolution (the default camera if None)."""
+        camera = self.camera or PinholeCamera()
+        return camera.scaled(self.image_scale) if self.image_scale != 1.0 else camera
+
+    @property
+    def max_rotation_rad(self) -> float:
+        """The rotation limit of one step, in radians."""
+        return float(np.deg2rad(self.max_rotation_deg))

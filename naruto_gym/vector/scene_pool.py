@@ -1,0 +1,175 @@
+"""The batched env's scenes: per agent the runtime of its current scene, built once per scene.
+
+Agents given the same scene share one :class:`~naruto_gym.envs.scene_runtime.SceneRuntime`
+(one ray-casting structure, one set of coverage samples), so a step casts the rays of all of
+them in one call. Agents on a ``"procedural:..."`` stream get a new generated scene every
+episode; those runtimes are kept in a bounded cache, keyed by the scene's seed, so a scene
+drawn again is not built again.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from naruto_gym.envs.scene_runtime import SceneRuntime
+from naruto_gym.envs.settings import EnvSettings
+from naruto_gym.scenes.stream import (
+    LruCache,
+    ProceduralSceneSpec,
+    is_procedural_name,
+    parse_procedural_name,
+)
+from naruto_gym.sensors.pinhole import AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED
+from naruto_gym.utils.threads import run_parallel
+
+
+class ScenePool:
+    """Per agent, the runtime of its current scene.
+
+    Args:
+        scenes: one entry per agent: a scene as ``NarutoReconEnv`` takes it, or a stream name
+            ``"procedural:room"`` / ``"procedural:apartment"`` (with an optional ``":train"``
+            or ``":test"`` split). Entries that are the same object share one runtime.
+        settings: the env's settings (the pinhole backend's ``"auto"`` choice is made for
+            many frames at a time).
+        cache_size: generated scenes' runtimes kept for reuse.
+
+    Raises:
+        ValueError: for a malformed procedural name.
+    """
+
+    def __init__(self, scenes: Sequence[Any], settings: EnvSettings, cache_size: int) -> None:
+        self.settings = settings
+        self._streams: list[ProceduralSceneSpec | None] = []
+        self._cache: LruCache[SceneRuntime] = LruCache(cache_size)
+        self._runtimes: list[SceneRuntime | None] = [None] * len(scenes)
+        fixed: dict[int, SceneRuntime] = {}
+        for index, item in enumerate(scenes):
+            if is_procedural_name(item):
+                spec = parse_procedural_name(item)
+                self._streams.append(spec if spec.is_stream else None)
+                if not spec.is_stream:
+                    self._runtimes[index] = self._cached(("fixed", item), item)
+                continue
+            self._streams.append(None)
+            key = id(item)
+            if key not in fixed:
+                fixed[key] = self.build(item)
+            self._runtimes[index] = fixed[key]
+
+    # -- what agents see -------------------------------------------------------------------
+    def __getitem__(self, agent: int) -> SceneRuntime | None:
+        """The runtime of ``agent``'s current scene (None for a stream before its reset)."""
+        return self._runtimes[agent]
+
+    @property
+    def runtimes(self) -> list[SceneRuntime | None]:
+        """Per agent, its current scene's runtime (None on a stream before the first reset)."""
+        return list(self._runtimes)
+
+    def distinct(self) -> list[SceneRuntime]:
+        """The runtimes agents are in now, each once, in the order of their first agent."""
+        return list({id(runtime): runtime for runtime in self._runtimes
+                     if runtime is not None}.values())
+
+    @property
+    def has_streams(self) -> bool:
+        """Whether some agent draws a new generated scene every episode."""
+        return any(self._streams)
+
+    @property
+    def cached(self) -> int:
+        """How many runtimes of generated scenes the cache holds."""
+        return len(self._cache)
+
+    def template(self) -> SceneRuntime:
+        """A runtime to take the spaces and cameras from: the first agent's, or with only
+        streams one generated scene's (they do not depend on the scene)."""
+        first = next((runtime for runtime in self._runtimes if runtime is not None), None)
+        if first is not None:
+            return first
+        spec = next(s for s in self._streams if s is not None)
+        return self._cached((spec.kind, spec.draw_seed(np.random.default_rng(0))), spec)
+
+    def groups(self, agents: np.ndarray, selected: np.ndarray) -> list[np.ndarray]:
+        """Indices into ``agents`` (where ``selected``), grouped by the agents' scene, groups
+        in the order of their first agent."""
+        picked = np.flatnonzero(selected)
+        if len(picked) == 0:
+            return []
+        runtimes = [self._runtimes[agent] for agent in np.asarray(agents)[picked].tolist()]
+        first = runtimes[0]
+        if all(runtime is first for runtime in runtimes):  # one scene for all: no dictionary
+            return [picked.astype(np.int64)]
+        groups: dict[int, list[int]] = {}
+        for k, runtime in zip(picked.tolist(), runtimes, strict=True):
+            groups.setdefault(id(runtime), []).append(k)
+        return [np.array(group, np.int64) for group in groups.values()]
+
+    # -- building --------------------------------------------------------------------------
+    def build(self, scene: Any) -> SceneRuntime:
+        """A new runtime of ``scene`` (a name, path or ``Scene``), its coverage samples (and
+        observable surface) made at once."""
+        runtime = SceneRuntime.load(
+            scene, self.settings,
+            # Many frames at a time: "auto" rasterizes denser meshes than for one frame.
+            auto_max_triangles_per_pixel=AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED,
+        )
+        runtime.coverage  # noqa: B018 - builds the samples (and observable surface) now
+        return runtime
+
+    def draw_scenes(
+        self, agents: np.ndarray, rngs: Sequence[np.random.Generator], threads: int
+    ) -> None:
+        """Give each stream agent of ``agents`` the scene its generator draws next (the other
+        agents keep theirs).
+
+        The scenes not cached yet are built two or more at a time (one per thread of
+        :func:`run_parallel`; the ray casts and compiled loops of a build release the GIL):
+        agents that start their episodes together, as in RL training, need a new scene each.
+        Each scene is a function of its draw alone, so the result is the one-by-one build's.
+
+        Args:
+            agents: the agents starting a new episode.
+            rngs: their generators, in the same order (each draws its scene's seed).
+            threads: the most threads to build in.
+        """
+        keys: list[tuple | None] = []
+        for agent, rng in zip(agents, rngs, strict=True):
+            stream = self._streams[agent]
+            keys.append(None if stream is None else (stream.kind, stream.draw_seed(rng)))
+        missing = {key: self._streams[agent] for agent, key in zip(agents, keys, strict=True)
+                   if key is not None and key not in self._cache}
+        built: dict[tuple, SceneRuntime] = {}
+        if len(missing) > 1 and threads > 1:
+            order = iter(list(missing))  # claimed one key at a time by whichever thread is free
+
+            def build(_: int) -> None:
+                for key in order:
+                    built[key] = self._build_key(key, missing[key])
+
+            run_parallel(build, min(threads, len(missing)))
+        for agent, key in zip(agents, keys, strict=True):
+            if key is not None:
+                self._runtimes[agent] = self._cached(key, self._streams[agent], built)
+
+    def clear(self) -> None:
+        """Let go of every agent's runtime."""
+        self._runtimes = [None] * len(self._runtimes)
+
+    def _cached(
+        self, key: tuple, spec: ProceduralSceneSpec | str,
+        built: dict[tuple, SceneRuntime] | None = None,
+    ) -> SceneRuntime:
+        """The cached runtime of scene ``key``, made when missing (taken from ``built`` when
+        it was made there already)."""
+        return self._cache.get(
+            key, lambda: built.pop(key) if built and key in built
+            else self._build_key(key, spec)
+        )
+
+    def _build_key(self, key: tuple, spec: ProceduralSceneSpec | str) -> SceneRuntime:
+        return self.build(spec if isinstance(spec, str) else spec.scene(key[1]))
