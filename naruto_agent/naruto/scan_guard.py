@@ -42,9 +42,9 @@ from naruto_agent.guards.panorama_clearance import (
     clear_part_of_move,
     first_contact,
     move_leaves_scan,
-    refused_at_top,
     steep_miss_share,
 )
+from naruto_agent.guards.refused_moves import refused_at_top
 from naruto_agent.naruto.agent_map import AgentMap
 from naruto_agent.naruto.config import NarutoConfig
 from naruto_agent.policies.base import EnvContext
