@@ -42,9 +42,9 @@ from naruto_agent.guards.panorama_clearance import (
     clear_part_of_move,
     first_contact,
     move_leaves_scan,
-    refused_at_top,
     steep_miss_share,
 )
+from naruto_agent.guards.refused_moves import refused_at_top
 from naruto_agent.naruto.agent_map import AgentMap
 from naruto_agent.naruto.config import NarutoConfig
 from naruto_agent.policies.base import EnvContext
@@ -247,8 +247,7 @@ class ScanGuard:
 
     def refused_climb(self, position: np.ndarray, target: np.ndarray) -> bool:
         """Whether an escape refusal of the move to ``target`` came at the scan's open top
-        rather than at its side (:func:`~naruto_agent.guards.panorama_clearance.
-        refused_at_top`, with "all around below" judged by the env's cone test on the
+        rather than at its side (:func:`~naruto_agent.guards.refused_moves.refused_at_top`, with "all around below" judged by the env's cone test on the
         agent's own grid)."""
         supported = self.agent_map.observed_space.sectors_seen_below(position[None])[0]
         return refused_at_top(position, target, bool(supported))
