@@ -170,12 +170,14 @@ class ScanGuard:
         self.scan_open = False
         self.holds = HeldMoves(self.config.max_held_moves)
         self.edge_holds = HeldMoves(self.config.max_held_moves)
+        self._panorama: tuple[np.ndarray, np.ndarray] | None = None  # (panorama, where)
 
     # -- state ----------------------------------------------------------------------------
     def reset(self) -> None:
         """Start an episode: the scan is not known open, no move held (the hold limits are
-        read from the config again)."""
+        read from the config again), no panorama kept."""
         self.scan_open = False
+        self._panorama = None
         for holds in (self.holds, self.edge_holds):
             holds.reset()
             holds.limit = self.config.max_held_moves
@@ -198,6 +200,22 @@ class ScanGuard:
     def panorama(self, observation: dict[str, np.ndarray]) -> np.ndarray | None:
         """The observation's depth panorama when the guard reads it (``panorama_check``)."""
         return observation.get("panorama") if self.config.panorama_check else None
+
+    def observe_panorama(self, panorama: np.ndarray | None, spot: np.ndarray) -> None:
+        """Keep the newest depth panorama (None: the observation has none) and the spot it
+        was taken at, for a policy that checks moves later in its step (:meth:`panorama_at`).
+        """
+        self._panorama = (None if panorama is None
+                          else (np.asarray(panorama), np.asarray(spot, np.float64).copy()))
+
+    def panorama_at(self, spot: np.ndarray) -> np.ndarray | None:
+        """The kept panorama (:meth:`observe_panorama`) when it was taken at ``spot`` (within
+        :data:`SAME_SPOT_M`) and the guard reads panoramas (``panorama_check``); None
+        otherwise: a panorama says nothing about a move that starts elsewhere."""
+        if not self.config.panorama_check or self._panorama is None:
+            return None
+        panorama, taken_at = self._panorama
+        return panorama if np.linalg.norm(spot - taken_at) <= SAME_SPOT_M else None
 
     @property
     def clearance_m(self) -> float:

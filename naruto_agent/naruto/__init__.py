@@ -4,9 +4,10 @@
   rotation planning), acting in the env's ``"pose"`` action mode; ``policy.mesh()`` is its
   reconstruction.
 * Its parts, one job each: :class:`AgentMap` (the mapper and the planner view),
-  :class:`ScanGuard` (panorama and open-scan checks), :class:`MoveChecker` (the check of a
-  move before it is sent), :class:`GoalPlanner` (the planning step) and
-  :class:`RecoveryPlanner` (the recovery steps as plans).
+  :class:`NarutoScanChecks` (the shared :class:`~naruto_agent.guards.ScanGuard` read with the
+  agent's map), :class:`MoveChecker` (the check of a move before it is sent),
+  :class:`GoalPlanner` (the planning step) and :class:`RecoveryPlanner` (the recovery steps
+  as plans).
 * :func:`uncertainty_aware_goal_search` and its parts (:func:`candidate_goals`,
   :func:`safe_goal_mask`, :func:`select_targets`, :func:`visibility`, :func:`search_goals`):
   the goal search as pure functions.
@@ -40,7 +41,7 @@ from naruto_agent.naruto.goal_search import (
 from naruto_agent.naruto.move_checks import MoveChecker
 from naruto_agent.naruto.policy import NarutoPolicy
 from naruto_agent.naruto.recovery_plans import RecoveryPlanner
-from naruto_agent.naruto.scan_guard import ScanGuard
+from naruto_agent.naruto.scan_checks import NarutoScanChecks
 from naruto_agent.naruto.state_machine import TRANSITIONS, NarutoStateMachine, Plan, State
 
 __all__ = [
@@ -53,10 +54,10 @@ __all__ = [
     "MoveChecker",
     "NarutoConfig",
     "NarutoPolicy",
+    "NarutoScanChecks",
     "NarutoStateMachine",
     "Plan",
     "RecoveryPlanner",
-    "ScanGuard",
     "State",
     "build_config",
     "candidate_goals",

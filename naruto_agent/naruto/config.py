@@ -1,6 +1,9 @@
 """The NARUTO agent's settings (:class:`NarutoConfig`) and their keyword overrides.
 
 Every setting, its default and the reason for it are explained in ``docs/agent-config.md``.
+The open-scan guard's settings are the ``guard`` section, the
+:class:`~naruto_agent.guards.ScanGuardConfig` that the frontier and random policies take too,
+filled from keywords as theirs are (:func:`~naruto_agent.policies.config.build_config`).
 """
 
 from __future__ import annotations
@@ -8,10 +11,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
+from naruto_agent.guards import ScanGuardConfig
 from naruto_agent.mapping import NeuralMapperConfig, TsdfMapperConfig
 from naruto_agent.naruto.goal_search import GoalSearchConfig
 from naruto_agent.naruto.recovery import RecoveryConfig
 from naruto_agent.planning import PlannerConfig
+from naruto_agent.policies.config import pop_guard_settings, rename_settings
 
 #: The mappers the agent can build (``NarutoPolicy(mapper=...)``).
 MAPPERS = ("tsdf", "neural")
@@ -54,13 +59,7 @@ class NarutoConfig:
     reachable_iterations: int = 2000
     """extensions of the goal search's fallback tree (and of the wander recovery's)"""
     check_moves_on_map: bool = True
-    """check every move against the agent's newest map before sending it"""
-    check_moves_on_panorama: bool = True
-    """also check every move against the depth panorama taken where it starts"""
-    panorama_margin_m: float = 0.01
-    """the panorama check keeps the agent's radius plus this, metres"""
-    max_held_moves: int = 3
-    """moves held back in a row at one spot before the next goes to the env"""
+    """check every move against the agent's newest map (and with ``guard``) before sending it"""
     margin_climb_m: float = 0.3
     """height of a climb out of an open scan's margin when the holds run out (0: off)"""
     escape_radius_m: float = 0.3
@@ -79,16 +78,14 @@ class NarutoConfig:
     """candidate goals lie at least this far below the measured surfaces' top, metres"""
     sector_support_after_escape: bool = True
     """once the scan is known open, goals and moves must pass the env's support-cone test"""
-    open_sky_share: float | None = 0.05
-    """share of steep depth pixels that miss at which the scan counts as open (None: off)"""
-    edge_probe_m: float = 0.15
-    """how far past a move's end the open-scan edge test probes, metres"""
     unresolved_visit_looks: float = 4.0
     """looks a reached goal adds to every target it was chosen for (0: off)"""
     initial_look_around: bool = True
     """the first plan of an episode is a turn in place that looks all around"""
     seed: int = 0
     """seed of the agent's randomness when ``reset`` gets none"""
+    guard: ScanGuardConfig = field(default_factory=ScanGuardConfig)
+    """the open-scan guard: the panorama check, held moves, the scan's edge, the open sky"""
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     """stall detection and recovery settings"""
     goal_search: GoalSearchConfig = field(default_factory=_goal_search_defaults)
@@ -116,19 +113,17 @@ class NarutoConfig:
             raise ValueError("escape_radius_m, arrival_tolerance_m, unresolved_visit_looks, "
                              "scan_top_margin_m, shortcut_margin_m and margin_climb_m must "
                              "be >= 0")
-        if self.open_sky_share is not None and not 0 < self.open_sky_share <= 1:
-            raise ValueError(f"open_sky_share must be in (0, 1] or None, got "
-                             f"{self.open_sky_share}")
-        if self.edge_probe_m < 0:
-            raise ValueError(f"edge_probe_m must be >= 0, got {self.edge_probe_m}")
-        if self.max_held_moves < 0:
-            raise ValueError(f"max_held_moves must be >= 0, got {self.max_held_moves}")
+        if self.guard.panorama_top_check or self.guard.release_held_until_moved:
+            raise ValueError("the agent reads an open scan's top from its own map "
+                             "(sector_support_after_escape) and counts held moves per spot: "
+                             "guard.panorama_top_check and guard.release_held_until_moved "
+                             "must be False")
         self.planner.validate()
 
 
 #: The settings that are sections of their own, by field name.
 SECTIONS: dict[str, type] = {"goal_search": GoalSearchConfig, "planner": PlannerConfig,
-                             "recovery": RecoveryConfig,
+                             "recovery": RecoveryConfig, "guard": ScanGuardConfig,
                              "tsdf": TsdfMapperConfig, "neural": NeuralMapperConfig}
 
 
@@ -137,6 +132,9 @@ def build_config(config: NarutoConfig | None = None, **settings: Any) -> NarutoC
 
     Top-level fields are given by name (``goal_attempts=1``); a section takes a dict of its
     fields (``goal_search={"top_k": 1}``, ``planner={"time_limit_s": 1.0}``) or an instance.
+    The fields of the ``guard`` section are also given by name (``max_held_moves=5``), and
+    its former names still work with a ``DeprecationWarning``
+    (:data:`~naruto_agent.policies.config.RENAMED_SETTINGS`), as for every policy.
     JSON-able, so benchmark specs can carry them.
 
     Args:
@@ -149,11 +147,14 @@ def build_config(config: NarutoConfig | None = None, **settings: Any) -> NarutoC
     Raises:
         ValueError: for an unknown setting or section field, or an invalid value.
     """
+    settings = rename_settings(settings)
     config = config or NarutoConfig()
     known = {f.name for f in fields(NarutoConfig)}
+    guard_updates = pop_guard_settings(settings, known)
     unknown = set(settings) - known
     if unknown:
-        raise ValueError(f"unknown NARUTO settings {sorted(unknown)}; known: {sorted(known)}")
+        raise ValueError(f"unknown NARUTO settings {sorted(unknown)}; known: {sorted(known)} "
+                         f"and the fields of guard")
     updates: dict[str, Any] = {}
     for name, value in settings.items():
         if name in SECTIONS and isinstance(value, dict):
@@ -165,4 +166,6 @@ def build_config(config: NarutoConfig | None = None, **settings: Any) -> NarutoC
                                  f"{sorted(section_fields)}")
             value = replace(section, **value)
         updates[name] = value
+    if guard_updates:
+        updates["guard"] = replace(updates.get("guard", config.guard), **guard_updates)
     return replace(config, **updates)

@@ -16,7 +16,7 @@ the published step (all switchable, see ``docs/agent-config.md``):
 * a reached goal counts as a look at every target it was chosen for
   (``unresolved_visit_looks``);
 * when the agent is stuck, a recovery plan (:mod:`naruto_agent.naruto.recovery_plans`), and
-  a climb out of an open scan's margin when the scan guard planned one.
+  a climb out of an open scan's margin when the scan checks planned one.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from naruto_agent.naruto.recovery_plans import (
     look_around_plan,
     look_around_views,
 )
-from naruto_agent.naruto.scan_guard import ScanGuard
+from naruto_agent.naruto.scan_checks import NarutoScanChecks
 from naruto_agent.naruto.state_machine import Plan
 from naruto_agent.planning import plan_path
 
@@ -53,7 +53,7 @@ class GoalPlanner:
     Args:
         config: the agent's settings.
         agent_map: the agent's map.
-        guard: the agent's scan guard (goals inside the scan, the margin climb).
+        scan_checks: the agent's scan checks (goals inside the scan, the margin climb).
         move_checker: the agent's move check (an escape's nodes must pass it).
         monitor: the episode's progress monitor.
         rng: the agent's randomness (the goal search, every E-RRT seed).
@@ -66,12 +66,12 @@ class GoalPlanner:
         recovery: the planner of the recovery steps.
     """
 
-    def __init__(self, config: NarutoConfig, agent_map: AgentMap, guard: ScanGuard,
+    def __init__(self, config: NarutoConfig, agent_map: AgentMap, scan_checks: NarutoScanChecks,
                  move_checker: MoveChecker, monitor: ProgressMonitor, rng: np.random.Generator,
                  device: str = "auto", timings: dict[str, float] | None = None) -> None:
         self.config = config
         self.agent_map = agent_map
-        self.guard = guard
+        self.scan_checks = scan_checks
         self.move_checker = move_checker
         self.monitor = monitor
         self.rng = rng
@@ -79,7 +79,8 @@ class GoalPlanner:
         self.timings = timings if timings is not None else {"goal_search": 0.0, "rrt": 0.0}
         self.plans: list[dict[str, Any]] = []
         self.recoveries: list[tuple[int, str]] = []
-        self.recovery = RecoveryPlanner(config, agent_map, monitor, rng, guard.inside_scan,
+        self.recovery = RecoveryPlanner(config, agent_map, monitor, rng,
+                                        scan_checks.inside_scan,
                                         device, self.timings)
         self._visit: tuple[np.ndarray, np.ndarray] | None = None  # (goal, targets it sees)
 
@@ -101,7 +102,7 @@ class GoalPlanner:
         if self.config.initial_look_around and len(self.plans) == 1:
             record.update(outcome="initial look-around", path_nodes=1)
             return look_around_plan(position, self.config)
-        climb = self.guard.take_climb(position)
+        climb = self.scan_checks.take_climb(position)
         if climb is not None:
             # Checked on the panorama already; the edge test held every way from here.
             record.update(outcome="climb out of the scan's margin", path_nodes=int(len(climb)))
@@ -214,7 +215,7 @@ class GoalPlanner:
             free = observed.sample(observed.grid.free, sdf.grid_points()).reshape(sdf.shape)
             mask = free if mask is None else mask & free
         if self.config.stay_in_scanned_space:
-            inside = self.guard.inside_scan(sdf.grid_points(), start).reshape(sdf.shape)
+            inside = self.scan_checks.inside_scan(sdf.grid_points(), start).reshape(sdf.shape)
             mask = inside if mask is None else mask & inside
         failed = self.monitor.recent_failed_goals()
         if len(failed):

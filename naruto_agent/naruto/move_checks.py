@@ -1,8 +1,9 @@
 """The NARUTO agent's own check of a move before it sends it to the env.
 
 A move is checked on the agent's newest map (the planner view's SDF, 2 cm samples, the
-planner's clearance) and then by the :class:`~naruto_agent.naruto.scan_guard.ScanGuard`
-(the depth panorama and, on an open scan, the scan's edges). A move the check refuses is a
+planner's clearance) and then by the
+:class:`~naruto_agent.naruto.scan_checks.NarutoScanChecks` (the shared scan guard: the depth
+panorama and, on an open scan, the scan's edges). A move the check refuses is a
 detected collision for the state machine: the agent stays and plans again.
 """
 
@@ -14,35 +15,36 @@ import numpy as np
 
 from naruto_agent.naruto.agent_map import AgentMap
 from naruto_agent.naruto.config import NarutoConfig
-from naruto_agent.naruto.scan_guard import ScanGuard
+from naruto_agent.naruto.scan_checks import NarutoScanChecks
 
 
 class MoveChecker:
-    """Checks moves on the agent's map and with its scan guard.
+    """Checks moves on the agent's map and with its scan checks.
 
     Args:
         config: the agent's settings (``check_moves_on_map``, the planner's clearance and
             collision sample spacing).
         agent_map: the agent's map.
-        guard: the agent's scan guard.
+        scan_checks: the agent's checks of the scanned space.
     """
 
-    def __init__(self, config: NarutoConfig, agent_map: AgentMap, guard: ScanGuard) -> None:
+    def __init__(self, config: NarutoConfig, agent_map: AgentMap,
+                 scan_checks: NarutoScanChecks) -> None:
         self.config = config
         self.agent_map = agent_map
-        self.guard = guard
+        self.scan_checks = scan_checks
 
     def is_free(self, start: np.ndarray, end: np.ndarray) -> bool:
         """Whether the move from ``start`` to ``end`` may be sent (always, with
         ``check_moves_on_map`` off): it keeps the clearance on the newest planner view
-        (:meth:`keeps_clearance`) and passes the scan guard
-        (:meth:`~naruto_agent.naruto.scan_guard.ScanGuard.check_move`)."""
+        (:meth:`keeps_clearance`) and passes the scan checks
+        (:meth:`~naruto_agent.naruto.scan_checks.NarutoScanChecks.check_move`)."""
         if not self.config.check_moves_on_map:
             return True
         self.agent_map.refresh()
         if not self.keeps_clearance(start, end):
             return False
-        return self.guard.check_move(start, end)
+        return self.scan_checks.check_move(start, end)
 
     def keeps_clearance(self, start: np.ndarray, end: np.ndarray) -> bool:
         """The move's samples (every ``collision_sample_m``, the start excluded) keep the

@@ -24,7 +24,9 @@ Mappers (``mapper=``):
 The agent never gets stuck for good: a move the env refuses (``collided`` /
 ``collision_reason`` in the step info) blocks its target in the agent's own map, and when
 plans keep failing it recovers (:mod:`naruto_agent.naruto.recovery`). On an open scan its
-:class:`~naruto_agent.naruto.scan_guard.ScanGuard` keeps it inside the scanned space.
+open-scan guard (:class:`~naruto_agent.guards.ScanGuard`, shared with the baselines, read with
+its own map by :class:`~naruto_agent.naruto.scan_checks.NarutoScanChecks`) keeps it inside
+the scanned space.
 
 What the agent knows: the observations (RGB-D, pose, panorama), the env's step info and the
 scene's bounding box from the :class:`~naruto_agent.policies.EnvContext`; never the mesh.
@@ -40,13 +42,14 @@ from typing import Any, Literal
 import numpy as np
 import trimesh
 
+from naruto_agent.guards import ScanGuard
 from naruto_agent.mapping import NeuralMapper, SdfVolume, TsdfUncertaintyMapper
 from naruto_agent.naruto.agent_map import AgentMap, build_mapper
 from naruto_agent.naruto.config import MAPPERS, NarutoConfig, build_config
 from naruto_agent.naruto.goal_planning import GoalPlanner
 from naruto_agent.naruto.move_checks import MoveChecker
 from naruto_agent.naruto.recovery import BlockedSpace, ProgressMonitor
-from naruto_agent.naruto.scan_guard import ScanGuard
+from naruto_agent.naruto.scan_checks import NarutoScanChecks
 from naruto_agent.naruto.state_machine import MoveCheck, NarutoStateMachine, Plan, State
 from naruto_agent.planning.rotation import image_view_test
 from naruto_agent.policies.base import (
@@ -58,11 +61,13 @@ from naruto_agent.policies.base import (
     clip_pose_action,
     pose_action,
 )
+from naruto_agent.policies.registry import register_policy
 
 #: The phases whose seconds ``NarutoPolicy.timings`` holds.
 PHASES = ("mapping", "planner_view", "goal_search", "rrt", "control")
 
 
+@register_policy("naruto")
 class NarutoPolicy(Policy):
     """NARUTO: uncertainty-aware goal search + E-RRT on the agent's own map ("pose" actions).
 
@@ -73,14 +78,18 @@ class NarutoPolicy(Policy):
             :func:`~naruto_agent.naruto.config.build_config`).
         device: device of the mapper and the planner's nearest-neighbour search ("auto":
             CUDA when present).
-        **settings: :class:`~naruto_agent.naruto.config.NarutoConfig` fields.
+        **settings: :class:`~naruto_agent.naruto.config.NarutoConfig` fields, and those of
+            its ``guard`` section (:class:`~naruto_agent.guards.ScanGuardConfig`) by name.
 
     Attributes:
         config: the settings.
         machine: the state machine (``machine.history`` holds the state of every action).
         monitor: progress, failed plans and goals of the episode.
         agent_map: the episode's map and planner view (None before ``reset``).
-        scan_guard: the episode's panorama and open-scan checks (None before ``reset``).
+        guard: the open-scan guard (the panorama readings, held moves, whether the scan is
+            open), shared with the baselines; set up again at every ``reset``.
+        scan_checks: the episode's checks of moves and goals against the scanned space
+            (None before ``reset``).
         move_checker: the episode's move check (None before ``reset``).
         goal_planner: the episode's planning step (None before ``reset``).
         timings: seconds spent per phase (``mapping``, ``planner_view``, ``goal_search``,
@@ -108,7 +117,8 @@ class NarutoPolicy(Policy):
         self.timings: dict[str, float] = dict.fromkeys(PHASES, 0.0)
         self.monitor = ProgressMonitor(self.config.recovery)
         self.agent_map: AgentMap | None = None
-        self.scan_guard: ScanGuard | None = None
+        self.guard = ScanGuard(self.config.guard)
+        self.scan_checks: NarutoScanChecks | None = None
         self.move_checker: MoveChecker | None = None
         self.goal_planner: GoalPlanner | None = None
         self._rng = np.random.default_rng(self.config.seed)
@@ -157,7 +167,7 @@ class NarutoPolicy(Policy):
     @property
     def scan_open(self) -> bool:
         """Whether the agent knows the scan is open (an escape refusal, or the sky)."""
-        return self.scan_guard is not None and self.scan_guard.scan_open
+        return self.guard.scan_open
 
     @property
     def state(self) -> State:
@@ -167,6 +177,7 @@ class NarutoPolicy(Policy):
     # -- episode -----------------------------------------------------------------------------
     def bind(self, context: EnvContext) -> None:
         super().bind(context)
+        self.guard.agent_radius_m = context.agent_radius_m
         camera = context.camera
         self.machine.in_view = (
             image_view_test(camera.width, camera.height, camera.fx, camera.fy, camera.cx,
@@ -185,10 +196,11 @@ class NarutoPolicy(Policy):
         self.timings = dict.fromkeys(PHASES, 0.0)
         self.monitor = ProgressMonitor(self.config.recovery)
         self.agent_map = AgentMap(mapper, self.config, self.timings)
-        self.scan_guard = ScanGuard(self.config, self.context, self.agent_map,
-                                    self._fail_current_goal)
-        self.move_checker = MoveChecker(self.config, self.agent_map, self.scan_guard)
-        self.goal_planner = GoalPlanner(self.config, self.agent_map, self.scan_guard,
+        self.guard.reset()
+        self.scan_checks = NarutoScanChecks(self.config, self.guard, self.agent_map,
+                                            self._fail_current_goal)
+        self.move_checker = MoveChecker(self.config, self.agent_map, self.scan_checks)
+        self.goal_planner = GoalPlanner(self.config, self.agent_map, self.scan_checks,
                                         self.move_checker, self.monitor, self._rng,
                                         self.device, self.timings)
         self._frame_index = 0
@@ -268,8 +280,8 @@ class NarutoPolicy(Policy):
         if self.agent_map is None:
             raise RuntimeError("call reset() with the first observation before act()")
         if reason == "escape":
-            self.scan_guard.mark_open()
-            if self.scan_guard.refused_climb(position, target):
+            self.guard.note_escape()
+            if self.scan_checks.refused_climb(position, target):
                 self.agent_map.lower_ceiling(position[2])
             else:
                 self.agent_map.block_past_edge(position, target)
@@ -295,8 +307,8 @@ class NarutoPolicy(Policy):
         panorama = observation.get("panorama")
         new_map = self.agent_map.integrate(observation["rgb"], observation["depth"], pose,
                                            self._frame_index, panorama)
-        self.scan_guard.observe_frame(observation["depth"], pose)
-        self.scan_guard.observe_panorama(panorama, pose[:3, 3])
+        self.guard.observe_depth(observation["depth"], pose, self.context.camera)
+        self.guard.observe_panorama(panorama, pose[:3, 3])
         self.timings["mapping"] += time.perf_counter() - clock
         if new_map:
             self._new_map = True

@@ -11,7 +11,7 @@ or as ``guard={...}``.
 from __future__ import annotations
 
 import warnings
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, TypeVar
 
@@ -26,7 +26,9 @@ RENAMED_SETTINGS: dict[str, str] = {
     "max_held_steps": "max_held_moves",  # RandomPolicy
 }
 
-_GUARD_FIELDS = frozenset(item.name for item in fields(ScanGuardConfig))
+GUARD_FIELDS: frozenset[str] = frozenset(item.name for item in fields(ScanGuardConfig))
+"""The fields of :class:`~naruto_agent.guards.ScanGuardConfig`: a config with a ``guard``
+section also takes them by name."""
 
 
 def _frontier_guard() -> ScanGuardConfig:
@@ -211,29 +213,29 @@ def build_config(
     Raises:
         TypeError: a keyword that names no setting (as a constructor would).
     """
-    settings = _renamed(settings)
+    settings = rename_settings(settings)
     base = config if config is not None else config_type()
     own = {item.name for item in fields(config_type)}  # type: ignore[arg-type]
     has_guard = "guard" in own
-    guard_updates = {name: settings.pop(name) for name in list(settings)
-                     if has_guard and name in _GUARD_FIELDS and name not in own}
+    guard_updates = pop_guard_settings(settings, own) if has_guard else {}
     unknown = sorted(set(settings) - own)
     if unknown:
-        known = sorted(own | (_GUARD_FIELDS if has_guard else set()))
+        known = sorted(own | (GUARD_FIELDS if has_guard else set()))
         raise TypeError(f"{config_type.__name__} has no setting {unknown}; known: {known}")
     if has_guard:
         guard = settings.pop("guard", base.guard)  # type: ignore[attr-defined]
-        if isinstance(guard, Mapping):
-            guard = replace(base.guard, **guard)  # type: ignore[attr-defined]
-        if not isinstance(guard, ScanGuardConfig):
-            raise TypeError(f"guard must be a ScanGuardConfig or a dict of its fields, got "
-                            f"{type(guard).__name__}")
-        settings["guard"] = replace(guard, **guard_updates)
+        settings["guard"] = guard_section(base.guard, guard,  # type: ignore[attr-defined]
+                                          guard_updates)
     return replace(base, **settings)  # type: ignore[type-var]
 
 
-def _renamed(settings: dict[str, Any]) -> dict[str, Any]:
-    """``settings`` with the old names of :data:`RENAMED_SETTINGS` replaced by the new."""
+def rename_settings(settings: Mapping[str, Any]) -> dict[str, Any]:
+    """``settings`` with the former names of :data:`RENAMED_SETTINGS` replaced by the new
+    ones, each with a ``DeprecationWarning`` (shown where the policy was built).
+
+    Raises:
+        TypeError: a former name and its new name are both given.
+    """
     settings = dict(settings)
     for old, new in RENAMED_SETTINGS.items():
         if old not in settings:
@@ -244,3 +246,27 @@ def _renamed(settings: dict[str, Any]) -> dict[str, Any]:
                       stacklevel=4)
         settings[new] = settings.pop(old)
     return settings
+
+
+def pop_guard_settings(settings: dict[str, Any], own: Collection[str]) -> dict[str, Any]:
+    """Take the keywords that name a field of the guard section (:data:`GUARD_FIELDS`) and
+    no field of the config itself (``own``) out of ``settings``, and return them."""
+    return {name: settings.pop(name) for name in list(settings)
+            if name in GUARD_FIELDS and name not in own}
+
+
+def guard_section(
+    base: ScanGuardConfig, guard: ScanGuardConfig | Mapping[str, Any], updates: Mapping[str, Any]
+) -> ScanGuardConfig:
+    """A config's guard section: ``guard`` (a ``ScanGuardConfig``, or a dict of fields that
+    override ``base``) with the fields of ``updates`` on top.
+
+    Raises:
+        TypeError: ``guard`` is neither, or a dict or ``updates`` names no guard field.
+    """
+    if isinstance(guard, Mapping):
+        guard = replace(base, **guard)
+    if not isinstance(guard, ScanGuardConfig):
+        raise TypeError(f"guard must be a ScanGuardConfig or a dict of its fields, got "
+                        f"{type(guard).__name__}")
+    return replace(guard, **updates)

@@ -5,10 +5,11 @@ A policy class registers itself with a decorator::
     @register_policy("frontier")
     class FrontierPolicy(Policy): ...
 
-A policy whose module is costly to import (the NARUTO agent imports torch) is registered by
-import path instead (:func:`register_lazy_policy`) and imported on its first lookup; when
-that module registers the class itself, the decorator takes the lazy entry's place. Any
-``Policy`` subclass can also be named by its import path, ``"package.module:ClassName"``,
+A policy whose module is costly to import (the NARUTO agent's planner and mappers) is also
+registered by import path (:func:`register_lazy_policy`), so that listing and looking names up
+does not import it: the first lookup imports the module, whose decorator then registers the
+class and takes the lazy entry's place (the lookup checks that the two name the same class).
+Any ``Policy`` subclass can also be named by its import path, ``"package.module:ClassName"``,
 without registering.
 """
 
@@ -92,7 +93,11 @@ def policy_class(name: str) -> type[Policy]:
         raise ValueError(f"cannot import policy {target!r}: {error}") from error
     if not (isinstance(cls, type) and issubclass(cls, Policy)):
         raise ValueError(f"{target!r} is not a naruto_agent.policies.Policy subclass")
-    if name in LAZY_POLICIES:  # its module did not register it itself
+    registered = POLICIES.get(name)
+    if registered is not None and registered is not cls:
+        raise ValueError(f"policy name {name!r} names {target!r}, but importing it registered "
+                         f"{registered.__module__}.{registered.__qualname__} under that name")
+    if name in LAZY_POLICIES:  # no decorator ran on import (none, or imported before)
         register_policy(name)(cls)
     return cls
 

@@ -7,9 +7,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from naruto_agent.guards import ScanGuard
 from naruto_agent.mapping.observed_space import ObservedSpace
 from naruto_agent.mapping.sdf_volume import SdfVolume
-from naruto_agent.naruto import AgentMap, GoalPlanner, MoveChecker, NarutoConfig, ScanGuard
+from naruto_agent.naruto import AgentMap, GoalPlanner, MoveChecker, NarutoConfig, NarutoScanChecks
 from naruto_agent.naruto.recovery import ProgressMonitor
 from naruto_agent.policies import EnvContext
 from naruto_gym.sensors.pinhole import PinholeCamera
@@ -38,11 +39,12 @@ def walls_up_to(top_m: float) -> ObservedSpace:
 
 @dataclass
 class Parts:
-    """An agent map, scan guard, move checker and goal planner sharing one map."""
+    """An agent map, scan guard, scan checks, move checker and goal planner sharing one map."""
 
     config: NarutoConfig
     agent_map: AgentMap
     guard: ScanGuard
+    checks: NarutoScanChecks
     checker: MoveChecker
     monitor: ProgressMonitor
     planner: GoalPlanner
@@ -64,13 +66,14 @@ def make_parts(sdf: SdfVolume | None = None, uncertainty: SdfVolume | None = Non
         uncertainty = SdfVolume(np.zeros(sdf.shape), sdf.origin, sdf.voxel_size)
     agent_map.use_view(sdf, uncertainty)
     failed: list[int] = []
-    guard = ScanGuard(config, context(), agent_map, lambda: failed.append(1))
+    guard = ScanGuard(config.guard, agent_radius_m=context().agent_radius_m)
+    checks = NarutoScanChecks(config, guard, agent_map, lambda: failed.append(1))
     if panorama is not None:
         guard.observe_panorama(panorama, where)
     if scan_open:
-        guard.mark_open()
-    checker = MoveChecker(config, agent_map, guard)
+        guard.note_escape()
+    checker = MoveChecker(config, agent_map, checks)
     monitor = ProgressMonitor(config.recovery)
-    planner = GoalPlanner(config, agent_map, guard, checker, monitor,
+    planner = GoalPlanner(config, agent_map, checks, checker, monitor,
                           np.random.default_rng(0), device="cpu")
-    return Parts(config, agent_map, guard, checker, monitor, planner, failed)
+    return Parts(config, agent_map, guard, checks, checker, monitor, planner, failed)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from naruto_agent.guards import ScanGuardConfig
 from naruto_agent.naruto import NarutoConfig, build_config
 from naruto_agent.naruto import config as config_module
 
@@ -48,6 +49,32 @@ def test_overrides_reach_fields_and_sections_and_leave_the_base_alone() -> None:
     with pytest.raises(ValueError, match="unknown recovery settings"):
         build_config(recovery={"windows": 3})
     with pytest.raises(ValueError, match="max_held_moves"):
-        NarutoConfig(max_held_moves=-1)
+        build_config(max_held_moves=-1)
     with pytest.raises(ValueError, match="max_rotation_step_deg"):
         NarutoConfig(max_rotation_step_deg=0.0)
+
+
+def test_the_guard_section_takes_the_names_every_policy_takes() -> None:
+    """The guard's fields are given by name or as a section, as for frontier and random; the
+    agent's former name of the panorama switch still works, with a DeprecationWarning."""
+    config = build_config(max_held_moves=5, open_sky_share=None, edge_probe_m=0.2,
+                          panorama_margin_m=0.02)
+    assert config.guard == ScanGuardConfig(max_held_moves=5, open_sky_share=None,
+                                           edge_probe_m=0.2, panorama_margin_m=0.02)
+    assert NarutoConfig().guard == ScanGuardConfig()  # the agent takes the guard's defaults
+    config = build_config(guard={"max_held_moves": 1}, panorama_edge_probe=False)
+    assert config.guard.max_held_moves == 1 and not config.guard.panorama_edge_probe
+    assert build_config(guard=ScanGuardConfig(max_held_moves=2)).guard.max_held_moves == 2
+    with pytest.warns(DeprecationWarning, match="'check_moves_on_panorama' is now called"):
+        config = build_config(check_moves_on_panorama=False)
+    assert not config.guard.panorama_check
+    with pytest.raises(ValueError, match="unknown guard settings"):
+        build_config(guard={"max_held_steps": 1})
+    with pytest.raises(ValueError, match="unknown NARUTO settings"):
+        build_config(max_held=1)
+
+
+def test_guard_settings_the_agent_does_not_read_are_refused() -> None:
+    for name in ("panorama_top_check", "release_held_until_moved"):
+        with pytest.raises(ValueError, match=name):
+            build_config(**{name: True})

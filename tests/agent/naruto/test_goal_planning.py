@@ -88,13 +88,13 @@ def test_the_first_plan_looks_around_and_a_pending_climb_comes_next() -> None:
     plan = parts.planner.plan(agent)
     assert plan.info == {"recovery": "look_around"}
     assert parts.planner.plans[-1]["outcome"] == "initial look-around"
-    for _ in range(parts.config.max_held_moves + 1):
-        assert not parts.guard.panorama_keeps_to_scan(agent, agent + [0.25, 0.0, 0.0])
+    for _ in range(parts.config.guard.max_held_moves + 1):
+        assert not parts.checks.panorama_keeps_to_scan(agent, agent + [0.25, 0.0, 0.0])
     plan = parts.planner.plan(agent, frame=9)
     assert plan.info == {"recovery": "climb", "trusted": True}
     np.testing.assert_allclose(plan.path[-1], agent + [0.0, 0.0, parts.config.margin_climb_m])
     assert parts.planner.recoveries == [(9, "climb")]
-    assert parts.guard.pending_climb is None  # used once
+    assert parts.checks.pending_climb is None  # used once
 
 
 def test_escape_from_inside_a_blocked_ball_takes_a_line_the_move_check_accepts() -> None:

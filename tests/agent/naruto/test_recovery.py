@@ -213,9 +213,9 @@ def test_a_refused_climb_sets_a_ceiling_above_the_agent() -> None:
         action = policy.act(observation, info)
         assert action[2] <= position[2] + 0.02
     # A steep sideways climb from over measured floor is the top too; a level move is not.
-    assert policy.scan_guard.refused_climb(position, position + [0.1, 0.0, 0.05]) == bool(
+    assert policy.scan_checks.refused_climb(position, position + [0.1, 0.0, 0.05]) == bool(
         policy.mapper.observed_space.sectors_seen_below(position[None])[0])
-    assert not policy.scan_guard.refused_climb(position, position + [0.1, 0.0, 0.0])
+    assert not policy.scan_checks.refused_climb(position, position + [0.1, 0.0, 0.0])
 
 
 def _scenes() -> list:
@@ -295,9 +295,9 @@ def test_goals_may_stay_as_high_as_the_agent_stands_over_a_low_scan() -> None:
     top = observed.scan_top_z() - policy.config.scan_top_margin_m
     column = np.array([[position[0], position[1], z] for z in np.arange(0.2, 6.0, 0.1)])
     supported = observed.sample(observed.supported(), column)
-    low = policy.scan_guard.inside_scan(column, np.array([*position[:2], 0.0]))
+    low = policy.scan_checks.inside_scan(column, np.array([*position[:2], 0.0]))
     assert np.array_equal(low, supported & (column[:, 2] <= top))
-    high = policy.scan_guard.inside_scan(column, np.array([*position[:2], top + 1.0]))
+    high = policy.scan_checks.inside_scan(column, np.array([*position[:2], top + 1.0]))
     assert np.array_equal(high, supported & (column[:, 2] <= top + 1.0))
     assert (high & ~low).any()  # the agent's own height admits more
     env.close()
@@ -314,7 +314,7 @@ def test_after_an_escape_refusal_goals_need_measured_surface_in_every_sector_bel
         points = policy.sdf.grid_points()
         top = max(observed.scan_top_z() - policy.config.scan_top_margin_m, position[2])
         coarse = observed.sample(observed.supported(), points) & (points[:, 2] <= top)
-        inside = policy.scan_guard.inside_scan(points, position)
+        inside = policy.scan_checks.inside_scan(points, position)
         if strict:
             expected = coarse.copy()
             expected[coarse] = observed.sectors_seen_below(points[coarse])
@@ -391,24 +391,24 @@ def test_a_move_towards_the_scans_edge_is_refused_on_the_agents_map() -> None:
     observed.grid.observed[:] = False
     xs = np.arange(0.05, 2.0, 0.1)
     observed.grid.mark_occupied(np.array([[x, y, 0.05] for x in xs for y in xs]))
-    policy.scan_guard.mark_open()
+    policy.guard.note_escape()
     blocked = len(policy.blocked.points)
-    assert policy.scan_guard.stays_in_scan(np.array([1.0, 1.0, 1.0]), np.array([1.1, 1.0, 1.0]))
+    assert policy.scan_checks.stays_in_scan(np.array([1.0, 1.0, 1.0]), np.array([1.1, 1.0, 1.0]))
     assert len(policy.blocked.points) == blocked
     start, end = np.array([1.8, 1.0, 1.0]), np.array([1.9, 1.0, 1.0])
-    assert not policy.scan_guard.stays_in_scan(start, end)
+    assert not policy.scan_checks.stays_in_scan(start, end)
     assert len(policy.blocked.points) == blocked + 1
     assert policy.blocked.points[-1][0] > end[0]  # beyond the move's end, not behind it
     # From a point the test already fails, the agent may move (it has to get back in).
-    assert policy.scan_guard.stays_in_scan(np.array([2.5, 1.0, 1.0]), np.array([2.6, 1.0, 1.0]))
+    assert policy.scan_checks.stays_in_scan(np.array([2.5, 1.0, 1.0]), np.array([2.6, 1.0, 1.0]))
 
 
 def test_config_rejects_bad_open_scan_settings() -> None:
     from naruto_agent.naruto import NarutoConfig
 
     with pytest.raises(ValueError, match="open_sky_share"):
-        NarutoConfig(open_sky_share=0.0)
+        NarutoPolicy(open_sky_share=0.0)
     with pytest.raises(ValueError, match="edge_probe_m"):
-        NarutoConfig(edge_probe_m=-0.1)
+        NarutoPolicy(edge_probe_m=-0.1)
     with pytest.raises(ValueError, match="margin_climb_m"):
         NarutoConfig(margin_climb_m=-0.1)

@@ -136,3 +136,36 @@ def test_former_names_still_work_with_a_deprecation_warning():
     assert policy.config.guard.max_held_moves == 2
     with pytest.raises(TypeError, match="give 'max_held_moves' only"):
         RandomPolicy(max_held_steps=2, max_held_moves=3)
+
+
+def test_naruto_stays_lazy_until_looked_up_and_then_registers_itself(registry):
+    """``import naruto_agent.policies`` never imports the agent; its module registers the
+    class with the decorator, and the lazy entry names that same class."""
+    import subprocess
+
+    code = ("import sys, naruto_agent.policies as p; p.policy_names(); "
+            "assert 'naruto_agent.naruto' not in sys.modules; "
+            "assert 'naruto' in p.LAZY_POLICIES and 'naruto' not in p.POLICIES; "
+            "from naruto_agent.naruto import NarutoPolicy; "
+            "assert p.POLICIES['naruto'] is NarutoPolicy and 'naruto' not in p.LAZY_POLICIES")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    from naruto_agent.naruto import NarutoPolicy
+
+    assert policy_class("naruto") is NarutoPolicy
+    assert policy_class(LAZY_POLICIES.get("naruto", "naruto_agent.naruto:NarutoPolicy")) is (
+        NarutoPolicy)
+
+
+def test_a_lazy_entry_and_the_class_its_module_registers_must_agree(registry, tmp_path,
+                                                                    monkeypatch):
+    (tmp_path / "decoy_policies.py").write_text(
+        "from naruto_agent.policies import RandomPolicy, register_policy\n"
+        "class Decoy(RandomPolicy):\n"
+        "    pass\n"
+        "register_policy('decoy')(RandomPolicy)  # another class under the lazy name\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    register_lazy_policy("decoy", "decoy_policies:Decoy")
+    with pytest.raises(ValueError, match="names 'decoy_policies:Decoy', but importing it"):
+        policy_class("decoy")
+    monkeypatch.delitem(sys.modules, "decoy_policies")

@@ -100,3 +100,21 @@ def test_open_scan_from_the_sky_or_an_escape():
     assert guard.scan_open
     assert not ScanGuard(ScanGuardConfig(open_sky_share=None)).observe_depth(
         sky, looking_down, camera)
+
+
+def test_the_kept_panorama_reads_moves_from_where_it_was_taken():
+    guard = ScanGuard()
+    here = np.array([1.0, 2.0, 1.0])
+    assert guard.panorama_at(here) is None  # none kept yet
+    panorama = wall_panorama(-0.07)
+    guard.observe_panorama(panorama, here)
+    assert guard.panorama_at(here + 1e-4) is panorama  # within SAME_SPOT_M
+    assert guard.panorama_at(here + [0.01, 0.0, 0.0]) is None  # taken elsewhere
+    guard.observe_panorama(None, here)
+    assert guard.panorama_at(here) is None
+    guard.observe_panorama(panorama, here)
+    guard.reset()
+    assert guard.panorama_at(here) is None
+    off = ScanGuard(ScanGuardConfig(panorama_check=False))
+    off.observe_panorama(panorama, here)
+    assert off.panorama_at(here) is None

@@ -1,16 +1,15 @@
-"""NARUTO's scan guard: the panorama move check, held moves, the open scan's top and edges."""
+"""NARUTO's scan checks on the shared guard: the panorama move check, held moves (one count
+for the surface and the edge readings), the open scan's top and edges."""
 
 from __future__ import annotations
-
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from naruto_agent.mapping.observed_space import ObservedSpace
-from naruto_agent.naruto import NarutoConfig
-from naruto_agent.naruto.scan_guard import MIN_CLIMB_M
-from tests.agent.naruto.agent_parts import BOUNDS, make_parts, walls_up_to
+from naruto_agent.naruto import NarutoConfig, build_config
+from naruto_agent.naruto.scan_checks import MIN_CLIMB_M
+from tests.agent.naruto.agent_parts import BOUNDS, context, make_parts, walls_up_to
 from tests.agent.synthetic_panoramas import floor_panorama, wall_panorama
 
 AGENT = np.array([1.5, 1.5, 1.0])
@@ -21,7 +20,7 @@ def test_a_move_the_panorama_shows_blocked_is_held_and_its_surface_blocked() -> 
     panorama taken where it stands shows it, so the move towards it is held before the env
     sees it, the surface point is blocked in the map, and the goal stays."""
     parts = make_parts(panorama=wall_panorama(-0.07), where=AGENT)  # a wall at y = 1.43 m
-    guard, blocked = parts.guard, parts.agent_map.blocked
+    guard, checks, blocked = parts.guard, parts.checks, parts.agent_map.blocked
     assert parts.checker.is_free(AGENT, AGENT + [0.1, 0.0, 0.0])  # along the wall
     assert len(blocked.points) == 0
     assert not parts.checker.is_free(AGENT, AGENT + [0.06, -0.05, 0.07])
@@ -30,10 +29,10 @@ def test_a_move_the_panorama_shows_blocked_is_held_and_its_surface_blocked() -> 
     assert parts.agent_map.sdf.sample(blocked.points[0][None])[0] < 0
     assert parts.failed_goals == []
     # Taken elsewhere, the panorama says nothing about this move.
-    assert guard.panorama_from(AGENT + [1.0, 0.0, 0.0]) is None
-    assert guard.panorama_shows_way_clear(AGENT + [1.0, 0.02, 0.0], AGENT + [1.0, -0.03, 0.0])
+    assert guard.panorama_at(AGENT + [1.0, 0.0, 0.0]) is None
+    assert checks.panorama_shows_way_clear(AGENT + [1.0, 0.02, 0.0], AGENT + [1.0, -0.03, 0.0])
     off = make_parts(panorama=wall_panorama(-0.07), where=AGENT,
-                     config=NarutoConfig(check_moves_on_panorama=False))
+                     config=build_config(panorama_check=False))
     assert off.checker.is_free(AGENT, AGENT + [0.06, -0.05, 0.07])
 
 
@@ -43,9 +42,9 @@ def test_in_a_tight_spot_a_held_move_goes_to_the_env_after_max_held_moves() -> N
     the next is sent and the env decides, then the count starts again."""
     parts = make_parts(panorama=wall_panorama(-0.07), where=AGENT)
     towards_wall = AGENT + [0.06, -0.05, 0.07]
-    for _ in range(parts.config.max_held_moves):
+    for _ in range(parts.config.guard.max_held_moves):
         assert not parts.checker.is_free(AGENT, towards_wall)
-    assert len(parts.agent_map.blocked.points) == parts.config.max_held_moves
+    assert len(parts.agent_map.blocked.points) == parts.config.guard.max_held_moves
     assert parts.checker.is_free(AGENT, towards_wall)
     assert not parts.checker.is_free(AGENT, towards_wall)
 
@@ -60,9 +59,9 @@ def test_on_an_open_scan_a_move_the_panorama_shows_leaving_the_scan_is_held() ->
     assert closed.checker.is_free(AGENT, towards_edge)  # closed: no cone check
     parts = make_parts(panorama=floor_panorama(edge_x_m=0.3), where=AGENT, scan_open=True)
     blocked = parts.agent_map.blocked
-    assert parts.guard.panorama_keeps_to_scan(AGENT, AGENT + [-0.1, 0.0, 0.0])
+    assert parts.checks.panorama_keeps_to_scan(AGENT, AGENT + [-0.1, 0.0, 0.0])
     assert len(blocked.points) == 0
-    assert not parts.guard.panorama_keeps_to_scan(AGENT, towards_edge)
+    assert not parts.checks.panorama_keeps_to_scan(AGENT, towards_edge)
     assert len(blocked.points) == 1 and blocked.points[0][0] > towards_edge[0]
     assert blocked.guessed == [True] and parts.failed_goals == []
 
@@ -75,19 +74,19 @@ def test_on_an_open_scan_a_climb_above_the_scans_top_is_refused_and_lowers_the_c
     agent = np.array([1.5, 1.5, 2.0])
     closed = make_parts(observed=walls_up_to(2.6), panorama=floor_panorama(height_m=2.0),
                         where=agent)
-    limit = closed.agent_map.observed_space.scan_top_z() - closed.guard.context.agent_radius_m
+    limit = closed.agent_map.observed_space.scan_top_z() - closed.guard.agent_radius_m
     assert 2.5 < limit < 2.7
     below, above = agent + [0.0, 0.0, limit - 2.01], agent + [0.0, 0.0, limit - 1.95]
     assert closed.checker.is_free(agent, above)  # closed: the top is the ceiling the map shows
     parts = make_parts(observed=walls_up_to(2.6), panorama=floor_panorama(height_m=2.0),
                        where=agent, scan_open=True)
-    guard = parts.guard
-    assert guard.stays_below_top(agent, below)
-    assert not guard.stays_below_top(agent, above)
+    checks = parts.checks
+    assert checks.stays_below_top(agent, below)
+    assert not checks.stays_below_top(agent, above)
     assert parts.agent_map.blocked.ceiling_z == pytest.approx(limit)
     assert parts.agent_map.sdf.sample(above[None])[0] < 0  # the next plan stays under it
-    assert guard.stays_below_top(above, above + [0.1, 0.0, 0.0])  # level, already above
-    assert guard.stays_below_top(above, below)
+    assert checks.stays_below_top(above, above + [0.1, 0.0, 0.0])  # level, already above
+    assert checks.stays_below_top(above, below)
 
 
 def test_at_the_scans_edge_a_held_move_goes_to_the_env_when_no_climb_is_possible() -> None:
@@ -98,19 +97,19 @@ def test_at_the_scans_edge_a_held_move_goes_to_the_env_when_no_climb_is_possible
     the plan's goal (the env never refused it)."""
     parts = make_parts(panorama=floor_panorama(edge_x_m=0.3), where=AGENT, scan_open=True,
                        config=NarutoConfig(margin_climb_m=0.0))
-    guard = parts.guard
+    guard, checks = parts.guard, parts.checks
     towards_edge = AGENT + [0.25, 0.0, 0.0]
-    for _ in range(parts.config.max_held_moves):
-        assert not guard.panorama_keeps_to_scan(AGENT, towards_edge)
-    assert guard.panorama_keeps_to_scan(AGENT, towards_edge)
-    assert guard.pending_climb is None
-    assert len(parts.agent_map.blocked.points) == parts.config.max_held_moves
+    for _ in range(parts.config.guard.max_held_moves):
+        assert not checks.panorama_keeps_to_scan(AGENT, towards_edge)
+    assert checks.panorama_keeps_to_scan(AGENT, towards_edge)
+    assert checks.pending_climb is None
+    assert len(parts.agent_map.blocked.points) == parts.config.guard.max_held_moves
     assert parts.failed_goals == []
     # The count starts again: the next move from here is checked (and held) again.
-    assert not guard.panorama_keeps_to_scan(AGENT, towards_edge)
+    assert not checks.panorama_keeps_to_scan(AGENT, towards_edge)
     elsewhere = AGENT + [0.0, 0.05, 0.0]
     guard.observe_panorama(floor_panorama(edge_x_m=0.3), elsewhere)
-    assert not guard.panorama_keeps_to_scan(elsewhere, elsewhere + [0.25, 0.0, 0.0])
+    assert not checks.panorama_keeps_to_scan(elsewhere, elsewhere + [0.25, 0.0, 0.0])
 
 
 def test_when_the_holds_run_out_at_the_scans_edge_the_guard_plans_a_climb() -> None:
@@ -122,43 +121,43 @@ def test_when_the_holds_run_out_at_the_scans_edge_the_guard_plans_a_climb() -> N
     towards_edge = AGENT + [0.25, 0.0, 0.0]
     parts = make_parts(observed=walls_up_to(2.6), panorama=floor_panorama(edge_x_m=0.3),
                        where=AGENT, scan_open=True)
-    guard = parts.guard
-    for _ in range(parts.config.max_held_moves + 1):
-        assert not guard.panorama_keeps_to_scan(AGENT, towards_edge)
-    climb = guard.pending_climb
+    checks = parts.checks
+    for _ in range(parts.config.guard.max_held_moves + 1):
+        assert not checks.panorama_keeps_to_scan(AGENT, towards_edge)
+    climb = checks.pending_climb
     np.testing.assert_allclose(climb[0], AGENT)
     np.testing.assert_allclose(climb[-1], AGENT + [0.0, 0.0, parts.config.margin_climb_m])
     assert np.all(np.diff(climb[:, 2]) > 0) and np.allclose(climb[:, :2], AGENT[:2])
-    assert guard.take_climb(AGENT + [0.1, 0.0, 0.0]) is None  # planned elsewhere: dropped
-    assert guard.pending_climb is None
+    assert checks.take_climb(AGENT + [0.1, 0.0, 0.0]) is None  # planned elsewhere: dropped
+    assert checks.pending_climb is None
 
     # A surface 0.2 m overhead (under a table): the climb stops short of it.
     overhead = np.flipud(floor_panorama(height_m=0.2))
     floor = floor_panorama(edge_x_m=0.3)
     parts = make_parts(observed=walls_up_to(2.6), where=AGENT, scan_open=True,
                        panorama=np.where(overhead > 0, overhead, floor))
-    for _ in range(parts.config.max_held_moves + 1):
-        assert not parts.guard.panorama_keeps_to_scan(AGENT, towards_edge)
-    rise = parts.guard.pending_climb[-1][2] - AGENT[2]
-    assert 0.1 < rise < 0.2 - parts.guard.context.agent_radius_m
+    for _ in range(parts.config.guard.max_held_moves + 1):
+        assert not parts.checks.panorama_keeps_to_scan(AGENT, towards_edge)
+    rise = parts.checks.pending_climb[-1][2] - AGENT[2]
+    assert 0.1 < rise < 0.2 - parts.guard.agent_radius_m
 
     # The scan's top (measured top 2.6 m less scan_top_margin_m) leaves 0.12 m: cut short.
     high = np.array([1.5, 1.5, 2.18])
     parts = make_parts(observed=walls_up_to(2.6), where=high, scan_open=True,
                        panorama=floor_panorama(height_m=2.18, edge_x_m=0.3))
     top = parts.agent_map.observed_space.scan_top_z() - parts.config.scan_top_margin_m
-    for _ in range(parts.config.max_held_moves + 1):
-        assert not parts.guard.panorama_keeps_to_scan(high, high + [0.25, 0.0, 0.0])
-    assert parts.guard.pending_climb[-1][2] == pytest.approx(top)
+    for _ in range(parts.config.guard.max_held_moves + 1):
+        assert not parts.checks.panorama_keeps_to_scan(high, high + [0.25, 0.0, 0.0])
+    assert parts.checks.pending_climb[-1][2] == pytest.approx(top)
 
     # No room left to climb: the move is sent and the env decides.
     start = np.array([1.5, 1.5, top - MIN_CLIMB_M / 2])
     parts = make_parts(observed=walls_up_to(2.6), where=start, scan_open=True,
                        panorama=floor_panorama(height_m=start[2], edge_x_m=0.3))
-    for _ in range(parts.config.max_held_moves):
-        assert not parts.guard.panorama_keeps_to_scan(start, start + [0.25, 0.0, 0.0])
-    assert parts.guard.panorama_keeps_to_scan(start, start + [0.25, 0.0, 0.0])
-    assert parts.guard.pending_climb is None
+    for _ in range(parts.config.guard.max_held_moves):
+        assert not parts.checks.panorama_keeps_to_scan(start, start + [0.25, 0.0, 0.0])
+    assert parts.checks.panorama_keeps_to_scan(start, start + [0.25, 0.0, 0.0])
+    assert parts.checks.pending_climb is None
 
 
 def test_a_move_across_the_edge_of_the_measured_floor_fails_the_goal() -> None:
@@ -169,13 +168,13 @@ def test_a_move_across_the_edge_of_the_measured_floor_fails_the_goal() -> None:
     xs = np.arange(0.05, 2.0, 0.1)
     observed.grid.mark_occupied(np.array([[x, y, 0.05] for x in xs for y in xs]))
     parts = make_parts(observed=observed, scan_open=True)
-    guard = parts.guard
-    assert guard.stays_in_scan(np.array([1.0, 1.0, 1.0]), np.array([1.1, 1.0, 1.0]))
+    checks = parts.checks
+    assert checks.stays_in_scan(np.array([1.0, 1.0, 1.0]), np.array([1.1, 1.0, 1.0]))
     end = np.array([1.9, 1.0, 1.0])
-    assert not guard.stays_in_scan(np.array([1.8, 1.0, 1.0]), end)
+    assert not checks.stays_in_scan(np.array([1.8, 1.0, 1.0]), end)
     assert parts.agent_map.blocked.points[-1][0] > end[0]
     assert parts.failed_goals == [1]
-    assert guard.stays_in_scan(np.array([2.5, 1.0, 1.0]), np.array([2.6, 1.0, 1.0]))
+    assert checks.stays_in_scan(np.array([2.5, 1.0, 1.0]), np.array([2.6, 1.0, 1.0]))
 
 
 def test_inside_scan_and_a_refused_climb() -> None:
@@ -192,21 +191,21 @@ def test_inside_scan_and_a_refused_climb() -> None:
     column = np.array([[2.3, 1.5, z] for z in np.arange(0.2, 3.0, 0.1)])
     top = observed.scan_top_z() - closed.config.scan_top_margin_m
     supported = observed.sample(observed.supported(), column)
-    low = closed.guard.inside_scan(column, np.array([2.3, 1.5, 0.0]))
+    low = closed.checks.inside_scan(column, np.array([2.3, 1.5, 0.0]))
     assert np.array_equal(low, supported & (column[:, 2] <= top)) and low.any()
-    high = closed.guard.inside_scan(column, np.array([2.3, 1.5, top + 0.4]))
+    high = closed.checks.inside_scan(column, np.array([2.3, 1.5, top + 0.4]))
     assert np.array_equal(high, supported & (column[:, 2] <= top + 0.4))
     assert (high & ~low).any()  # the agent's own height admits more
     beside_hole = np.array([[1.5 + dx, 1.5, z] for dx in (0.0, 0.2, 0.4, 0.8)
                             for z in (0.2, 0.5, 1.0)])
-    coarse = closed.guard.inside_scan(beside_hole, np.zeros(3))
-    strict = opened.guard.inside_scan(beside_hole, np.zeros(3))
+    coarse = closed.checks.inside_scan(beside_hole, np.zeros(3))
+    strict = opened.checks.inside_scan(beside_hole, np.zeros(3))
     assert np.array_equal(strict, coarse & observed.sectors_seen_below(beside_hole))
     assert (coarse & ~strict).any() and strict.any()
     position = np.array([0.6, 0.6, 1.0])
     assert observed.sectors_seen_below(position[None])[0]
-    assert opened.guard.refused_climb(position, position + [0.1, 0.0, 0.05])
-    assert not opened.guard.refused_climb(position, position + [0.1, 0.0, 0.0])
+    assert opened.checks.refused_climb(position, position + [0.1, 0.0, 0.05])
+    assert not opened.checks.refused_climb(position, position + [0.1, 0.0, 0.0])
 
 
 def test_a_depth_frame_that_sees_the_sky_opens_the_scan() -> None:
@@ -215,15 +214,38 @@ def test_a_depth_frame_that_sees_the_sky_opens_the_scan() -> None:
     from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 
     parts = make_parts()
-    camera = parts.guard.context.camera
+    camera = context().camera
     eye = np.array([1.0, 1.0, 1.0])
     up = make_pose(look_at_rotation(eye, eye + [1.0, 0.0, 3.0]), eye)
-    parts.guard.observe_frame(np.ones((camera.height, camera.width), np.float32), up)
+    parts.guard.observe_depth(np.ones((camera.height, camera.width), np.float32), up, camera)
     assert not parts.guard.scan_open
-    parts.guard.observe_frame(np.zeros((camera.height, camera.width), np.float32), up)
+    parts.guard.observe_depth(np.zeros((camera.height, camera.width), np.float32), up, camera)
     assert parts.guard.scan_open
-    never = make_parts(config=replace(NarutoConfig(), open_sky_share=None))
-    never.guard.observe_frame(np.zeros((camera.height, camera.width), np.float32), up)
+    never = make_parts(config=build_config(open_sky_share=None))
+    never.guard.observe_depth(np.zeros((camera.height, camera.width), np.float32), up, camera)
     assert not never.guard.scan_open
-    never.guard.mark_open()
+    never.guard.note_escape()
     assert never.guard.scan_open
+
+
+def test_one_count_serves_the_surface_and_the_edge_readings() -> None:
+    """A move held for a surface and one held for leaving the scan at the same spot count
+    together (``guard.holds``): after ``max_held_moves`` of either the next goes through."""
+    parts = make_parts(panorama=wall_panorama(-0.07), where=AGENT, scan_open=True,
+                       config=NarutoConfig(margin_climb_m=0.0))
+    checks, limit = parts.checks, parts.config.guard.max_held_moves
+    assert not checks.panorama_shows_way_clear(AGENT, AGENT + [0.06, -0.05, 0.07])
+    parts.guard.observe_panorama(floor_panorama(edge_x_m=0.3), AGENT)  # the next frame
+    for _ in range(limit - 1):
+        assert not checks.panorama_keeps_to_scan(AGENT, AGENT + [0.25, 0.0, 0.0])
+    assert parts.guard.holds.count == limit and parts.guard.edge_holds.count == 0
+    assert checks.panorama_keeps_to_scan(AGENT, AGENT + [0.25, 0.0, 0.0])  # the env decides
+
+
+def test_the_panorama_edge_reading_follows_the_guards_switch() -> None:
+    """``guard.panorama_edge_probe`` off: the panorama no longer holds a move for leaving the
+    scan (the surface reading and the grid's edge probe stay)."""
+    off = make_parts(panorama=floor_panorama(edge_x_m=0.3), where=AGENT, scan_open=True,
+                     config=build_config(panorama_edge_probe=False))
+    assert off.checks.panorama_keeps_to_scan(AGENT, AGENT + [0.25, 0.0, 0.0])
+    assert off.guard.holds.count == 0 and len(off.agent_map.blocked.points) == 0
