@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -187,7 +188,8 @@ def test_missing_scene_folders_and_unknown_names(tmp_path, capsys):
 
 def test_help_describes_every_option():
     result = subprocess.run([sys.executable, str(SCRIPT), "--help"], capture_output=True,
-                            text=True, timeout=120, cwd=ROOT)
+                            text=True, timeout=120, cwd=ROOT,
+                            env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert result.returncode == 0, result.stderr
     assert "Reads the Replica release as NICE-SLAM prepared it" in result.stdout
     documented = field_docs(prepare_replica.Args)
@@ -204,3 +206,21 @@ def test_the_prepared_scene_runs_in_the_harness(tmp_path):
     assert record["status"] == "ok" and record["steps_run"] == 3
     positions = np.array(record["trajectory"])
     np.testing.assert_allclose(positions, _poses(4)[:, :3, 3], atol=1e-3)  # traj.txt replayed
+
+
+def test_replica_passive_replays_a_prepared_scene(tmp_path, capsys):
+    source = write_release(tmp_path, scenes=("office0", "room0"), poses=4)
+    assert run_prepare(source, tmp_path / "out") == 0
+    spec = importlib.util.spec_from_file_location(
+        "replica_passive", ROOT / "benchmarks" / "replica_passive.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["replica_passive"] = module
+    spec.loader.exec_module(module)
+    report = module.main(["--scene-dir", str(tmp_path / "out" / "replica_room0"),
+                          "--num-samples", "2000", "--out", str(tmp_path / "room0.json")])
+    assert report["scene"] == "replica_room0" and report["frames"] == 4
+    assert report["image"] == "12 x 16"  # the scene's own camera (cam_params.json)
+    assert report["poses_not_reached"] == 0
+    assert report["published_passive_coslam"] is None  # published for office0 only
+    assert json.loads((tmp_path / "room0.json").read_text())["scene"] == "replica_room0"
+    assert "| Replica replica_room0, traj.txt (4 frames)" in capsys.readouterr().out
