@@ -132,7 +132,9 @@ def _import_policy_module(module_name: str, target: str) -> ModuleType:
     except ModuleNotFoundError as error:
         top = module_name.partition(".")[0]
         cwd = os.getcwd()
-        if error.name != top or cwd in sys.path or not _importable_from(cwd, top):
+        if error.name != top:  # the module was found; something it imports was not
+            raise ValueError(f"cannot import policy {target!r}: {error}") from error
+        if cwd in sys.path or not _importable_from(cwd, top):
             raise ValueError(
                 f"cannot import policy {target!r}: {error} (searched sys.path and the working "
                 f"directory {cwd}; name a file instead: 'path/to/file.py:ClassName')"
