@@ -51,7 +51,9 @@ GOAL_S = 2.0
 @dataclass
 class Args:
     samples: int = 200_000
+    """surface samples per mesh (200,000 as published)"""
     repeats: int = 5
+    """timed repetitions of each measurement"""
     cull_poses: int = 2000
     """Replica trajectory poses for the culling timing (every 2nd is used)"""
     cull_scene: str = ""
@@ -61,6 +63,7 @@ class Args:
     culling_only: bool = False
     """time only the culling (written to benchmarks/results/culling_speed_<scene>.json)"""
     out: str = "benchmarks/results/metrics_speed.json"
+    """the JSON report"""
 
 
 def parse_args() -> Args:

@@ -58,6 +58,7 @@ from PIL import Image  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 import naruto_gym  # noqa: E402,F401  (registers the env)
+from naruto_agent.benchmark.spec import SceneSpec  # noqa: E402
 from naruto_agent.mapping import NeuralMapper  # noqa: E402
 from naruto_agent.naruto import NarutoPolicy  # noqa: E402
 from naruto_agent.policies import EnvContext  # noqa: E402
@@ -91,7 +92,8 @@ class Args:
     output_dir: str = str(REPO_ROOT / "benchmarks" / "results")
     """where the JSON and PNGs go"""
     tag: str = ""
-    """suffix of the output names (default: scene, mapper and steps)"""
+    """suffix of the output names (default: scene, mapper and steps; the scene of a mesh
+    called mesh.ply is its folder's name, e.g. replica_room0)"""
     target_snapshots: int = 4
     """top-down pictures of the targets, evenly over the episode (0: none)"""
     settings: str = ""
@@ -363,7 +365,7 @@ def main(args: Args) -> dict:
     )
     base = env.unwrapped
     policy = NarutoPolicy(mapper=args.mapper, device=args.device, **settings)
-    tag = args.tag or f"{Path(args.scene).stem}_{args.mapper}_{args.steps}steps"
+    tag = args.tag or f"{SceneSpec(args.scene).label}_{args.mapper}_{args.steps}steps"
     output_dir = Path(args.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     policy.bind(EnvContext.from_env(env, step_budget=args.steps))

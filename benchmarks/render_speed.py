@@ -56,11 +56,14 @@ class Args:
     scenes: list[str] = field(
         default_factory=lambda: ["replica_like_room", "apartment", str(REPLICA / "mesh.ply")]
     )
+    """catalogue names or mesh paths (default: the two catalogue rooms and the Replica
+    office0 sample)"""
     paper_panorama: bool = True
     """also time the published 1024 x 2048 panorama"""
     large_mesh: bool = True
     """add two_rooms subdivided four times (760,832 triangles) to the frame-size sweep"""
     out: str = "benchmarks/results/render_speed.json"
+    """the JSON report"""
 
 
 def parse_args() -> Args:

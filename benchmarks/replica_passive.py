@@ -1,23 +1,29 @@
-"""The real Replica office0 scan, replayed and scored. Results: docs/benchmarks/metrics.md
+"""A Replica scan replayed and scored as every policy is. Results: docs/benchmarks/metrics.md
 
-Replays the 2000-pose Replica office0 scan in the env, fuses it with the reference TSDF mapper
-and scores it the way every policy is scored.
+Replays a Replica scene's recorded camera trajectory (``traj.txt``, the human-style "passive"
+scan of the published systems) in ``NarutoRecon-v0`` with pose actions and
+``reconstruct=True``: each action is the next recorded pose, the env moves the camera there
+(the recorded steps are far below the env's 0.1 m / 20 degree limits), renders the frame with
+the scene's camera (``cam_params.json``) and fuses it at 2 cm; then scores the fused mesh with
+the published protocol. On office0 the result is set beside the published passive figure.
 
-The trajectory (``../shared/scenes/replica_office0/traj.txt``) is the standard human-style
-"passive" scan of office0 (18.20 m). It is replayed with pose actions in ``NarutoRecon-v0``
-(``reconstruct=True``): each action is the next recorded pose, the env moves the camera there
-(the recorded steps are far below the env's 0.1 m / 20 degree limits), renders the frame and
-fuses it at 2 cm. The result is set beside the published passive figure for this trajectory.
+The scene is a folder holding ``mesh.ply``, ``traj.txt`` and ``cam_params.json``: the office0
+sample in ``../shared/scenes/replica_office0`` by default, or any of the eight scenes that
+``scripts/prepare_replica.py`` lays out from the Replica release (see docs/replica.md).
 
-    python benchmarks/replica_passive.py                       # the reported full run
-    python benchmarks/replica_passive.py --stride 10 --scale 0.5   # quick look
+Usage::
+
+    python benchmarks/replica_passive.py                                 # the reported run
+    python benchmarks/replica_passive.py --stride 10 --scale 0.5         # quick look
+    python benchmarks/replica_passive.py --scene-dir data/replica/replica_room0
 
 ``--trajectory`` replays another pose file of the same layout (one flattened 4 x 4
 camera-to-world matrix per line), e.g. the ``*_poses.txt`` that ``naruto_episode.py`` writes:
 the reference map of an active episode, rebuilt and scored (MAD included) without running
 its agent again.
 
-Writes ``benchmarks/results/replica_passive.json`` and prints a Markdown table.
+Writes ``benchmarks/results/replica_passive.json`` (``replica_passive_<folder>.json`` for
+another scene) and prints a Markdown table.
 """
 
 from __future__ import annotations
@@ -42,12 +48,14 @@ from naruto_gym.evaluation import (
     visible_vertex_mask,
 )
 from naruto_gym.geometry.transforms import quaternion_from_pose, rotation_angle_between
+from naruto_gym.sensors.pinhole import PinholeCamera
 
 REPO = Path(__file__).resolve().parents[1]
 REPLICA = REPO.parent / "shared" / "scenes" / "replica_office0"
+DEFAULT_OUT = "benchmarks/results/replica_passive.json"
 
-# NARUTO (CVPR 2024) supplementary Tables 4 and 6: passive Co-SLAM without tracking along this
-# trajectory, full-resolution office0 mesh, 2000 frames.
+# NARUTO (Feng et al., CVPR 2024) supplementary Tables 4 and 6: passive Co-SLAM without
+# tracking along office0's trajectory, full-resolution mesh, 2000 frames.
 PUBLISHED = {
     "completion_ratio_pct": 96.33,
     "accuracy_cm": 1.50,
@@ -58,20 +66,52 @@ PUBLISHED = {
 
 @dataclass
 class Args:
-    stride: int = 1  # replay every stride-th pose (1 = all 2000, the reported run)
-    scale: float = 1.0  # image resolution factor (1 = the published 680 x 1200 camera)
+    """Settings of the replay."""
+
+    scene_dir: str = str(REPLICA)
+    """scene folder with mesh.ply, traj.txt and cam_params.json (default: the office0 sample
+    in ../shared/scenes; scripts/prepare_replica.py writes one per Replica scene)"""
+    stride: int = 1
+    """replay every stride-th pose (1: all of them, 2000 on Replica, the reported run)"""
+    scale: float = 1.0
+    """image resolution factor of the scene's camera (1: the published 680 x 1200)"""
     voxel_size_m: float = 0.02
+    """voxel size of the TSDF fusion in metres (2 cm as the env's reference map)"""
     truncation_m: float = 0.08
+    """truncation distance of the TSDF fusion in metres"""
     num_samples: int = 200_000
+    """surface samples per mesh for the metrics (200,000 as published)"""
     seed: int = 0
-    trajectory: str = ""  # pose file to replay (default: the scan's traj.txt)
-    pinhole_backend: str = "raycast"  # the env's pinhole_backend ("auto": raster where cheaper)
-    out: str = "benchmarks/results/replica_passive.json"
-    mesh_out: str = ""  # also save the fused mesh here (PLY), e.g. /tmp/office0_tsdf.ply
+    """seed of the env reset and of the surface samples"""
+    trajectory: str = ""
+    """pose file to replay, one flattened 4 x 4 camera-to-world matrix per line (default:
+    the scene's traj.txt)"""
+    pinhole_backend: str = "raycast"
+    """the env's pinhole_backend: raycast, raster, or auto (the rasterizer where cheaper)"""
+    out: str = ""
+    """the JSON report (default: benchmarks/results/replica_passive.json for the office0
+    sample, replica_passive_<folder>.json for another scene folder)"""
+    mesh_out: str = ""
+    """also save the fused mesh here (PLY), e.g. /tmp/office0_tsdf.ply"""
 
 
-def parse_args() -> Args:
-    return parse_dataclass_args(Args, description=__doc__.splitlines()[0])
+def parse_args(argv: list[str] | None = None) -> Args:
+    description = " ".join(__doc__.split("\n\n")[1:3]).replace("\n", " ")
+    return parse_dataclass_args(Args, argv, description=description)
+
+
+def scene_camera(scene_dir: Path, scale: float) -> dict:
+    """The env's camera keywords for the scene's ``cam_params.json``: ``image_scale`` alone
+    when it is the env's default camera (the published one), else a ``camera``."""
+    params = scene_dir / "cam_params.json"
+    if not params.is_file():
+        return {"image_scale": scale}
+    values = json.loads(params.read_text())["camera"]
+    camera = PinholeCamera(int(values["w"]), int(values["h"]), float(values["fx"]),
+                           float(values["fy"]), float(values["cx"]), float(values["cy"]))
+    if camera == PinholeCamera():
+        return {"image_scale": scale}
+    return {"camera": camera.scaled(scale)}
 
 
 def pose_action(pose: np.ndarray) -> np.ndarray:
@@ -79,21 +119,27 @@ def pose_action(pose: np.ndarray) -> np.ndarray:
     return np.concatenate([pose[:3, 3], quaternion_from_pose(pose)]).astype(np.float32)
 
 
-def main() -> None:
-    args = parse_args()
-    if not REPLICA.is_dir():
-        raise SystemExit(f"{REPLICA} not found: this benchmark needs ../shared/scenes")
-    trajectory = Path(args.trajectory) if args.trajectory else REPLICA / "traj.txt"
+def main(argv: list[str] | None = None) -> dict:
+    args = parse_args(argv)
+    scene_dir = Path(args.scene_dir)
+    if not (scene_dir / "mesh.ply").is_file():
+        raise SystemExit(
+            f"{scene_dir / 'mesh.ply'} not found: pass --scene-dir with a scene folder (the "
+            "office0 sample is ../shared/scenes/replica_office0; scripts/prepare_replica.py "
+            "makes one per Replica scene, see docs/replica.md)"
+        )
+    trajectory = Path(args.trajectory) if args.trajectory else scene_dir / "traj.txt"
     if not trajectory.is_file():
         raise SystemExit(f"{trajectory} not found: pass a pose file (16 numbers per line)")
+    office0 = scene_dir.name.endswith("office0")
     poses = np.loadtxt(trajectory).reshape(-1, 4, 4)[:: args.stride]
     # A strided replay takes longer steps: widen the step limits so the poses are reached.
     limits = {} if args.stride == 1 else {"max_translation_m": 1.0, "max_rotation_deg": 180.0}
     env = gym.make(
         "NarutoRecon-v0",
-        scene=str(REPLICA / "mesh.ply"),
+        scene=str(scene_dir / "mesh.ply"),
         action_mode="pose",
-        image_scale=args.scale,
+        **scene_camera(scene_dir, args.scale),
         panorama_shape=None,  # not needed for a replay; saves a render per step
         reconstruct=True,
         pinhole_backend=args.pinhole_backend,
@@ -143,6 +189,7 @@ def main() -> None:
 
     report = {
         "args": asdict(args),
+        "scene": scene_dir.name,
         "trajectory_file": trajectory.name,
         "frames": int(unwrapped.reconstruction.mapper.num_frames),
         "image": f"{unwrapped.camera.height} x {unwrapped.camera.width}",
@@ -159,12 +206,15 @@ def main() -> None:
             "completion_ratio_pct": on_observable.completion_ratio_pct,
         },
         "gt_against_itself": floor.as_dict(),
-        "published_passive_coslam": PUBLISHED,
+        "published_passive_coslam": PUBLISHED if office0 else None,
         "recon_faces": len(recon.faces),
         "replay_s": replay_s,
         "evaluate_s": evaluate_s,
     }
-    out = Path(args.out) if Path(args.out).is_absolute() else REPO / args.out
+    default_out = (DEFAULT_OUT if scene_dir.resolve() == REPLICA.resolve()
+                   else f"benchmarks/results/replica_passive_{scene_dir.name}.json")
+    out = Path(args.out or default_out)
+    out = out if out.is_absolute() else REPO / out
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(report, indent=2))
 
@@ -172,20 +222,22 @@ def main() -> None:
     print(f"\nframes fused {report['frames']} at {report['image']}, poses not reached {off_target}")
     print(f"replay {replay_s:.0f} s, culling + metrics {evaluate_s:.1f} s")
     print(
-        f"\n| Replica office0, {report['trajectory_file']} ({report['frames']} frames) | mapper "
+        f"\n| Replica {scene_dir.name}, {report['trajectory_file']} ({report['frames']} frames) "
+        "| mapper "
         "| Acc. (cm) | Comp. (cm) | Comp. ratio (%) | Traj. (m) |"
     )
     print("|---|---|---|---|---|---|")
     print(
-        f"| naruto-gym env replay (50k-triangle mesh, culled) | TSDF fusion, "
+        f"| naruto-gym env replay ({len(scene.faces):,}-triangle mesh, culled) | TSDF fusion, "
         f"{100 * args.voxel_size_m:.0f} cm | {m['accuracy_cm']:.2f} | {m['completion_cm']:.2f} | "
         f"{m['completion_ratio_pct']:.2f} | {report['trajectory_length_m']:.2f} |"
     )
-    print(
-        f"| NARUTO paper, passive (full-resolution mesh) | Co-SLAM, no tracking | "
-        f"{PUBLISHED['accuracy_cm']:.2f} | {PUBLISHED['completion_cm']:.2f} | "
-        f"{PUBLISHED['completion_ratio_pct']:.2f} | {PUBLISHED['trajectory_length_m']:.2f} |"
-    )
+    if office0:
+        print(
+            f"| NARUTO paper, passive (full-resolution mesh) | Co-SLAM, no tracking | "
+            f"{PUBLISHED['accuracy_cm']:.2f} | {PUBLISHED['completion_cm']:.2f} | "
+            f"{PUBLISHED['completion_ratio_pct']:.2f} | {PUBLISHED['trajectory_length_m']:.2f} |"
+        )
     print(
         f"\nprecision {m['precision_pct']:.2f} %, F-score {m['fscore_pct']:.2f} %, "
         f"MAD {mad_cm:.2f} cm; not culled: acc {uncropped['accuracy_cm']:.2f} cm, "
@@ -200,6 +252,7 @@ def main() -> None:
     )
     print(f"saved {out}")
     env.close()
+    return report
 
 
 if __name__ == "__main__":

@@ -68,19 +68,32 @@ SLOW = {"RRT", "without direct line"}
 
 @dataclass
 class Args:
-    pairs: int = 50  # start/goal pairs per scene (the same for every variant)
-    slow_pairs: int = 20  # first pairs of the same set for the two slow variants (0: all)
+    pairs: int = 50
+    """start/goal pairs per scene (the same for every variant)"""
+    slow_pairs: int = 20
+    """first pairs of the same set for the two slow variants (0: all)"""
     seed: int = 0
+    """seed of the start/goal pairs"""
     scenes: str = "replica_office0,apartment"
+    """comma-separated scenes: replica_office0 (the sample) and catalogue names"""
     voxel_size: float = 0.1
-    min_clearance_m: float = 0.15  # start and goal keep this SDF
-    min_pair_distance_m: float = 1.0  # straight-line distance between start and goal
-    slow_time_limit_s: float = 20.0  # cap per request for RRT and "without direct line"
-    time_limit_s: float = 5.0  # cap per request for the fast variants
+    """voxel size of the planner's SDF grid in metres"""
+    min_clearance_m: float = 0.15
+    """start and goal keep this SDF"""
+    min_pair_distance_m: float = 1.0
+    """straight-line distance between start and goal"""
+    slow_time_limit_s: float = 20.0
+    """cap per request for RRT and 'without direct line'"""
+    time_limit_s: float = 5.0
+    """cap per request for the fast variants"""
     max_iterations: int = 1_000_000
-    device: str = "cpu"  # nearest-neighbour search: "cpu" (numpy), "auto", "cuda"
-    variants: str = "RRT,without direct line,without fast tree,E-RRT"  # rows to run
+    """iteration cap per request"""
+    device: str = "cpu"
+    """nearest-neighbour search: cpu (numpy), auto, cuda"""
+    variants: str = "RRT,without direct line,without fast tree,E-RRT"
+    """comma-separated rows to run"""
     out: str = "benchmarks/results/rrt_ablation.json"
+    """the JSON report"""
 
 
 def parse_args() -> Args:

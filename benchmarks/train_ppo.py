@@ -53,8 +53,8 @@ class Args:
     """square side the frames are resized to"""
     top_down_map: bool = False
     """add the egocentric top-down map of what the episode has seen and what is occupied"""
-    episode_steps: int = 200
-    """episode budget"""
+    episode_steps: int = 250
+    """episode budget in steps (250, as the reported runs and their evaluation)"""
     coverage_samples: int = 5000
     """coverage samples per scene (fewer makes a new scene cheaper)"""
     n_steps: int = 128

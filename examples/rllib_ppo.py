@@ -1,6 +1,8 @@
 """RLlib PPO on naruto-gym: register the env, run a few PPO iterations on a local Ray instance.
 
-Needs ``pip install "naruto-gym[ray]"`` (Ray with RLlib). The env each RLlib env runner builds
+Needs ``pip install "naruto-gym[ray]"`` (Ray with RLlib); without it, or with a Ray that lacks
+a piece of RLlib (``ray[default]`` alone has no ``dm_tree``), it says so and exits. The env
+each RLlib env runner builds
 is ``NarutoRecon-v0`` with discrete actions, a low-resolution camera and the learning
 observations of ``naruto_gym.wrappers.for_learning``, flattened to one vector (RLlib's
 default model for vectors is an MLP; use a custom RLModule for a CNN).
@@ -21,6 +23,7 @@ from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.wrappers import for_learning
 
 ENV_NAME = "NarutoReconFlat-v0"
+INSTALL_HINT = "pip install 'naruto-gym[ray]'"
 
 
 @dataclass
@@ -65,11 +68,28 @@ def _float_space(space: gym.spaces.Dict) -> gym.spaces.Dict:
     })
 
 
-def main(args: Args) -> list[dict[str, Any]]:
-    import ray
-    from ray.rllib.algorithms.ppo import PPOConfig
-    from ray.tune.registry import register_env
+def import_rllib() -> tuple[Any, Any, Any]:
+    """``ray``, RLlib's ``PPOConfig`` and ``register_env``.
 
+    Raises:
+        SystemExit: Ray or any piece RLlib imports is missing (the message says what to
+            install).
+    """
+    try:
+        import ray
+        from ray.rllib.algorithms.ppo import PPOConfig
+        from ray.tune.registry import register_env
+    except ImportError as error:
+        missing = getattr(error, "name", None) or str(error)
+        raise SystemExit(
+            f"examples/rllib_ppo.py needs Ray with RLlib, and {missing!r} does not import "
+            f"({type(error).__name__}: {error}); install it with: {INSTALL_HINT}"
+        ) from error
+    return ray, PPOConfig, register_env
+
+
+def main(args: Args) -> list[dict[str, Any]]:
+    ray, PPOConfig, register_env = import_rllib()  # noqa: N806 (RLlib's class name)
     register_env(ENV_NAME, make_env)
     ray.init(num_cpus=2, include_dashboard=False, ignore_reinit_error=True,
              log_to_driver=False)
@@ -82,7 +102,8 @@ def main(args: Args) -> list[dict[str, Any]]:
         .training(train_batch_size_per_learner=args.train_batch_size, minibatch_size=50,
                    num_epochs=2)
     )
-    algorithm = config.build_algo()
+    build = getattr(config, "build_algo", None) or config.build  # older Ray: build()
+    algorithm = build()
     results = []
     try:
         for iteration in range(args.iterations):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from dataclasses import dataclass, field
@@ -58,3 +59,80 @@ def test_every_benchmark_script_prints_its_help(script):
 def test_bad_value_is_rejected():
     with pytest.raises(SystemExit):
         parse_dataclass_args(ExampleArgs, ["--steps", "many"])
+
+
+def _script_args_fields(path: Path) -> tuple[list[str], set[str]]:
+    """The fields of a script's ``Args`` dataclass and those with a help string under them
+    (read from the source: the scripts need not import here)."""
+    import ast
+
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, ast.ClassDef) and node.name == "Args":
+            body = node.body
+            fields = [n.target.id for n in body if isinstance(n, ast.AnnAssign)]
+            documented = {
+                n.target.id for n, following in zip(body, body[1:], strict=False)
+                if isinstance(n, ast.AnnAssign) and isinstance(following, ast.Expr)
+                and isinstance(following.value, ast.Constant)
+            }
+            return fields, documented
+    return [], set()
+
+
+SCRIPTS = sorted([*BENCHMARKS.glob("*.py"), *(BENCHMARKS.parent / "scripts").glob("*.py"),
+                  *(BENCHMARKS.parent / "examples").glob("*.py")])
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda path: f"{path.parent.name}/{path.name}")
+def test_every_option_of_every_script_has_help(script):
+    fields, documented = _script_args_fields(script)
+    missing = [name for name in fields if name not in documented]
+    assert not missing, f"{script.name}: no help string under {missing} in its Args"
+
+
+def _help(argv: list[str]) -> str:
+    result = subprocess.run(
+        [sys.executable, *argv, "--help"], capture_output=True, text=True, timeout=120,
+        cwd=BENCHMARKS.parent, env={**os.environ, "PYTHONPATH": str(BENCHMARKS.parent)},
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    return " ".join(result.stdout.split())  # argparse wraps lines: compare words
+
+
+def test_benchmark_help_lists_every_policy_and_scene_form():
+    from naruto_agent.benchmark.cli import build_parser
+    from naruto_agent.policies import policy_names
+
+    text = " ".join(build_parser().format_help().split())
+    assert "naruto" in policy_names()
+    assert f"registered policies: {', '.join(policy_names())};" in text
+    for form in ("procedural:room:SEED", "NAME:OPENINGS", "PATH@AXIS", "--up-axis",
+                 "package.module:ClassName", "path/to/file.py:ClassName",
+                 '{"random": {"max_run_steps": 20}}', '{"max_run_steps": 20}'):
+        assert form in text, form
+
+
+def test_demo_help_gives_the_same_conventions():
+    from naruto_agent.demo.run import DemoArgs
+    from naruto_gym.cli_args import dataclass_parser
+
+    text = " ".join(dataclass_parser(DemoArgs).format_help().split())
+    for form in ("PATH@AXIS", "path/to/file.py:ClassName", '{"random": {"max_run_steps": 20}}',
+                 "680 x 1200 (H x W)", "170 x 300"):
+        assert form in text, form
+
+
+def test_replica_passive_help_is_whole():
+    text = _help([str(BENCHMARKS / "replica_passive.py")])
+    assert "On office0 the result is set beside the published passive figure." in text
+    assert "see docs/replica.md)." in text and "::" not in text
+    assert "--scene-dir SCENE_DIR scene folder with mesh.ply, traj.txt and cam_params.json" in text
+
+
+def test_train_ppo_default_budget_is_the_documented_one():
+    """The docs train and evaluate with 250-step episodes: the script's default agrees."""
+    text = _help([str(BENCHMARKS / "train_ppo.py")])
+    assert "250, as the reported runs and their evaluation) (default: 250)" in text
+    docs = BENCHMARKS.parent / "docs"
+    assert "every 250-step episode" in (docs / "benchmarks" / "ppo.md").read_text()
+    assert "--episode-steps 250" in (docs / "rl.md").read_text()

@@ -3,7 +3,8 @@
 Runs every (scene, policy, seed) episode in spawned worker processes (or as Ray tasks with
 ``--ray-address``), writes one JSON record per episode as soon as it finishes, then a Markdown
 table (mean +- std over seeds), a JSON summary and plots. A rerun skips the episodes already
-recorded with the same settings and retries the failed ones.
+recorded with the same settings and retries the failed ones; every failed episode is listed
+with its reason and the record that holds its traceback.
 
 Example::
 
@@ -26,7 +27,7 @@ from naruto_agent.benchmark.executors import pending_specs, run_local, run_ray
 from naruto_agent.benchmark.plots import plot_curves, plot_trajectories
 from naruto_agent.benchmark.records import load_records, write_json_atomic
 from naruto_agent.benchmark.spec import build_specs
-from naruto_agent.benchmark.tables import markdown_table, summarise
+from naruto_agent.benchmark.tables import failure_lines, markdown_table, summarise
 from naruto_gym.cli_args import dataclass_parser
 
 
@@ -35,15 +36,21 @@ class Args:
     """Arguments of the policy comparison (each field is a ``--flag``)."""
 
     scenes: list[str] = field(default_factory=lambda: ["replica_like_room"])
-    """catalogue names or mesh paths (PATH@AXIS for a y-up file)"""
+    """scenes, each a catalogue name (listed below), NAME:OPENINGS (an open scan, e.g.
+    two_rooms:no_ceiling+holes), procedural:room:SEED (a generated room), or a mesh path
+    (PATH@AXIS gives that file's up axis, e.g. room.obj@y)"""
     policies: list[str] = field(default_factory=lambda: ["passive", "random", "frontier"])
-    """registered policy names (listed below) or package.module:Class"""
+    """policies, each a registered name (listed below), package.module:ClassName (a module in
+    the working directory is found) or path/to/file.py:ClassName"""
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
     """episode seeds"""
     steps: int = 500
     """step budget of every episode"""
+    up_axis: str = "z"
+    """up axis of the mesh paths written without @AXIS: z, y, -y, x, -x, -z or auto (from a
+    recognised dataset layout)"""
     image_scale: float = 0.25
-    """camera resolution factor (0.25: 170 x 300 pixels)"""
+    """camera resolution factor of the 680 x 1200 (H x W) camera (0.25: 170 x 300)"""
     workers: int = 2
     """parallel worker processes (0: run in this process)"""
     ray_address: str | None = None
@@ -64,7 +71,9 @@ class Args:
     device: str = "auto"
     """Open3D device of the reference mapper (auto, cpu, cuda)"""
     policy_kwargs: str = "{}"
-    """JSON dict from policy name to its arguments, e.g. '{"random": {"max_run_steps": 20}}'"""
+    """JSON object of constructor arguments keyed by policy, e.g. '{"random":
+    {"max_run_steps": 20}}'; with one policy also its arguments directly, e.g.
+    '{"max_run_steps": 20}' (as naruto-demo takes them)"""
     env_kwargs: str = "{}"
     """JSON dict of extra env arguments, e.g. '{"max_depth_m": 5.0}'"""
     plots: bool = True
@@ -76,11 +85,16 @@ class Args:
 def build_parser() -> argparse.ArgumentParser:
     """An ``argparse`` parser made from the fields of :class:`Args`."""
     from naruto_agent.policies import policy_names
+    from naruto_gym.scenes import available_scenes
 
     description = __doc__.split("\n\n")[1].replace("\n", " ")
     parser = dataclass_parser(Args, description=description, prog="naruto-benchmark")
-    parser.epilog = (f"registered policies: {', '.join(policy_names())}; any other Policy "
-                     "subclass as package.module:ClassName")
+    parser.epilog = (
+        f"registered policies: {', '.join(policy_names())}; any other Policy subclass as "
+        "package.module:ClassName or path/to/file.py:ClassName. Catalogue scenes: "
+        f"{', '.join(available_scenes())}; also NAME:OPENINGS, procedural:room:SEED and mesh "
+        "paths (PATH@AXIS)."
+    )
     return parser
 
 
@@ -114,13 +128,30 @@ def write_reports(out_dir: str | Path, plots: bool = True) -> dict[str, Any]:
     return summary
 
 
+def check_policies(policies: list[str]) -> None:
+    """Load every policy given by import or file path, so that a missing module, file or class
+    stops the run with one clear error before any episode starts.
+
+    Raises:
+        ValueError: a policy that cannot be loaded (the message says why).
+    """
+    from naruto_agent.policies import policy_class, policy_names
+
+    registered = set(policy_names())
+    for policy in policies:
+        if policy not in registered:
+            policy_class(policy)
+
+
 def run(args: Args) -> int:
     """Run the comparison; returns the number of failed episodes."""
+    check_policies(args.policies)
     specs = build_specs(
         args.scenes,
         args.policies,
         args.seeds,
         args.steps,
+        up_axis=args.up_axis,
         image_scale=args.image_scale,
         eval_points=args.eval_points,
         eval_samples=args.eval_samples,
@@ -151,6 +182,10 @@ def run(args: Args) -> int:
         f"{summary['episodes']} records in {out_dir}; this run: {len(todo)} episodes, "
         f"{failed} failed, {time.perf_counter() - started:.0f} s"
     )
+    failures = failure_lines(specs, out_dir)
+    if failures:
+        print(f"{len(failures)} failed episode(s); the traceback is in each record:")
+        print("\n".join(failures))
     return failed
 
 

@@ -14,7 +14,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-UP_AXES = ("x", "y", "z", "-x", "-y", "-z")
+UP_AXES = ("x", "y", "z", "-x", "-y", "-z", "auto")
+"""Up axes of a mesh file (``"auto"``: read from a recognised dataset layout)."""
 TRAJECTORY_FILE = "traj.txt"
 
 
@@ -40,20 +41,62 @@ class SceneSpec:
         return Path(self.scene).suffix != ""
 
 
-def parse_scene(argument: str) -> SceneSpec:
-    """``"NAME"``, ``"PATH"`` or ``"PATH@AXIS"`` (e.g. ``room.obj@y``) to a :class:`SceneSpec`."""
-    scene, up_axis = argument, "z"
+def parse_scene(argument: str, up_axis: str = "z") -> SceneSpec:
+    """``"NAME"``, ``"PATH"`` or ``"PATH@AXIS"`` (e.g. ``room.obj@y``) to a :class:`SceneSpec`.
+
+    Args:
+        argument: the scene argument.
+        up_axis: the up axis of a mesh path written without ``@AXIS`` (``--up-axis``); an
+            ``@AXIS`` wins over it, and catalogue names ignore both.
+
+    Raises:
+        ValueError: an empty scene or an unknown axis.
+    """
+    if up_axis not in UP_AXES:
+        raise ValueError(f"unknown up axis {up_axis!r}; use one of {', '.join(UP_AXES)}")
+    scene = argument
     if "@" in argument:
-        scene, _, up_axis = argument.rpartition("@")
+        scene, _, written = argument.rpartition("@")
+        if written not in UP_AXES:
+            raise ValueError(
+                f"unknown up axis {written!r} in {argument!r}; write PATH@AXIS with AXIS one "
+                f"of {', '.join(UP_AXES)}"
+            )
+        up_axis = written
     if not scene:
         raise ValueError(f"empty scene in {argument!r}; use NAME, PATH or PATH@AXIS")
-    if up_axis not in UP_AXES:
-        raise ValueError(f"unknown up axis {up_axis!r} in {argument!r}; use one of {UP_AXES}")
-    return SceneSpec(scene, up_axis)
+    return SceneSpec(scene, up_axis if SceneSpec(scene).is_path else "z")
 
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "scene"
+
+
+def split_policy_kwargs(
+    kwargs: dict[str, Any], policies: list[str]
+) -> dict[str, dict[str, Any]]:
+    """Constructor arguments per policy from either form of ``--policy-kwargs``.
+
+    Keyed by policy (``{"random": {"max_run_steps": 20}}``): every key is one of
+    ``policies`` and every value an object. Flat (``{"max_run_steps": 20}``): the arguments
+    of the one policy, allowed when there is one policy.
+
+    Raises:
+        ValueError: a flat form with several policies, or keys that name no given policy.
+    """
+    if not kwargs:
+        return {}
+    keyed = all(key in policies and isinstance(value, dict) for key, value in kwargs.items())
+    if keyed:
+        return {key: dict(value) for key, value in kwargs.items()}
+    if len(policies) == 1:
+        return {policies[0]: dict(kwargs)}
+    strays = sorted(key for key in kwargs if key not in policies)
+    raise ValueError(
+        f"--policy-kwargs with several policies must be keyed by policy name, e.g. "
+        f"'{{\"{policies[0]}\": {{...}}}}'; {strays or sorted(kwargs)} name no policy of "
+        f"{policies} (with one policy its arguments may also be given directly)"
+    )
 
 
 def policy_label(policy: str) -> str:
@@ -164,6 +207,7 @@ def build_specs(
     policies: list[str],
     seeds: list[int],
     steps: int,
+    up_axis: str = "z",
     **settings: Any,
 ) -> list[EpisodeSpec]:
     """The episodes of scenes x policies x seeds, ordered scene-major.
@@ -173,17 +217,22 @@ def build_specs(
         policies: policy names or import paths.
         seeds: episode seeds.
         steps: step budget of every episode.
+        up_axis: the up axis of mesh paths written without ``@AXIS``.
         **settings: further :class:`EpisodeSpec` fields (``image_scale``, ``eval_points``...);
-            ``policy_kwargs`` here is a dict from policy name to its arguments.
+            ``policy_kwargs`` here is a dict from policy name to its arguments, or the
+            arguments themselves when there is one policy (:func:`split_policy_kwargs`).
+
+    A policy file (``path/to/file.py:Class``) is recorded by its absolute path, so that
+    workers in another folder find it.
     """
     if not scenes or not policies or not seeds:
         raise ValueError("need at least one scene, one policy and one seed")
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds must be distinct, got {seeds}")
-    per_policy = settings.pop("policy_kwargs", {}) or {}
+    per_policy = split_policy_kwargs(settings.pop("policy_kwargs", {}) or {}, policies)
     specs = []
     for argument in scenes:
-        scene = parse_scene(argument)
+        scene = parse_scene(argument, up_axis)
         for policy in policies:
             kwargs = {**default_policy_kwargs(policy, scene), **per_policy.get(policy, {})}
             for seed in seeds:
@@ -191,7 +240,7 @@ def build_specs(
                     EpisodeSpec(
                         scene=scene.scene,
                         up_axis=scene.up_axis,
-                        policy=policy,
+                        policy=_absolute_policy_file(policy),
                         seed=int(seed),
                         steps=int(steps),
                         policy_kwargs=kwargs,
@@ -202,3 +251,13 @@ def build_specs(
     if len(set(ids)) != len(ids):
         raise ValueError("two scenes or policies share a label; give them distinct names")
     return specs
+
+
+def _absolute_policy_file(policy: str) -> str:
+    """``path/to/file.py:Class`` with the file's absolute path; other names unchanged."""
+    from naruto_agent.policies.registry import is_policy_file
+
+    source, separator, attribute = policy.rpartition(":")
+    if not separator or not is_policy_file(source):
+        return policy
+    return f"{Path(source).expanduser().resolve()}:{attribute}"

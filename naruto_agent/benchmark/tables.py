@@ -1,13 +1,20 @@
-"""Aggregate episode records into mean +- std over seeds per scene and policy, as Markdown."""
+"""Aggregate episode records into mean +- std over seeds per scene and policy, as Markdown,
+and list the failed episodes with their reasons."""
 
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from naruto_agent.benchmark.records import STATUS_OK
+from naruto_agent.benchmark.records import STATUS_FAILED, STATUS_OK, read_record
+from naruto_agent.benchmark.spec import EpisodeSpec
+
+#: Longest reason printed for a failed episode (the whole error is in its record).
+REASON_CHARS = 200
 
 # (column title, how to read the value from a record, decimals)
 COLUMNS: tuple[tuple[str, str, int], ...] = (
@@ -92,3 +99,22 @@ def markdown_table(rows: list[dict[str, Any]]) -> str:
             )
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def failure_reason(record: dict[str, Any]) -> str:
+    """One line saying why an episode failed: the first line of its error, shortened."""
+    lines = [line.strip() for line in str(record.get("error") or "").splitlines()]
+    reason = next((line for line in lines if line), "no error message recorded")
+    return reason if len(reason) <= REASON_CHARS else reason[: REASON_CHARS - 3] + "..."
+
+
+def failure_lines(specs: Iterable[EpisodeSpec], out_dir: str | Path) -> list[str]:
+    """``"  EPISODE: REASON (traceback: RECORD PATH)"`` for each of ``specs`` whose record
+    under ``out_dir`` says it failed."""
+    lines = []
+    for spec in specs:
+        path = spec.record_path(out_dir)
+        record = read_record(path)
+        if record is not None and record.get("status") == STATUS_FAILED:
+            lines.append(f"  {spec.episode_id}: {failure_reason(record)} (traceback: {path})")
+    return lines

@@ -31,7 +31,8 @@ class Episode:
             ``checkpoints``).
         mesh: the reconstruction scored at the end.
         map_source: where ``mesh`` comes from.
-        camera_size: (width, height) of the frames.
+        camera_size: (height, width) of the frames, the order of the docs and of image
+            arrays.
         policy_detail_s: the policy's own per-phase seconds, when it keeps them.
     """
 

@@ -266,13 +266,13 @@ def summary_text(metrics: dict[str, Any], folder: Path) -> str:
         value = metrics.get(key)
         return "n/a" if value is None else f"{value:.{digits}f} {unit}"
 
-    width, height = metrics["image_size"]
+    height, width = metrics["image_size"]
     times = metrics["time_per_step_ms"]
     phases = ", ".join(f"{phase} {times[phase]:.0f}" for phase in ("policy", "env", "mapping"))
     return "\n".join(
         [
             f"{metrics['policy']} on {metrics['scene']}, seed {metrics['seed']}: "
-            f"{metrics['steps']} steps, {width} x {height} frames",
+            f"{metrics['steps']} steps, {height} x {width} (H x W) frames",
             f"  map: {metrics['map']}, {metrics['mesh_faces']:,} faces",
             f"  accuracy {number('accuracy_cm', 'cm')} | completion {number('completion_cm', 'cm')}"
             f" | completion ratio {number('completion_ratio_pct', '%')}"

@@ -44,11 +44,14 @@ class DemoArgs:
     """Settings of the demo."""
 
     policy: str = "naruto"
-    """passive, random, frontier, naruto, or a Policy subclass as 'package.module:ClassName'"""
+    """passive, random, frontier, naruto, or a Policy subclass as 'package.module:ClassName'
+    (a module in the working directory is found) or 'path/to/file.py:ClassName'"""
     scene: str = "replica_like_room"
-    """catalogue name, mesh path, 'NAME:OPENINGS' or 'procedural:room:SEED'"""
+    """catalogue name, 'NAME:OPENINGS', 'procedural:room:SEED', or a mesh path ('PATH@AXIS'
+    gives its up axis, e.g. room.obj@y, as naruto-benchmark takes it)"""
     up_axis: str = "z"
-    """up axis of a mesh file: z, y or auto"""
+    """up axis of a mesh path written without @AXIS: z, y, -y, x, -x, -z or auto (from a
+    recognised dataset layout)"""
     steps: int = DEFAULT_STEPS
     """step budget of the episode"""
     seed: int = 0
@@ -59,9 +62,11 @@ class DemoArgs:
     device: str = "auto"
     """device of the policy's mapper, for a policy that takes one (auto: CUDA when present)"""
     policy_kwargs: str = ""
-    """JSON object of further keyword arguments of the policy's constructor"""
+    """JSON object of further keyword arguments of the policy's constructor, e.g.
+    '{"max_run_steps": 20}', or keyed by the policy as naruto-benchmark takes them, e.g.
+    '{"random": {"max_run_steps": 20}}'"""
     image_scale: float = 0.25
-    """camera resolution factor of the 680 x 1200 camera (0.25: 170 x 300)"""
+    """camera resolution factor of the 680 x 1200 (H x W) camera (0.25: 170 x 300)"""
     out: str = "outputs/demo"
     """folder the outputs are written to"""
     checkpoints: int = 4
@@ -103,10 +108,14 @@ def build_policy(args: DemoArgs) -> Any:
     """The policy named by ``--policy`` with ``--policy-kwargs``, plus the demo's policy
     settings (``--mapper``, ``--device``) that its constructor takes (:func:`policy_settings`).
 
+    ``--policy-kwargs`` is flat (the constructor's arguments) or keyed by the policy's name,
+    as ``naruto-benchmark`` takes it (:func:`~naruto_agent.benchmark.spec.split_policy_kwargs`).
+
     Raises:
         ValueError: an unknown policy name, an import path that is not a ``Policy``, or
             keyword arguments that are not a JSON object.
     """
+    from naruto_agent.benchmark.spec import split_policy_kwargs
     from naruto_agent.policies import policy_class
 
     cls = policy_class(args.policy)
@@ -116,6 +125,7 @@ def build_policy(args: DemoArgs) -> Any:
         raise ValueError(f"--policy-kwargs is not valid JSON: {error}") from error
     if not isinstance(kwargs, dict):
         raise ValueError(f"--policy-kwargs must be a JSON object, got {args.policy_kwargs!r}")
+    kwargs = split_policy_kwargs(kwargs, [args.policy]).get(args.policy, {})
     kwargs = {**policy_settings(cls, args), **kwargs}
     try:
         return cls(**kwargs)
@@ -311,7 +321,7 @@ def run_episode(args: DemoArgs, env: Any, policy: Any) -> Episode:
         times_s=times,
         mesh=source.mesh(),
         map_source=source.label,
-        camera_size=(base.camera.width, base.camera.height),
+        camera_size=(base.camera.height, base.camera.width),
         policy_detail_s=dict(getattr(policy, "timings", {}) or {}),
     )
 
@@ -322,12 +332,14 @@ def prepare(args: DemoArgs) -> tuple[Any, Any]:
     Raises:
         DemoInputError: bad settings, an unknown policy or scene (the message says which).
     """
+    from naruto_agent.benchmark.spec import parse_scene
     from naruto_gym.scenes.catalogue import resolve_scene
 
     try:
         check_args(args)
         policy = build_policy(args)
-        scene = resolve_scene(args.scene, args.up_axis)
+        scene_spec = parse_scene(args.scene, args.up_axis)
+        scene = resolve_scene(scene_spec.scene, scene_spec.up_axis)
     except (ValueError, FileNotFoundError) as error:
         raise DemoInputError(str(error)) from error
     return scene, policy

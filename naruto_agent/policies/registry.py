@@ -8,15 +8,24 @@ A policy class registers itself with a decorator::
 A policy whose module is costly to import (the NARUTO agent's planner and mappers) is also
 registered by import path (:func:`register_lazy_policy`), so that listing and looking names up
 does not import it: the first lookup imports the module, whose decorator then registers the
-class and takes the lazy entry's place (the lookup checks that the two name the same class).
-Any ``Policy`` subclass can also be named by its import path, ``"package.module:ClassName"``,
-without registering.
+class and takes the lazy entry's place (the lookup checks that the two name the same class). Any
+``Policy`` subclass can also be named without registering, by its import path
+(``"package.module:ClassName"``, a module in the working directory included, as ``python -m``
+finds it) or by its file (``"path/to/file.py:ClassName"``), so that the command-line tools
+take a user's policy as they find it.
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import importlib.util
+import inspect
+import os
+import sys
 from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
 from typing import Any, TypeVar
 
 from naruto_agent.policies.base import Policy
@@ -72,25 +81,37 @@ def policy_names() -> list[str]:
 
 
 def policy_class(name: str) -> type[Policy]:
-    """The policy class of a registry name or a ``"package.module:ClassName"`` import path.
+    """The policy class of a registry name, an import path or a file path.
+
+    Args:
+        name: a registered name (:func:`policy_names`), ``"package.module:ClassName"`` (a
+            module in the working directory is found without ``PYTHONPATH``), or
+            ``"path/to/file.py:ClassName"`` (relative to the working directory).
 
     Raises:
-        ValueError: an unknown name, a path that does not import, or a class that is not a
-            ``Policy`` subclass.
+        ValueError: an unknown name, a module or file that does not exist or does not load,
+            a class it does not define, or a class that is not a ``Policy`` subclass.
     """
     if name in POLICIES:
         return POLICIES[name]
     target = LAZY_POLICIES.get(name, name)
     if ":" not in target:
+        hint = " (a file needs its class: 'FILE.py:ClassName')" if target.endswith(".py") else ""
         raise ValueError(
-            f"unknown policy {name!r}; use one of {policy_names()} or "
-            "'package.module:ClassName'"
+            f"unknown policy {name!r}{hint}; use one of {policy_names()}, "
+            "'package.module:ClassName' or 'path/to/file.py:ClassName'"
         )
-    module_name, _, attribute = target.partition(":")
-    try:
-        cls = getattr(importlib.import_module(module_name), attribute)
-    except (ImportError, AttributeError) as error:
-        raise ValueError(f"cannot import policy {target!r}: {error}") from error
+    source, _, attribute = target.rpartition(":")
+    module = _load_policy_file(source) if is_policy_file(source) else _import_policy_module(
+        source, target
+    )
+    cls = getattr(module, attribute, None)
+    if cls is None:
+        defined = ", ".join(_policy_classes_in(module)) or "none"
+        raise ValueError(
+            f"cannot import policy {target!r}: {source} has no {attribute!r} (its Policy "
+            f"subclasses: {defined})"
+        )
     if not (isinstance(cls, type) and issubclass(cls, Policy)):
         raise ValueError(f"{target!r} is not a naruto_agent.policies.Policy subclass")
     registered = POLICIES.get(name)
@@ -102,6 +123,92 @@ def policy_class(name: str) -> type[Policy]:
     return cls
 
 
+def is_policy_file(source: str) -> bool:
+    """True when the part of a policy name before ``:ClassName`` is a file path (it ends in
+    ``.py`` or holds a path separator), not a dotted module name."""
+    return source.endswith(".py") or "/" in source or os.sep in source
+
+
+def _import_policy_module(module_name: str, target: str) -> ModuleType:
+    """Import a module by name; one that is not on ``sys.path`` is looked for in the working
+    directory too (appended to ``sys.path``, so it never shadows an installed module)."""
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as error:
+        top = module_name.partition(".")[0]
+        cwd = os.getcwd()
+        if error.name != top:  # the module was found; something it imports was not
+            raise ValueError(f"cannot import policy {target!r}: {error}") from error
+        if cwd in sys.path or not _importable_from(cwd, top):
+            raise ValueError(
+                f"cannot import policy {target!r}: {error} (searched sys.path and the working "
+                f"directory {cwd}; name a file instead: 'path/to/file.py:ClassName')"
+            ) from error
+        sys.path.append(cwd)
+    except ImportError as error:
+        raise ValueError(f"cannot import policy {target!r}: {error}") from error
+    try:
+        return importlib.import_module(module_name)
+    except ImportError as error:
+        raise ValueError(f"cannot import policy {target!r}: {error}") from error
+
+
+def _importable_from(folder: str, top: str) -> bool:
+    """True when ``folder`` holds the module or package ``top``."""
+    base = Path(folder) / top
+    return base.with_suffix(".py").is_file() or (base / "__init__.py").is_file()
+
+
+def _load_policy_file(source: str) -> ModuleType:
+    """Execute a policy file once per path (later calls get the same module, so its classes
+    and registrations stay the same objects).
+
+    Raises:
+        ValueError: the file does not exist, is not a ``.py`` file or fails to load.
+    """
+    path = Path(source).expanduser()
+    if not path.is_absolute():
+        path = Path.cwd() / path
+    if not path.is_file():
+        raise ValueError(
+            f"policy file {source!r} does not exist (looked at {path}); give a path to a .py "
+            "file, absolute or relative to the working directory"
+        )
+    if path.suffix != ".py":
+        raise ValueError(f"policy file {source!r} is not a .py file")
+    path = path.resolve()
+    digest = hashlib.sha1(str(path).encode()).hexdigest()[:10]
+    module_name = f"_naruto_policy_file_{digest}_{path.stem}"
+    if module_name in sys.modules:
+        return sys.modules[module_name]
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    if spec is None or spec.loader is None:
+        raise ValueError(f"cannot load policy file {source!r}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[module_name] = module  # dataclasses and pickling look classes up there
+    try:
+        spec.loader.exec_module(module)
+    except Exception as error:  # the user's file: any error is a load failure
+        del sys.modules[module_name]
+        raise ValueError(
+            f"cannot load policy file {source!r}: {type(error).__name__}: {error}"
+        ) from error
+    return module
+
+
+def _policy_classes_in(module: ModuleType) -> list[str]:
+    """Names of the ``Policy`` subclasses a module defines."""
+    return sorted(
+        name
+        for name, value in vars(module).items()
+        if inspect.isclass(value)
+        and issubclass(value, Policy)
+        and value is not Policy
+        and value.__module__ == module.__name__
+    )
+
+
 def make_policy(name: str, **kwargs: Any) -> Policy:
-    """Build a policy by registry name or import path, with constructor keyword arguments."""
+    """Build a policy by registry name, import path or file path (see :func:`policy_class`),
+    with constructor keyword arguments."""
     return policy_class(name)(**kwargs)

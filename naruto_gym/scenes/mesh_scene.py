@@ -36,6 +36,11 @@ _UP_AXIS_TO_Z: dict[str, np.ndarray] = {
 # File layouts whose up axis is fixed by the dataset (``up_axis="auto"``).
 _SCANNET_MESH = re.compile(r"^scene\d{4}_\d{2}_vh_clean(_2)?\.ply$")
 _REPLICA_SIBLINGS = ("habitat", "textures")
+# The Replica release as NICE-SLAM prepared it (``office0_mesh.ply`` beside ``office0/``), and
+# a scene folder of it as ``scripts/prepare_replica.py`` writes it (``mesh.ply`` beside the
+# release's ``cam_params.json``).
+_NICE_SLAM_REPLICA_MESH = re.compile(r"^(room[0-2]|office[0-4])_mesh\.ply$")
+_PREPARED_REPLICA_FILE = "cam_params.json"
 
 _LOG = logging.getLogger(__name__)
 
@@ -325,8 +330,11 @@ def scene_from_trimesh(
 def dataset_up_axis(path: str | Path) -> str:
     """The up axis fixed by a recognised dataset layout (what ``up_axis="auto"`` uses).
 
-    Recognised: ScanNet (``sceneXXXX_XX_vh_clean_2.ply`` or ``..._vh_clean.ply``, z-up) and
-    Replica (``mesh.ply`` beside its ``habitat/`` or ``textures/`` folder, z-up). Nothing else
+    Recognised: ScanNet (``sceneXXXX_XX_vh_clean_2.ply`` or ``..._vh_clean.ply``, z-up),
+    Replica (``mesh.ply`` beside its ``habitat/`` or ``textures/`` folder, z-up) and the
+    Replica release of NICE-SLAM (``office0_mesh.ply`` and the other seven scenes, or a
+    ``mesh.ply`` beside its ``cam_params.json`` as ``scripts/prepare_replica.py`` lays it out,
+    z-up). Nothing else
     is guessed: glTF files are y-up by the glTF specification, but MP3D/HM3D exports differ
     and habitat-sim's own test files are z-up.
 
@@ -338,10 +346,15 @@ def dataset_up_axis(path: str | Path) -> str:
         return "z"
     if path.name == "mesh.ply" and any((path.parent / d).is_dir() for d in _REPLICA_SIBLINGS):
         return "z"
+    if _NICE_SLAM_REPLICA_MESH.match(path.name):
+        return "z"
+    if path.name == "mesh.ply" and (path.parent / _PREPARED_REPLICA_FILE).is_file():
+        return "z"
     raise ValueError(
         f"up_axis='auto' does not recognise the layout of {str(path)!r} (it knows ScanNet "
-        "sceneXXXX_XX_vh_clean_2.ply and Replica mesh.ply with habitat/ or textures/ beside "
-        "it); pass the axis that points up in the file: up_axis='z' for ScanNet, Replica and "
+        "sceneXXXX_XX_vh_clean_2.ply, Replica mesh.ply with habitat/, textures/ or "
+        "cam_params.json beside it, and NICE-SLAM's Replica office0_mesh.ply...); pass the "
+        "axis that points up in the file: up_axis='z' for ScanNet, Replica and "
         "most PLY scans, 'y' for y-up glTF/GLB files such as MP3D/HM3D exports and SceneNet "
         "(habitat-sim's test .glb files are z-up)"
     )

@@ -66,7 +66,7 @@ def test_metrics_json_holds_the_scores(naruto_run):
     assert 0 < written["completion_ratio_pct"] <= written["observable_completion_ratio_pct"] <= 100
     assert written["collisions"] == sum(written["collision_reasons"].values())
     assert written["time_per_step_ms"]["total"] > 0
-    assert written["image_size"] == [120, 68]
+    assert written["image_size"] == [68, 120]  # H x W, as the docs write frame sizes
     assert set(written["outputs"]) == {
         "reconstruction.ply",
         "metrics.json",
@@ -94,6 +94,7 @@ def test_printed_summary_names_the_scores(naruto_run, capsys):
     ):
         assert words in text
     assert f"{metrics['completion_ratio_pct']:.2f} %" in text
+    assert "68 x 120 (H x W) frames" in text  # height first, as the docs write "170 x 300"
 
 
 def test_ply_is_the_scored_mesh_inside_the_scene(naruto_run):
