@@ -20,8 +20,8 @@ HTML comments right before a block (invisible on GitHub and on the site) steer t
 ``<!-- docs-test: alone -->``
     A Python block that runs in a fresh process of its own, not in the page's session.
 ``<!-- docs-test: write FILE -->``
-    The page tells the reader to save the block as FILE: it is written to the page's folder,
-    then run there as ``python FILE`` (a module must at least import cleanly).
+    The page tells the reader to save the block as FILE: it is written to the page's folder
+    and checked for syntax; the later blocks that use it run it.
 ``<!-- docs-test: needs X,Y -->``
     Skip cleanly unless each X is there: ``shared`` (the research-only meshes in
     ``../shared/scenes``; implied by a block that mentions ``../shared``), ``gpu`` (CUDA),
@@ -447,16 +447,21 @@ def console_scripts() -> dict[str, str]:
 
 
 def _shims(folder: Path) -> Path:
-    """A folder of ``python`` and the package's console scripts, all on this interpreter."""
+    """A folder of ``python`` and the package's console scripts, all on this interpreter.
+
+    A console script is a Python file run by path, as pip's launchers do, so that its import
+    path starts with its own folder and not with the working directory.
+    """
     folder.mkdir(parents=True, exist_ok=True)
     for name in ("python", "python3"):
         (folder / name).symlink_to(sys.executable)
     for name, target in console_scripts().items():
         module, function = target.split(":")
-        code = (f"import sys; sys.argv[0] = {name!r}; from {module} import {function}; "
-                f"sys.exit({function}())")
+        script = folder / f"{name}.py"
+        script.write_text(f"import sys\nfrom {module} import {function}\n\n"
+                          f"sys.argv[0] = {name!r}\nsys.exit({function}())\n")
         shim = folder / name
-        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -c "{code}" "$@"\n')
+        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" "{script}" "$@"\n')
         shim.chmod(0o755)
     return folder
 
@@ -528,8 +533,12 @@ class PageRun:
             target = self.work / block.write
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_text(block.code, encoding="utf-8")
-            if block.runs_as == "python":
-                return run_command([sys.executable, block.write], self.work, self.env)
+            if block.runs_as == "python":  # the blocks that import it run it
+                try:
+                    compile(block.code, str(target), "exec")
+                except SyntaxError as error:
+                    return Outcome(False, f"{type(error).__name__}: {error}", 0.0)
+                return Outcome(True, "", 0.0)
             return run_command(["bash", "-n", block.write], self.work, self.env)
         if block.runs_as == "bash":
             script = self.work.parent / (re.sub(r"\W+", "_", block.id) + ".sh")
