@@ -458,8 +458,9 @@ def _shims(folder: Path) -> Path:
     for name, target in console_scripts().items():
         module, function = target.split(":")
         script = folder / f"{name}.py"
-        script.write_text(f"import sys\nfrom {module} import {function}\n\n"
-                          f"sys.argv[0] = {name!r}\nsys.exit({function}())\n")
+        script.write_text(f"import sys\n\nfrom {module} import {function}\n\n"
+                          f"if __name__ == '__main__':\n    sys.argv[0] = {name!r}\n"
+                          f"    sys.exit({function}())\n")
         shim = folder / name
         shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" "{script}" "$@"\n')
         shim.chmod(0o755)
@@ -477,7 +478,7 @@ def page_folder(base: Path) -> Path:
     for name in ("examples", "scripts"):
         shutil.copytree(REPO_ROOT / name, work / name,
                         ignore=shutil.ignore_patterns("__pycache__"))
-    (work / "benchmarks").mkdir()
+    (work / "benchmarks" / "results").mkdir(parents=True)
     for script in (REPO_ROOT / "benchmarks").glob("*.py"):
         shutil.copy2(script, work / "benchmarks" / script.name)
     shutil.copy2(REPO_ROOT / "pyproject.toml", work / "pyproject.toml")
