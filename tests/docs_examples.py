@@ -12,6 +12,8 @@ HTML comments right before a block (invisible on GitHub and on the site) steer t
 ``<!-- docs-test: skip (REASON; covered by: ID) -->``
     The block is not run (a long benchmark, an install); the hidden twin ``ID``, a
     size-reduced version of it, runs in its place, so nothing documented goes unchecked.
+    ``PAGE#ID`` names a twin on another page that checks the same command. A block the code
+    fails names the issue item that fixes it instead of a twin.
 ``<!-- docs-test: twin ID LANG [slow] [alone] [needs=X,Y]`` ... ``-->``
     A hidden twin: the lines up to the closing ``-->`` are code in LANG (python or bash), run
     where the comment stands. A page with no room for its twins (the README has a line limit)
@@ -63,7 +65,7 @@ BLOCK_TIMEOUT_S = 300.0
 _FENCE = re.compile(r"^(?P<indent>[ \t]*)(?P<fence>`{3,}|~{3,})[ \t]*(?P<info>[^`]*)$")
 _DIRECTIVE = re.compile(r"^\s*<!--\s*docs-test:\s*(?P<body>.*?)\s*-->\s*$")
 _TWIN_OPEN = re.compile(r"^\s*<!--\s*docs-test:\s*twin\s+(?P<header>.*?)\s*$")
-_COVERED_BY = re.compile(r"covered by:\s*(?P<ids>[\w.-]+(?:\s*,\s*[\w.-]+)*)")
+_COVERED_BY = re.compile(r"covered by:\s*(?P<ids>[\w./#-]+(?:\s*,\s*[\w./#-]+)*)")
 
 
 class DocsFormatError(ValueError):
