@@ -411,17 +411,21 @@ class PythonSession:
                 return Outcome(bool(ok), "".join(output), time.perf_counter() - start)
             output.append(line)
 
-    def close(self) -> None:
-        """Ends the process."""
-        if self.process.poll() is None:
-            if self.process.stdin is not None:
-                self.process.stdin.close()
+    def retire(self) -> None:
+        """Asks the process to end (it exits when it reads the end of its input)."""
+        if self.process.stdin is not None and not self.process.stdin.closed:
             try:
-                self.process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                _kill(self.process)
-        else:
-            self.process.wait()
+                self.process.stdin.close()
+            except BrokenPipeError:
+                pass
+
+    def close(self) -> None:
+        """Ends the process and waits for it."""
+        self.retire()
+        try:
+            self.process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            _kill(self.process)
 
 
 def run_command(argv: list[str], cwd: Path, env: dict[str, str],
@@ -508,6 +512,7 @@ class PageRun:
         self.work = page_folder(base)
         self.env = block_env(_shims(base / "bin"))
         self.session: PythonSession | None = None
+        self.retired: list[PythonSession] = []
         self.results: dict[int, Outcome] = {}
 
     def runnable(self, block: Block) -> bool:
@@ -527,9 +532,18 @@ class PageRun:
                 self.results[earlier] = self._run(self.blocks[earlier])
         if index not in self.results:
             self.results[index] = self._run(block)
+        if self.session is not None and not any(
+                self._in_session(b) for b in self.blocks[index + 1:]):
+            self.session.retire()  # the page's last Python block: free its memory now
+            self.retired.append(self.session)
+            self.session = None
         failed = [self.blocks[i].id for i in range(index)
                   if i in self.results and not self.results[i].ok]
         return self.results[index], failed
+
+    def _in_session(self, block: Block) -> bool:
+        return (self.runnable(block) and block.runs_as == "python" and not block.alone
+                and block.write is None)
 
     def _run(self, block: Block) -> Outcome:
         if block.write is not None:
@@ -559,6 +573,11 @@ class PageRun:
         return self.session.run(block)
 
     def close(self) -> None:
-        """Ends the page's Python session."""
+        """Ends the page's Python sessions."""
         if self.session is not None:
-            self.session.close()
+            self.session.retire()
+            self.retired.append(self.session)
+            self.session = None
+        for session in self.retired:
+            session.close()
+        self.retired.clear()

@@ -48,6 +48,9 @@ def page_runs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Pa
 
     yield get  # type: ignore[misc]
     for run in runs.values():
+        for session in ([run.session] if run.session else []) + run.retired:
+            session.retire()  # all at once: interpreters take a while to exit
+    for run in runs.values():
         run.close()
 
 
