@@ -406,9 +406,11 @@ class PythonSession:
             if line is None:
                 output.append(f"\n[the Python process exited with {self.process.wait()}]")
                 return Outcome(False, "".join(output), time.perf_counter() - start)
-            if line.startswith(self.token):
-                ok = json.loads(line[len(self.token):])
-                return Outcome(bool(ok), "".join(output), time.perf_counter() - start)
+            if self.token in line:  # after the block's last output, even one with no newline
+                before, _, after = line.partition(self.token)
+                output.append(before)
+                return Outcome(bool(json.loads(after)), "".join(output),
+                               time.perf_counter() - start)
             output.append(line)
 
     def retire(self) -> None:

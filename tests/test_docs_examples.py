@@ -138,13 +138,34 @@ def test_the_runner_reads_directives_and_twins(tmp_path: Path) -> None:
 
 def test_a_python_page_keeps_its_state_and_reports_page_lines(tmp_path: Path) -> None:
     page = tmp_path / "page.md"
-    page.write_text("```python\nx = 41\n```\n\n```python\nx += 1\nassert x == 0, x\n```\n",
-                    encoding="utf-8")
+    page.write_text("```python\nx = 41\nprint('no newline', end='')\n```\n\n"
+                    "```python\nx += 1\nassert x == 0, x\n```\n", encoding="utf-8")
     first, second = parse_page(page, tmp_path)
     run = PageRun([first, second], tmp_path / "run")
     try:
         outcome, failed_before = run.run(second)  # runs the first block before it
     finally:
         run.close()
-    assert run.results[0].ok and not outcome.ok and not failed_before
-    assert "AssertionError: 42" in outcome.output and 'page.md", line 7' in outcome.output
+    assert run.results[0].ok and run.results[0].output == "no newline"
+    assert not outcome.ok and not failed_before
+    assert "AssertionError: 42" in outcome.output and 'page.md", line 8' in outcome.output
+
+
+def test_a_shell_block_runs_in_a_copy_with_this_checkouts_tools(tmp_path: Path) -> None:
+    page = tmp_path / "page.md"
+    page.write_text(
+        "```bash\ntest -f scripts/setup.sh && test -d benchmarks/results && test -d examples\n"
+        "python -c 'import naruto_gym, sys; print(naruto_gym.__file__)'\n```\n\n"
+        "```bash\nfalse\necho never\n```\n", encoding="utf-8")
+    first, second = parse_page(page, tmp_path)
+    run = PageRun([first, second], tmp_path / "run")
+    try:
+        outcome, _ = run.run(first)
+        failing, _ = run.run(second)
+    finally:
+        run.close()
+    assert outcome.ok, outcome.output
+    assert outcome.output.strip().startswith(str(REPO_ROOT / "naruto_gym"))
+    assert not failing.ok and "never" not in failing.output
+    launcher = (tmp_path / "run" / "bin" / "naruto-benchmark.py").read_text(encoding="utf-8")
+    assert "if __name__ == '__main__':" in launcher  # spawned workers re-import it
