@@ -523,15 +523,17 @@ class PageRun:
                 and missing_need(block) is None)
 
     def run(self, block: Block) -> tuple[Outcome, list[str]]:
-        """Runs the block after every earlier runnable block of the page not yet run.
+        """Runs the block after every earlier runnable block of the page not yet run (but the
+        slow ones before a block that is not slow, so that ``-m "not slow"`` runs none).
 
         Returns:
             The block's outcome, and the ids of earlier blocks that failed.
         """
         index = self.blocks.index(block)
-        for earlier in range(index):
-            if earlier not in self.results and self.runnable(self.blocks[earlier]):
-                self.results[earlier] = self._run(self.blocks[earlier])
+        for earlier, before in enumerate(self.blocks[:index]):
+            if (earlier not in self.results and self.runnable(before)
+                    and (block.slow or not before.slow)):
+                self.results[earlier] = self._run(before)
         if index not in self.results:
             self.results[index] = self._run(block)
         if self.session is not None and not any(
