@@ -458,7 +458,8 @@ def _shims(folder: Path) -> Path:
     """A folder of ``python`` and the package's console scripts, all on this interpreter.
 
     A console script is a Python file run by path, as pip's launchers do, so that its import
-    path starts with its own folder and not with the working directory.
+    path starts with its own folder and not with the working directory; this checkout comes
+    next, even where a block sets ``PYTHONPATH`` itself.
     """
     folder.mkdir(parents=True, exist_ok=True)
     for name in ("python", "python3"):
@@ -466,7 +467,8 @@ def _shims(folder: Path) -> Path:
     for name, target in console_scripts().items():
         module, function = target.split(":")
         script = folder / f"{name}.py"
-        script.write_text(f"import sys\n\nfrom {module} import {function}\n\n"
+        script.write_text(f"import sys\n\nsys.path.insert(1, {str(REPO_ROOT)!r})  # this checkout\n"
+                          f"from {module} import {function}\n\n"
                           f"if __name__ == '__main__':\n    sys.argv[0] = {name!r}\n"
                           f"    sys.exit({function}())\n")
         shim = folder / name

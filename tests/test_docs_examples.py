@@ -155,7 +155,8 @@ def test_a_shell_block_runs_in_a_copy_with_this_checkouts_tools(tmp_path: Path) 
     page = tmp_path / "page.md"
     page.write_text(
         "```bash\ntest -f scripts/setup.sh && test -d benchmarks/results && test -d examples\n"
-        "python -c 'import naruto_gym, sys; print(naruto_gym.__file__)'\n```\n\n"
+        "python -c 'import naruto_gym, sys; print(naruto_gym.__file__)'\n"
+        "PYTHONPATH=. naruto-benchmark --help > /dev/null\n```\n\n"
         "```bash\nfalse\necho never\n```\n", encoding="utf-8")
     first, second = parse_page(page, tmp_path)
     run = PageRun([first, second], tmp_path / "run")
@@ -169,3 +170,4 @@ def test_a_shell_block_runs_in_a_copy_with_this_checkouts_tools(tmp_path: Path) 
     assert not failing.ok and "never" not in failing.output
     launcher = (tmp_path / "run" / "bin" / "naruto-benchmark.py").read_text(encoding="utf-8")
     assert "if __name__ == '__main__':" in launcher  # spawned workers re-import it
+    assert repr(str(REPO_ROOT)) in launcher  # this checkout, whatever PYTHONPATH a block sets
