@@ -22,6 +22,7 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
+from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.vector.infos import agent_info
 from naruto_gym.vector.vector_env import NarutoReconVectorEnv
 
@@ -110,12 +111,17 @@ def make_sb3_vec_env(
         top_down_map: add the egocentric top-down map.
         depth: ``"uint8"`` or ``"float"``.
         **env_kwargs: ``NarutoReconVectorEnv`` keywords (``scene``, ``max_episode_steps``,
-            ``camera``, ...).
+            ``camera``, ...). Without ``camera`` or ``image_scale`` the env renders frames
+            ``size`` pixels high (the default camera scaled), so nothing is drawn only to be
+            thrown away by the resize.
     """
     from naruto_gym.wrappers import for_learning
 
     env_kwargs.setdefault("action_mode", "discrete")
     env_kwargs.setdefault("panorama_shape", None)
+    if "camera" not in env_kwargs and "image_scale" not in env_kwargs:
+        # Render about the size handed out (the frame's height), not the full camera.
+        env_kwargs["image_scale"] = min(1.0, size / PinholeCamera().height)
     env = NarutoReconVectorEnv(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs)
     return Sb3VecEnv(for_learning(env, size=size, depth=depth, top_down_map=top_down_map))
 
@@ -125,7 +131,9 @@ def _channels_first(space: spaces.Box) -> tuple[int, int, int]:
     shape = space.shape
     if len(shape) == 2:
         return 1, shape[0], shape[1]
-    if shape[0] <= 4 and shape[-1] > 4:
+    # The channel axis is the smallest one (SB3's rule, also after VecFrameStack has stacked
+    # frames along it: 4 stacked RGB frames are 12 channels, still fewer than the pixels).
+    if int(np.argmin(shape)) == 0:
         return shape[0], shape[1], shape[2]
     return shape[2], shape[0], shape[1]
 
