@@ -65,7 +65,7 @@ from naruto_agent.policies import EnvContext  # noqa: E402
 from naruto_gym.cli_args import parse_dataclass_args
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-# NARUTO paper, Replica room0 on a V100: per-frame averages (NARUTO_NOTES.md section 1).
+# NARUTO paper (Feng et al., CVPR 2024), Replica room0 on a V100: per-frame averages.
 PUBLISHED_MS_PER_FRAME = {"simulator": 24.4, "mapping": 60.5, "planning": 2.1}
 
 
