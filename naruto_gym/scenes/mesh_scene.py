@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import re
+import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -391,4 +392,29 @@ def load_scene(path: str | Path, up_axis: UpAxis = "z", name: str | None = None)
             f"could not read {str(path)!r} as a triangle mesh ({type(error).__name__}: {error}); "
             "use a PLY, OBJ or GLB/glTF file"
         ) from error
-    return scene_from_trimesh(geometry, name=name or path.stem, up_axis=up_axis)
+    scene = scene_from_trimesh(geometry, name=name or path.stem, up_axis=up_axis)
+    if up_axis == "z" and looks_y_up(scene.vertices, scene.faces):
+        warnings.warn(
+            f"{str(path)!r} looks y-up (its shortest side and most of its flat surface lie "
+            "along y) but was loaded z-up, so the scene lies on its side; pass up_axis='y' if "
+            "y points up in the file (the scene is kept as loaded)",
+            stacklevel=2,
+        )
+    return scene
+
+
+def looks_y_up(vertices: np.ndarray, faces: np.ndarray) -> bool:
+    """Whether a room-like mesh read z-up looks stored y-up: its shortest extent is along y
+    and more of its surface faces along y (floors and ceilings, table tops) than along z.
+
+    Rooms are wider than they are tall, and their floors and ceilings are their largest flat
+    surfaces; a z-up file of a long, narrow corridor keeps its shortest side along x or y but
+    its largest flat surfaces facing z, so it does not pass both tests.
+    """
+    extents = np.ptp(vertices, axis=0)
+    if not np.all(np.isfinite(extents)) or int(np.argmin(extents)) != 1:
+        return False
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    area_along = np.abs(normals).sum(axis=0)  # twice the area projected along each axis
+    return bool(area_along[1] > area_along[2])

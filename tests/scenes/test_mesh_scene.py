@@ -173,3 +173,28 @@ def test_flat_triangles_take_their_colour_as_the_interpolation_would():
     flat = (triangle_ids >= 0) & (triangle_ids < count // 2)
     np.testing.assert_array_equal(rgb[flat], colours[triangle_ids[flat], 0])
     assert (rgb[triangle_ids < 0] == 0).all()
+
+
+def test_a_y_up_file_loaded_z_up_gets_a_warning(tmp_path) -> None:
+    """A y-up mesh read with the default up axis lies on its side: say so and how to fix it."""
+    import warnings
+
+    import trimesh
+
+    from naruto_gym.scenes import resolve_scene
+    from naruto_gym.scenes.mesh_scene import load_scene
+
+    scene = resolve_scene("two_rooms")
+    x, y, z = scene.vertices.T
+    path = tmp_path / "y_up.ply"
+    trimesh.Trimesh(np.stack([x, z, -y], axis=1), scene.faces, process=False).export(path)
+    with pytest.warns(UserWarning, match="up_axis='y'"):
+        load_scene(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        upright = load_scene(path, up_axis="y")
+        z_up = tmp_path / "z_up.ply"
+        trimesh.Trimesh(scene.vertices, scene.faces, process=False).export(z_up)
+        load_scene(z_up)
+    np.testing.assert_allclose(np.ptp(upright.vertices, axis=0), np.ptp(scene.vertices, axis=0),
+                               atol=1e-9)

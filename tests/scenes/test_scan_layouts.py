@@ -147,7 +147,8 @@ def test_mp3d_style_textured_glb_is_y_up(tmp_path, room_scan):
     colours = loaded.colour_at(np.arange(len(loaded.faces)), centre)
     np.testing.assert_array_equal(colours, face_rgb)
     # The same file read as z-up stands on its side: its "height" is the rooms' depth.
-    sideways = load_scene(path, up_axis="z")
+    with pytest.warns(UserWarning, match="looks y-up"):
+        sideways = load_scene(path, up_axis="z")
     assert sideways.extents[2] == pytest.approx(loaded.extents[1], abs=1e-4)
 
 
