@@ -8,6 +8,15 @@ from typing import Any
 
 import gymnasium as gym
 
+__all__ = [
+    "EgocentricMap",
+    "FinalReconstructionMetrics",
+    "FlatPose",
+    "NormalizeDepth",
+    "ResizeFrames",
+    "for_learning",
+]
+
 
 class FinalReconstructionMetrics(gym.Wrapper):
     """Puts the reference reconstruction's metrics into the info of an episode's last step.
