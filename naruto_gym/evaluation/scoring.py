@@ -36,6 +36,7 @@ from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper
 from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
 
+MAD_NEEDS_SDF_NOTE = "no mad_cm: it needs the map's signed distance, pass sdf=..."
 NO_CULLING_NOTE = "not culled: no poses given (pass the trajectory's poses to cull)"
 
 
@@ -147,6 +148,8 @@ def evaluate_reconstruction(
         reference_samples_per_m2=reference_samples_per_m2,
         sdf=sdf,
     )
+    if sdf is None:  # say why mad_cm is None, and what gives it
+        note = "; ".join(filter(None, [note, MAD_NEEDS_SDF_NOTE]))
     return ReconstructionMetrics(
         **{**metrics.as_dict(), "faces_evaluated": len(faces), "faces_culled": culled, "note": note}
     )

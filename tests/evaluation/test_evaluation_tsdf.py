@@ -82,7 +82,8 @@ def test_fusion_of_a_rendered_room_is_complete_and_accurate(fused, room):
     assert metrics.accuracy_cm < 2.5  # 50k samples over 80 m^2: ~2 cm of sampling floor
     assert metrics.precision_pct > 97.0
     assert metrics.faces_evaluated is not None and metrics.faces_culled is not None
-    assert metrics.note == ""
+    assert metrics.note == "no mad_cm: it needs the map's signed distance, pass sdf=..."
+    assert metrics.mad_cm is None
 
 
 def test_fused_colours_follow_the_scene(fused):
