@@ -17,6 +17,10 @@ each, sampling in parallel) two figures are reported, with the load average besi
   (sampling, then the learner's PPO update in the driver), over ``train_iterations``
   iterations of ``train_batch_size`` steps.
 
+The driver's torch runs on ``torch_threads`` threads (1 by default, as Ray gives each env
+runner actor of one CPU): on a loaded machine torch's default of one thread per core makes
+the small inference batches of a sampler in the driver many times slower.
+
 Runs on a local Ray instance (all the machine's CPUs, or ``--num-cpus``) or on a cluster
 (``--address auto`` on a node of a cluster started with ``ray start``).
 
@@ -36,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import torch
 
 from naruto_gym.cli_args import parse_dataclass_args
 
@@ -64,6 +69,9 @@ class Args:
     """Ray cluster to join (auto, or ray://host:10001); none: start a local instance"""
     num_cpus: int | None = None
     """CPUs of the local Ray instance (none: all the machine has)"""
+    torch_threads: int | None = 1
+    """torch threads of the driver (the sampler with 0 runners, and the learner); 1 as Ray
+    gives each env-runner actor of one CPU; none: torch's default (all cores)"""
     output: str = "benchmarks/results/rllib_throughput.json"
     """JSON summary"""
 
@@ -133,6 +141,8 @@ def time_row(example: Any, PPOConfig: Any, args: Args, mode: str,  # noqa: N803
 
 
 def main(args: Args) -> dict[str, Any]:
+    if args.torch_threads:
+        torch.set_num_threads(args.torch_threads)
     example = load_example()
     for mode in args.modes:
         example.env_config(replace(example.Args(), vectorization_mode=mode))  # checks the mode
@@ -142,6 +152,7 @@ def main(args: Args) -> dict[str, Any]:
     results: dict[str, Any] = {
         "args": asdict(args), "cpus": os.cpu_count(), "ray_cpus": ray.cluster_resources().get(
             "CPU"), "ray": ray.__version__, "gymnasium": gym.__version__,
+        "torch_threads": torch.get_num_threads(),
         "load_start": load(), "rows": [],
     }
     print(f"Ray {ray.__version__}, {results['ray_cpus']} CPUs, load average at start: "
