@@ -50,6 +50,8 @@ class Args:
     """remote env runners (Ray actors, one CPU each); 0: the driver samples"""
     num_envs_per_env_runner: int = 8
     """agents each env runner steps together"""
+    num_cpus_per_env_runner: int = 1
+    """CPUs Ray reserves for each remote env runner"""
     vectorization_mode: str = "vector_entry_point"
     """vector_entry_point (the batched env), sync or async (Gymnasium's vectors of envs)"""
     scene: str = "two_rooms"
@@ -113,6 +115,7 @@ def build_algorithm(PPOConfig: Any, args: Args) -> Any:  # noqa: N803 (RLlib's c
         .environment(ENV_NAME, env_config=env_config(args))
         .env_runners(num_env_runners=args.num_env_runners,
                      num_envs_per_env_runner=args.num_envs_per_env_runner,
+                     num_cpus_per_env_runner=args.num_cpus_per_env_runner,
                      gym_env_vectorize_mode=args.vectorization_mode,
                      rollout_fragment_length="auto")
         .training(train_batch_size_per_learner=args.train_batch_size,

@@ -1,5 +1,6 @@
 """``examples/rllib_ppo.py`` names its install command for any missing piece of RLlib, and the
-``ray`` extra brings RLlib (the test extra does not: CI time)."""
+``ray`` extra brings RLlib (the test extra does not: RLlib pins an older Gymnasium, so its
+tests run in the second environment of ``scripts/rllib_env.sh``)."""
 
 from __future__ import annotations
 
