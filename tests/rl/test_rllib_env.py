@@ -64,3 +64,16 @@ def test_without_flatten_the_learning_dict_is_kept():
 def test_a_config_that_is_not_a_mapping_is_refused():
     with pytest.raises(TypeError, match="env_config"):
         make_rllib_env(["size", 8])
+
+
+def test_the_env_config_of_the_rl_page_gives_the_batched_env_on_a_scene_stream():
+    config = {"size": 16, "action_mode": "discrete", "panorama_shape": None,
+              "image_scale": 0.05, "scene": "procedural:room", "max_episode_steps": 250,
+              "coverage_samples": 1000, "num_envs": 2}  # docs/rl.md#rllib, fewer samples
+    envs = make_rllib_env(config)
+    try:
+        observations, _ = envs.reset(seed=0)
+        assert isinstance(envs.unwrapped, NarutoReconVectorEnv)
+        assert observations.shape == (2, 16 * 16 * 4 + 9)  # rgb, depth, flat pose
+    finally:
+        envs.close()
