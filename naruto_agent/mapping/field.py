@@ -32,6 +32,10 @@ class NeuralField(nn.Module):
         bounds: (2, 3) world box the encodings cover; points outside are clamped to it.
         config: the mapper settings.
         hash_encoding_cls: the hash-grid implementation (the naive one, for benchmarks).
+        backend: "torch" (the PyTorch encodings, the reference) or "triton" (the decoder's
+            input from the fused kernels of :mod:`naruto_agent.mapping.triton_kernels`; the
+            caller has checked that they can run, see
+            :func:`naruto_agent.mapping.backends.resolve_backend`).
     """
 
     def __init__(
@@ -39,8 +43,15 @@ class NeuralField(nn.Module):
         bounds: np.ndarray,
         config: NeuralMapperConfig,
         hash_encoding_cls: type[HashGridEncoding] = HashGridEncoding,
+        backend: str = "torch",
     ) -> None:
         super().__init__()
+        if backend not in ("torch", "triton"):
+            raise ValueError(
+                f"NeuralField backend must be 'torch' or 'triton' (resolve 'auto' with "
+                f"naruto_agent.mapping.backends.resolve_backend), got {backend!r}"
+            )
+        self.backend = backend
         bounds = np.asarray(bounds, dtype=np.float64)
         extent = bounds[1] - bounds[0]
         self.register_buffer("lower", torch.tensor(bounds[0], dtype=torch.float32))
@@ -68,21 +79,35 @@ class NeuralField(nn.Module):
         """World points -> [0, 1]^3 inside the bounds (clamped)."""
         return ((points - self.lower) * self.inverse_extent).clamp(0.0, 1.0)
 
+    def decoder_input(self, unit: torch.Tensor) -> torch.Tensor:
+        """(N, 3 bins + L F) geometry-decoder input of positions in [0, 1]: OneBlob features,
+        then hash-grid features (one fused kernel on the Triton backend)."""
+        if self.backend == "triton":
+            from naruto_agent.mapping import triton_kernels
+
+            return triton_kernels.field_inputs(
+                self.hash_grid, unit, self.one_blob.num_bins, ONE_BLOB_CUTOFF
+            )
+        return torch.cat([self.one_blob(unit), self.hash_grid(unit)], dim=1)
+
     def forward(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(N, 3) world points -> (SDF (N,) in truncation units, RGB (N, 3) in [0, 1])."""
-        unit = self.normalise(points)
-        blob = self.one_blob(unit)
-        geometry = self.geometry_mlp(torch.cat([blob, self.hash_grid(unit)], dim=1))
+        inputs = self.decoder_input(self.normalise(points))
+        blob = inputs[:, : self.one_blob.output_dim]
+        geometry = self.geometry_mlp(inputs)
         rgb = torch.sigmoid(self.colour_mlp(torch.cat([blob, geometry[:, 1:]], dim=1)))
         return geometry[:, 0], rgb
 
     def sdf(self, points: torch.Tensor) -> torch.Tensor:
         """(N,) SDF in truncation units (skips the colour decoder)."""
         unit = self.normalise(points)
-        if not torch.is_grad_enabled() and self.hash_grid.uses_cpu_kernel(unit):
+        if (
+            self.backend == "torch"
+            and not torch.is_grad_enabled()
+            and self.hash_grid.uses_cpu_kernel(unit)
+        ):
             return self._sdf_compiled(unit)
-        geometry = self.geometry_mlp(torch.cat([self.one_blob(unit), self.hash_grid(unit)], 1))
-        return geometry[:, 0]
+        return self.geometry_mlp(self.decoder_input(unit))[:, 0]
 
     def _sdf_compiled(self, unit: torch.Tensor) -> torch.Tensor:
         """The SDF without gradients on a CPU: the decoder's input (OneBlob + hash grid) from
@@ -106,4 +131,9 @@ class NeuralField(nn.Module):
 
     def grid_features(self, points: torch.Tensor) -> torch.Tensor:
         """(N, levels * features) hash-grid features (for the smoothness loss)."""
-        return self.hash_grid(self.normalise(points))
+        unit = self.normalise(points)
+        if self.backend == "triton":
+            from naruto_agent.mapping import triton_kernels
+
+            return triton_kernels.hash_grid_features(self.hash_grid, unit)
+        return self.hash_grid(unit)

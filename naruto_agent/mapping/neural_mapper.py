@@ -24,6 +24,7 @@ import numpy as np
 import torch
 import trimesh
 
+from naruto_agent.mapping.backends import resolve_backend
 from naruto_agent.mapping.base import check_bounds, check_frame, resolve_device
 from naruto_agent.mapping.config import NeuralMapperConfig
 from naruto_agent.mapping.cpu_allocator import keep_freed_memory_for_reuse
@@ -120,7 +121,10 @@ class NeuralMapper:
         if self._device.type == "cpu" and self.config.tune_cpu_allocator:
             keep_freed_memory_for_reuse()
         torch.manual_seed(self.config.seed)
-        self.field = NeuralField(self.bounds, self.config, hash_encoding_cls).to(self._device)
+        self._backend = resolve_backend(self.config.backend, self._device)
+        self.field = NeuralField(
+            self.bounds, self.config, hash_encoding_cls, backend=self._backend
+        ).to(self._device)
         self.uncertainty = UncertaintyGrid(
             self.bounds,
             self.config.uncertainty_voxel_m,
@@ -160,6 +164,12 @@ class NeuralMapper:
     @property
     def device(self) -> torch.device:
         return self._device
+
+    @property
+    def backend(self) -> str:
+        """The compute path in use: "torch" (the reference) or "triton" (fused kernels),
+        resolved from ``config.backend`` and the device."""
+        return self._backend
 
     @property
     def active_sampling(self) -> bool:
