@@ -51,6 +51,8 @@ from naruto_agent.mapping.uncertainty_grid import UncertaintyGrid
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 _QUERY_CHUNK = 65_536
+# Rays rendered at once when the PyTorch path scores the active-sampling pool.
+_SCORING_CHUNK = 4096
 
 
 @dataclass
@@ -367,12 +369,20 @@ class NeuralMapper:
             return surface_variance(self.field, self.uncertainty, rays, self.config)
         if self.config.active_score == "grid":
             return measured_point_variance(self.uncertainty, rays)
+        # The fast path scores the whole pool at once (its memory is no concern on a GPU).
+        fixed = self._backend == "triton"
+        chunk = len(rays) if fixed else _SCORING_CHUNK
         scores = []
-        for begin in range(0, len(rays), 4096):
-            part = rays.select(slice(begin, begin + 4096))
+        for begin in range(0, len(rays), max(chunk, 1)):
+            part = rays.select(slice(begin, begin + chunk))
             scores.append(
                 render_rays(
-                    self.field, part, self.config, self.uncertainty, with_colour=False
+                    self.field,
+                    part,
+                    self.config,
+                    self.uncertainty,
+                    with_colour=False,
+                    fixed_shape=fixed,
                 ).variance
             )
         return torch.cat(scores)
@@ -392,10 +402,17 @@ class NeuralMapper:
     def train_iteration(self, rays: RayBatch) -> dict[str, float]:
         """One optimisation step on a batch of rays; returns the loss values."""
         cfg = self.config
+        fixed = self._backend == "triton"
         output = render_rays(
-            self.field, rays, cfg, self.uncertainty, self.generator, perturb=cfg.perturb
+            self.field,
+            rays,
+            cfg,
+            self.uncertainty,
+            self.generator,
+            perturb=cfg.perturb,
+            fixed_shape=fixed,
         )
-        losses = mapping_losses(output, rays, cfg)
+        losses = mapping_losses(output, rays, cfg, fixed_shape=fixed)
         if cfg.smoothness_weight > 0:
             losses["smoothness"] = smoothness_loss(
                 self.field, self._bounds_tensor, cfg, self.generator
@@ -406,9 +423,9 @@ class NeuralMapper:
         total.backward()
         self.optimiser.step()
         self.uncertainty_optimiser.step()
-        result = {name: float(value.detach()) for name, value in losses.items()}
-        result["total"] = float(total.detach())
-        return result
+        # One transfer for all the values (each float() of a device tensor waits on it).
+        values = torch.stack([*losses.values(), total]).detach().tolist()
+        return dict(zip([*losses, "total"], values, strict=True))
 
     # -- queries --------------------------------------------------------------------------
     @torch.no_grad()
