@@ -90,6 +90,40 @@ class NeuralField(nn.Module):
             )
         return torch.cat([self.one_blob(unit), self.hash_grid(unit)], dim=1)
 
+    def fast_path_error(self, count: int = 257, seed: int = 0) -> str | None:
+        """Why the Triton backend cannot be trusted on this device, or None when it can.
+
+        Evaluates the decoder input (values and hash-table gradient) on ``count`` random
+        points with the fused kernels and with the PyTorch encodings and compares them; this
+        also compiles the kernels, which a first mapping iteration would do anyway. A failure
+        to compile (an unsupported GPU, a broken toolchain) is reported, not raised.
+        """
+        generator = torch.Generator().manual_seed(seed)
+        unit = torch.rand(count, 3, generator=generator).to(self.lower.device)
+        weights = torch.rand(count, self.geometry_mlp[0].in_features, generator=generator)
+        weights = weights.to(self.lower.device)
+        table = self.hash_grid.table
+        try:
+            from naruto_agent.mapping import triton_kernels
+
+            with torch.enable_grad():
+                fast = triton_kernels.field_inputs(
+                    self.hash_grid, unit, self.one_blob.num_bins, ONE_BLOB_CUTOFF
+                )
+                (fast_grad,) = torch.autograd.grad((fast * weights).sum(), table)
+                reference = torch.cat([self.one_blob(unit), self.hash_grid(unit)], dim=1)
+                (reference_grad,) = torch.autograd.grad((reference * weights).sum(), table)
+        except Exception as error:  # noqa: BLE001 (any compile or launch failure)
+            return f"the Triton kernels failed: {type(error).__name__}: {error}"
+        fast, reference = fast.detach(), reference.detach()
+        scale = float(reference.abs().max()) + 1e-6
+        grad_scale = float(reference_grad.abs().max()) + 1e-6
+        if not torch.allclose(fast, reference, rtol=1e-4, atol=1e-5 * scale):
+            return "the Triton kernels' features differ from the PyTorch reference"
+        if not torch.allclose(fast_grad, reference_grad, rtol=1e-3, atol=1e-4 * grad_scale):
+            return "the Triton kernels' table gradient differs from the PyTorch reference"
+        return None
+
     def forward(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(N, 3) world points -> (SDF (N,) in truncation units, RGB (N, 3) in [0, 1])."""
         inputs = self.decoder_input(self.normalise(points))

@@ -17,6 +17,7 @@ which picks the same pixels (same draws) from the full images.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -127,6 +128,8 @@ class NeuralMapper:
         self.field = NeuralField(
             self.bounds, self.config, hash_encoding_cls, backend=self._backend
         ).to(self._device)
+        if self._backend == "triton":
+            self._check_fast_path()
         self.uncertainty = UncertaintyGrid(
             self.bounds,
             self.config.uncertainty_voxel_m,
@@ -154,6 +157,17 @@ class NeuralMapper:
             ),
         )
         self.stats = MappingStats()
+
+    def _check_fast_path(self) -> None:
+        """Compile the Triton kernels and compare them with the reference once: "auto" falls
+        back to the PyTorch path with a warning when they fail, "triton" raises."""
+        error = self.field.fast_path_error()
+        if error is None:
+            return
+        if self.config.backend == "triton":
+            raise RuntimeError(f"{error}; use backend='torch' (the reference) on this machine")
+        warnings.warn(f"{error}; the neural mapper uses the PyTorch path", stacklevel=3)
+        self._backend = self.field.backend = "torch"
 
     def _adam(self, parameters, lr: float) -> torch.optim.Optimizer:  # noqa: ANN001
         # Co-SLAM's betas; the fused kernel when this torch has it for the device.

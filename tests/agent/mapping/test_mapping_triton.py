@@ -28,7 +28,8 @@ from naruto_agent.mapping import (  # noqa: E402
     NeuralMapper,
     NeuralMapperConfig,
     OneBlobEncoding,
-    triton_kernels,  # noqa: E402
+    neural_mapper,
+    triton_kernels,
 )
 from naruto_agent.mapping.encoding import ONE_BLOB_CUTOFF  # noqa: E402
 from naruto_agent.mapping.field import NeuralField  # noqa: E402
@@ -196,3 +197,23 @@ def test_mapper_on_the_triton_backend_maps_like_the_reference(
     torch.testing.assert_close(
         torch.tensor(losses["triton"]), torch.tensor(losses["torch"]), rtol=1e-3, atol=1e-5
     )
+
+
+def test_the_self_check_passes_and_a_failing_kernel_falls_back_or_raises(
+    monkeypatch, room_bounds, small_camera
+) -> None:
+    field = NeuralField(room_bounds, small_config(), backend="triton").to(DEVICE)
+    assert field.fast_path_error() is None
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no compiler")
+
+    monkeypatch.setattr(triton_kernels, "field_inputs", broken)
+    assert "no compiler" in field.fast_path_error()
+    with pytest.raises(RuntimeError, match="backend='torch'"):
+        NeuralMapper(room_bounds, small_camera, small_config(backend="triton"))
+    # "auto" where Triton would be chosen (a GPU): a warning, and the reference path.
+    monkeypatch.setattr(neural_mapper, "resolve_backend", lambda backend, device: "triton")
+    with pytest.warns(UserWarning, match="PyTorch path"):
+        mapper = NeuralMapper(room_bounds, small_camera, small_config(backend="auto"))
+    assert mapper.backend == mapper.field.backend == "torch"
