@@ -44,11 +44,15 @@ _LAYOUTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 @triton.jit
 def _row(x, y, z, dense, mask, offset):
+    """Table row of a corner from its per-axis products: summed on a dense level, hashed
+    (XOR, masked to the table) on a hashed one, plus the level's first row."""
     return tl.where(dense, x + y + z, (x ^ y ^ z) & mask) + offset
 
 
 @triton.jit
-def _corners(unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels, num_dense, table_size):
+def _corners(unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels):
+    """Per-axis products of the lower and upper cell corners (x0, x1, y0, y1, z0, z1) with
+    the level's row multipliers, and the upper corners' trilinear weights (wx1, wy1, wz1)."""
     ux = tl.load(unit_ptr + offs * 3 + 0, mask=valid, other=0.0)
     uy = tl.load(unit_ptr + offs * 3 + 1, mask=valid, other=0.0)
     uz = tl.load(unit_ptr + offs * 3 + 2, mask=valid, other=0.0)
@@ -92,7 +96,7 @@ def hash_forward(
     offs = tl.program_id(0).to(tl.int64) * BLOCK + tl.arange(0, BLOCK)
     valid = offs < count
     x0, x1, y0, y1, z0, z1, wx1, wy1, wz1 = _corners(
-        unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels, num_dense, table_size
+        unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels
     )
     dense = level < num_dense
     mask = table_size - 1
@@ -149,7 +153,7 @@ def hash_backward(
     offs = tl.program_id(0).to(tl.int64) * BLOCK + tl.arange(0, BLOCK)
     valid = offs < count
     x0, x1, y0, y1, z0, z1, wx1, wy1, wz1 = _corners(
-        unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels, num_dense, table_size
+        unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels
     )
     dense = level < num_dense
     mask = table_size - 1
@@ -219,7 +223,7 @@ class _Layout:
 
 
 def _layout(encoding: Any) -> _Layout:
-    """The encoding's kernel layout on its table's device (cached on the encoding object)."""
+    """The encoding's kernel layout on its table's device (cached per encoding)."""
     cached = _LAYOUTS.get(encoding)
     if cached is None or cached.scales.device != encoding.table.device:
         cached = _LAYOUTS[encoding] = _Layout(encoding)

@@ -9,7 +9,9 @@ checked on the GPU instead. Without triton installed the module is skipped.
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -217,3 +219,46 @@ def test_the_self_check_passes_and_a_failing_kernel_falls_back_or_raises(
     with pytest.warns(UserWarning, match="PyTorch path"):
         mapper = NeuralMapper(room_bounds, small_camera, small_config(backend="auto"))
     assert mapper.backend == mapper.field.backend == "torch"
+
+
+_COMPILE_FOR_GPUS = """
+import itertools, sys
+import triton
+from triton.backends.compiler import GPUTarget
+from triton.compiler import ASTSource
+from naruto_agent.mapping import triton_kernels as tk
+
+pointers = ("*fp32", "*fp32", "*fp32", "*i64", "*fp32")
+hash_signature = pointers + ("i32",) * 7
+blob_signature = ("*fp32", "*fp32", "i32", "i32", "fp32", "i32")
+kernels = [(tk.hash_forward, hash_signature, (2, 128)),
+           (tk.hash_backward, hash_signature, (2, 128)),
+           (tk.one_blob, blob_signature, (16, 128))]
+kernels += [(tk.hash_forward, hash_signature, (f, 128)) for f in (1, 4)]
+for capability, (fn, types, constants) in itertools.product((75, 80, 90), kernels):
+    names = fn.arg_names
+    signature = dict(zip(names, types + ("constexpr",) * len(constants)))
+    constexprs = {(len(types) + i,): value for i, value in enumerate(constants)}
+    compiled = triton.compile(ASTSource(fn, signature, constexprs),
+                              target=GPUTarget("cuda", capability, 32))
+    assert "cubin" in compiled.asm, (fn.__name__, capability)
+print("compiled")
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="Triton's CUDA compiler ships for Linux")
+def test_the_kernels_compile_for_cuda_gpus_without_one() -> None:
+    """The real compiler (not the interpreter) turns every kernel into a cubin for Turing,
+    Ampere and Hopper GPUs: a machine with no GPU checks what the interpreter cannot (types,
+    supported operations, the compile step of the first GPU run)."""
+    env = {k: v for k, v in os.environ.items() if k != "TRITON_INTERPRET"}
+    env["TRITON_DEFAULT_FP_FUSION"] = "1"
+    result = subprocess.run(
+        [sys.executable, "-c", _COMPILE_FOR_GPUS],
+        env={**env, "PYTHONPATH": str(Path(__file__).resolve().parents[3])},
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert result.returncode == 0 and "compiled" in result.stdout, result.stderr[-3000:]
