@@ -168,15 +168,30 @@ def render_rays(
         else:
             sdf_values, rgb_samples = field.sdf(points), None
         sdf = _scatter(sdf_values, flat, (count, samples), _CULLED_SDF)
-    weights = truncated_weights(sdf, z, config.truncation_m)
-    rgb = (weights[:, :, None] * rgb_samples).sum(dim=1) if rgb_samples is not None else None
-    depth = (weights * z).sum(dim=1)
-    variance = None
+    sigma2 = None
     if uncertainty is not None:
         if fixed_shape:
             sigma2 = torch.where(evaluated, uncertainty.variance(points).view(count, samples), 0.0)
         else:
             sigma2 = _scatter(uncertainty.variance(points), flat, (count, samples), 0.0)
+    if fixed_shape and field.backend == "triton":
+        # The weights, their sums and their gradients in one kernel per direction.
+        from naruto_agent.mapping import triton_kernels
+
+        depth, rgb, variance = triton_kernels.composite(
+            sdf,
+            z,
+            rgb_samples,
+            sigma2,
+            config.truncation_m,
+            sigma_to_weights=not config.uncertainty_detach_geometry,
+        )
+        return RenderOutput(rgb, depth, variance, sdf, z, evaluated)
+    weights = truncated_weights(sdf, z, config.truncation_m)
+    rgb = (weights[:, :, None] * rgb_samples).sum(dim=1) if rgb_samples is not None else None
+    depth = (weights * z).sum(dim=1)
+    variance = None
+    if sigma2 is not None:
         w = weights.detach() if config.uncertainty_detach_geometry else weights
         variance = (w * w * sigma2).sum(dim=1)
     return RenderOutput(rgb, depth, variance, sdf, z, evaluated)

@@ -317,3 +317,187 @@ def field_inputs(encoding: Any, unit: torch.Tensor, bins: int, cutoff: float) ->
     respect to ``encoding.table``."""
     unit = _prepare(encoding, unit)
     return _HashFeatures.apply(encoding.table, unit, _layout(encoding), int(bins), cutoff)
+
+
+@triton.jit
+def _ray_weights(sdf_ptr, z_ptr, rays, samples, count, truncation, SAMPLES: tl.constexpr):
+    """Per sample of a block of rays: the normalised weights, the unnormalised ones' sum,
+    the keep mask and sigmoid(sdf / tr) (see :func:`rendering.truncated_weights`)."""
+    index = tl.arange(0, SAMPLES)
+    inside = (rays[:, None] < count) & (index[None, :] < samples)
+    offsets = rays[:, None] * samples + index[None, :]
+    sdf = tl.load(sdf_ptr + offsets, mask=inside, other=0.0)
+    z = tl.load(z_ptr + offsets, mask=inside, other=0.0)
+    following = inside & (index[None, :] + 1 < samples)
+    sdf_next = tl.load(sdf_ptr + offsets + 1, mask=following, other=0.0)
+    crossing = following & (sdf * sdf_next < 0.0)
+    first = tl.min(tl.where(crossing, index[None, :], SAMPLES), axis=1)
+    has_crossing = first < SAMPLES
+    first_surface = tl.sum(tl.where(index[None, :] == first[:, None], z, 0.0), axis=1)
+    keep = inside & ((z < first_surface[:, None] + truncation) | ~has_crossing[:, None])
+    positive = tl.sigmoid(sdf / truncation)
+    raw = tl.where(keep, positive * tl.sigmoid(-sdf / truncation), 0.0)
+    total = tl.sum(raw, axis=1) + 1e-8
+    return raw / total[:, None], total, keep, positive, offsets, inside, z
+
+
+@triton.jit
+def composite_forward(
+    sdf_ptr,
+    z_ptr,
+    rgb_ptr,
+    sigma2_ptr,
+    out_ptr,
+    count,
+    samples,
+    truncation,
+    HAS_RGB: tl.constexpr,
+    HAS_SIGMA: tl.constexpr,
+    SAMPLES: tl.constexpr,
+    RAYS: tl.constexpr,
+):
+    """Per ray: depth, colour and variance from the weights (out: (N, 5) = depth, r, g, b,
+    variance)."""
+    rays = tl.program_id(0).to(tl.int64) * RAYS + tl.arange(0, RAYS)
+    weights, _, _, _, offsets, inside, z = _ray_weights(
+        sdf_ptr, z_ptr, rays, samples, count, truncation, SAMPLES
+    )
+    valid = rays < count
+    tl.store(out_ptr + rays * 5, tl.sum(weights * z, axis=1), mask=valid)
+    if HAS_RGB:
+        for channel in tl.static_range(3):
+            colour = tl.load(rgb_ptr + offsets * 3 + channel, mask=inside, other=0.0)
+            tl.store(out_ptr + rays * 5 + 1 + channel, tl.sum(weights * colour, axis=1), mask=valid)
+    if HAS_SIGMA:
+        sigma2 = tl.load(sigma2_ptr + offsets, mask=inside, other=0.0)
+        tl.store(out_ptr + rays * 5 + 4, tl.sum(weights * weights * sigma2, axis=1), mask=valid)
+
+
+@triton.jit
+def composite_backward(
+    sdf_ptr,
+    z_ptr,
+    rgb_ptr,
+    sigma2_ptr,
+    grad_out_ptr,
+    grad_sdf_ptr,
+    grad_rgb_ptr,
+    grad_sigma2_ptr,
+    count,
+    samples,
+    truncation,
+    HAS_RGB: tl.constexpr,
+    HAS_SIGMA: tl.constexpr,
+    SIGMA_TO_WEIGHTS: tl.constexpr,
+    SAMPLES: tl.constexpr,
+    RAYS: tl.constexpr,
+):
+    """Gradients of the per-sample SDF, colours and variances from those of the per-ray
+    outputs (the weights' chain rule through the normalisation and the sigmoids; the keep
+    mask has none)."""
+    rays = tl.program_id(0).to(tl.int64) * RAYS + tl.arange(0, RAYS)
+    weights, total, keep, positive, offsets, inside, z = _ray_weights(
+        sdf_ptr, z_ptr, rays, samples, count, truncation, SAMPLES
+    )
+    valid = rays < count
+    grad_depth = tl.load(grad_out_ptr + rays * 5, mask=valid, other=0.0)
+    grad_weights = grad_depth[:, None] * z
+    if HAS_RGB:
+        for channel in tl.static_range(3):
+            grad_colour = tl.load(grad_out_ptr + rays * 5 + 1 + channel, mask=valid, other=0.0)
+            colour = tl.load(rgb_ptr + offsets * 3 + channel, mask=inside, other=0.0)
+            grad_weights += grad_colour[:, None] * colour
+            tl.store(grad_rgb_ptr + offsets * 3 + channel, grad_colour[:, None] * weights,
+                     mask=inside)  # fmt: skip
+    if HAS_SIGMA:
+        grad_variance = tl.load(grad_out_ptr + rays * 5 + 4, mask=valid, other=0.0)
+        sigma2 = tl.load(sigma2_ptr + offsets, mask=inside, other=0.0)
+        tl.store(grad_sigma2_ptr + offsets, grad_variance[:, None] * weights * weights,
+                 mask=inside)  # fmt: skip
+        if SIGMA_TO_WEIGHTS:
+            grad_weights += 2.0 * grad_variance[:, None] * weights * sigma2
+    mean = tl.sum(weights * grad_weights, axis=1)
+    grad_raw = (grad_weights - mean[:, None]) / total[:, None]
+    slope = positive * (1.0 - positive) * (1.0 - 2.0 * positive)
+    grad_sdf = tl.where(keep, grad_raw * slope, 0.0) / truncation
+    tl.store(grad_sdf_ptr + offsets, grad_sdf, mask=inside)
+
+
+_RAYS = 16
+
+
+class _Composite(torch.autograd.Function):
+    """(N, 5) per-ray depth, RGB and variance from per-sample SDF, depths, colours and
+    variances; gradients to the SDF, the colours and the variances."""
+
+    @staticmethod
+    def forward(ctx, sdf, z, rgb, sigma2, truncation, sigma_to_weights):  # noqa: ANN001, ANN205
+        count, samples = sdf.shape
+        out = sdf.new_zeros((count, 5))
+        dummy = sdf.new_empty(0)
+        has_rgb, has_sigma = rgb is not None, sigma2 is not None
+        arguments = (
+            sdf, z, rgb if has_rgb else dummy, sigma2 if has_sigma else dummy,
+        )  # fmt: skip
+        if count:
+            composite_forward[(triton.cdiv(count, _RAYS),)](
+                *arguments, out, count, samples, float(truncation),
+                HAS_RGB=has_rgb, HAS_SIGMA=has_sigma,
+                SAMPLES=triton.next_power_of_2(samples), RAYS=_RAYS,
+            )  # fmt: skip
+        ctx.save_for_backward(*arguments)
+        ctx.flags = (has_rgb, has_sigma, bool(sigma_to_weights), float(truncation))
+        return out
+
+    @staticmethod
+    def backward(ctx, grad_out):  # noqa: ANN001, ANN205
+        sdf, z, rgb, sigma2 = ctx.saved_tensors
+        has_rgb, has_sigma, sigma_to_weights, truncation = ctx.flags
+        count, samples = sdf.shape
+        grad_sdf = torch.zeros_like(sdf)
+        grad_rgb = torch.zeros_like(rgb)
+        grad_sigma2 = torch.zeros_like(sigma2)
+        if count:
+            composite_backward[(triton.cdiv(count, _RAYS),)](
+                sdf, z, rgb, sigma2, grad_out.contiguous(), grad_sdf, grad_rgb, grad_sigma2,
+                count, samples, truncation,
+                HAS_RGB=has_rgb, HAS_SIGMA=has_sigma, SIGMA_TO_WEIGHTS=sigma_to_weights,
+                SAMPLES=triton.next_power_of_2(samples), RAYS=_RAYS,
+            )  # fmt: skip
+        return (
+            grad_sdf,
+            None,
+            grad_rgb if has_rgb else None,
+            grad_sigma2 if has_sigma else None,
+            None,
+            None,
+        )
+
+
+def composite(
+    sdf: torch.Tensor,
+    z: torch.Tensor,
+    rgb: torch.Tensor | None,
+    sigma2: torch.Tensor | None,
+    truncation: float,
+    sigma_to_weights: bool = True,
+) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+    """Volume rendering of rays in one kernel: (depth (N,), RGB (N, 3) or None, variance
+    (N,) or None) from the SDF (N, S) of the samples at depths ``z`` (N, S), their colours
+    (N, S, 3) and variances (N, S).
+
+    The weights are :func:`naruto_agent.mapping.rendering.truncated_weights`'s; the variance
+    is ``sum w^2 sigma^2``. ``sigma_to_weights`` False treats the weights as constants in the
+    variance's gradient (``uncertainty_detach_geometry``). Differentiable with respect to the
+    SDF, the colours and the variances (not ``z``).
+    """
+    sdf = sdf.contiguous().float()
+    z = z.detach().contiguous().float()
+    rgb = rgb.contiguous().float() if rgb is not None else None
+    sigma2 = sigma2.contiguous().float() if sigma2 is not None else None
+    out = _Composite.apply(sdf, z, rgb, sigma2, truncation, sigma_to_weights)
+    return (
+        out[:, 0],
+        out[:, 1:4] if rgb is not None else None,
+        out[:, 4] if sigma2 is not None else None,
+    )

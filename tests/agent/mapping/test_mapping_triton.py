@@ -35,6 +35,7 @@ from naruto_agent.mapping import (  # noqa: E402
 )
 from naruto_agent.mapping.encoding import ONE_BLOB_CUTOFF  # noqa: E402
 from naruto_agent.mapping.field import NeuralField  # noqa: E402
+from naruto_agent.mapping.rendering import truncated_weights  # noqa: E402
 
 from .conftest import orbit_poses  # noqa: E402
 
@@ -235,6 +236,12 @@ kernels = [(tk.hash_forward, hash_signature, (2, 128)),
            (tk.hash_backward, hash_signature, (2, 128)),
            (tk.one_blob, blob_signature, (16, 128))]
 kernels += [(tk.hash_forward, hash_signature, (f, 128)) for f in (1, 4)]
+composite_forward = ("*fp32",) * 5 + ("i32", "i32", "fp32")
+composite_backward = ("*fp32",) * 8 + ("i32", "i32", "fp32")
+kernels += [(tk.composite_forward, composite_forward, (True, True, 64, 16)),
+            (tk.composite_forward, composite_forward, (False, True, 64, 16)),
+            (tk.composite_backward, composite_backward, (True, True, True, 64, 16)),
+            (tk.composite_backward, composite_backward, (True, True, False, 64, 16))]
 for capability, (fn, types, constants) in itertools.product((75, 80, 90), kernels):
     names = fn.arg_names
     signature = dict(zip(names, types + ("constexpr",) * len(constants)))
@@ -262,3 +269,63 @@ def test_the_kernels_compile_for_cuda_gpus_without_one() -> None:
         check=False,
     )
     assert result.returncode == 0 and "compiled" in result.stdout, result.stderr[-3000:]
+
+
+def composite_reference(sdf, z, rgb, sigma2, truncation, sigma_to_weights):
+    weights = truncated_weights(sdf, z, truncation)
+    w = weights if sigma_to_weights else weights.detach()
+    return (
+        (weights * z).sum(dim=1),
+        (weights[:, :, None] * rgb).sum(dim=1),
+        (w * w * sigma2).sum(dim=1),
+    )
+
+
+@pytest.mark.parametrize("count", [1, 37])
+@pytest.mark.parametrize("sigma_to_weights", [True, False])
+def test_fused_compositing_matches_the_reference_weights_and_gradients(
+    count, sigma_to_weights
+) -> None:
+    generator = torch.Generator().manual_seed(count)
+    samples = 43
+    z = torch.sort(5.0 * torch.rand(count, samples, generator=generator), dim=1).values
+    surface = 0.5 + 4.0 * torch.rand(count, 1, generator=generator)
+    sdf = ((surface - z) / 0.1).clamp(-1.0, 1.0) * 0.3
+    sdf = sdf + 0.05 * torch.randn(count, samples, generator=generator)
+    if count > 1:
+        sdf[0] = 0.2  # no sign change: every sample kept
+        sdf[1, 30:] = -1.0  # culled samples behind the surface
+    rgb = torch.rand(count, samples, 3, generator=generator)
+    sigma2 = 0.01 + torch.rand(count, samples, generator=generator)
+    upstream = [torch.randn(count, generator=generator), torch.randn(count, 3, generator=generator),
+                torch.randn(count, generator=generator)]  # fmt: skip
+    results = []
+    for fused in (True, False):
+        inputs = [t.clone().to(DEVICE).requires_grad_() for t in (sdf, rgb, sigma2)]
+        zz = z.to(DEVICE)
+        if fused:
+            depth, colour, variance = triton_kernels.composite(
+                inputs[0], zz, inputs[1], inputs[2], 0.1, sigma_to_weights
+            )
+        else:
+            depth, colour, variance = composite_reference(
+                inputs[0], zz, inputs[1], inputs[2], 0.1, sigma_to_weights
+            )
+        outputs = (depth, colour, variance)
+        loss = sum((o * g.to(DEVICE)).sum() for o, g in zip(outputs, upstream, strict=True))
+        loss.backward()
+        results.append([depth, colour, variance, *(t.grad for t in inputs)])
+    names = ("depth", "rgb", "variance", "grad sdf", "grad rgb", "grad sigma2")
+    for name, fast, reference in zip(names, *results, strict=True):
+        torch.testing.assert_close(fast, reference, rtol=1e-4, atol=1e-5, msg=name)
+
+
+def test_fused_compositing_without_colour_or_variance() -> None:
+    generator = torch.Generator().manual_seed(9)
+    sdf = (torch.rand(5, 43, generator=generator) - 0.5).to(DEVICE)
+    z = torch.sort(torch.rand(5, 43, generator=generator), dim=1).values.to(DEVICE)
+    depth, rgb, variance = triton_kernels.composite(sdf, z, None, None, 0.1)
+    assert rgb is None and variance is None
+    torch.testing.assert_close(depth, (truncated_weights(sdf, z, 0.1) * z).sum(dim=1))
+    empty = triton_kernels.composite(sdf[:0], z[:0], None, None, 0.1)[0]
+    assert empty.shape == (0,)
