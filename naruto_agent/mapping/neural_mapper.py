@@ -40,6 +40,7 @@ from naruto_agent.mapping.observed_space import (
 )
 from naruto_agent.mapping.rendering import (
     RayBatch,
+    fast_compositing_error,
     mapping_losses,
     measured_point_variance,
     render_rays,
@@ -164,7 +165,9 @@ class NeuralMapper:
     def _check_fast_path(self) -> None:
         """Compile the Triton kernels and compare them with the reference once: "auto" falls
         back to the PyTorch path with a warning when they fail, "triton" raises."""
-        error = self.field.fast_path_error()
+        error = self.field.fast_path_error() or fast_compositing_error(
+            self._device, self.config.truncation_m
+        )
         if error is None:
             return
         if self.config.backend == "triton":

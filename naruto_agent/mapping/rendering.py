@@ -197,6 +197,45 @@ def render_rays(
     return RenderOutput(rgb, depth, variance, sdf, z, evaluated)
 
 
+def fast_compositing_error(device: torch.device, truncation_m: float = 0.1) -> str | None:
+    """Why the Triton compositing kernel cannot be trusted on ``device``, or None when it can.
+
+    Renders a few random rays (values and gradients) with the kernel and with
+    :func:`truncated_weights` and compares them; this also compiles the kernel. A failure to
+    compile or launch is reported, not raised.
+    """
+    generator = torch.Generator().manual_seed(0)
+    z = torch.sort(5.0 * torch.rand(8, 43, generator=generator), dim=1).values.to(device)
+    sdf = (0.4 * torch.rand(8, 43, generator=generator) - 0.2).to(device)
+    rgb = torch.rand(8, 43, 3, generator=generator).to(device)
+    sigma2 = (0.01 + torch.rand(8, 43, generator=generator)).to(device)
+    results = []
+    try:
+        from naruto_agent.mapping import triton_kernels
+
+        for fused in (True, False):
+            inputs = [t.clone().requires_grad_() for t in (sdf, rgb, sigma2)]
+            with torch.enable_grad():
+                if fused:
+                    depth, colour, variance = triton_kernels.composite(
+                        inputs[0], z, inputs[1], inputs[2], truncation_m
+                    )
+                else:
+                    weights = truncated_weights(inputs[0], z, truncation_m)
+                    depth = (weights * z).sum(dim=1)
+                    colour = (weights[:, :, None] * inputs[1]).sum(dim=1)
+                    variance = (weights * weights * inputs[2]).sum(dim=1)
+                total = depth.sum() + colour.sum() + variance.sum()
+                grads = torch.autograd.grad(total, inputs)
+            results.append([t.detach() for t in (depth, colour, variance, *grads)])
+    except Exception as error:  # noqa: BLE001 (any compile or launch failure)
+        return f"the Triton compositing kernel failed: {type(error).__name__}: {error}"
+    for fast, reference in zip(*results, strict=True):
+        if not torch.allclose(fast, reference, rtol=1e-3, atol=1e-5):
+            return "the Triton compositing kernel differs from the PyTorch reference"
+    return None
+
+
 def surface_variance(
     field: NeuralField,
     uncertainty: UncertaintyGrid,

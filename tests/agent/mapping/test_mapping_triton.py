@@ -35,7 +35,10 @@ from naruto_agent.mapping import (  # noqa: E402
 )
 from naruto_agent.mapping.encoding import ONE_BLOB_CUTOFF  # noqa: E402
 from naruto_agent.mapping.field import NeuralField  # noqa: E402
-from naruto_agent.mapping.rendering import truncated_weights  # noqa: E402
+from naruto_agent.mapping.rendering import (  # noqa: E402
+    fast_compositing_error,
+    truncated_weights,
+)
 
 from .conftest import orbit_poses  # noqa: E402
 
@@ -207,6 +210,14 @@ def test_the_self_check_passes_and_a_failing_kernel_falls_back_or_raises(
 ) -> None:
     field = NeuralField(room_bounds, small_config(), backend="triton").to(DEVICE)
     assert field.fast_path_error() is None
+    assert fast_compositing_error(DEVICE) is None
+
+    def broken_composite(*args, **kwargs):
+        raise RuntimeError("no kernel")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(triton_kernels, "composite", broken_composite)
+        assert "no kernel" in fast_compositing_error(DEVICE)
 
     def broken(*args, **kwargs):
         raise RuntimeError("no compiler")
