@@ -62,7 +62,7 @@ def resolve_backend(backend: str, device: torch.device | str) -> str:
     if not triton_available():
         raise ValueError(
             "backend='triton' needs the triton package: pip install triton "
-            "(or use backend='auto' / 'torch')"
+            "(or use backend='torch', the reference, or 'auto')"
         )
     if not usable:
         raise ValueError(
