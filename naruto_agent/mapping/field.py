@@ -126,8 +126,15 @@ class NeuralField(nn.Module):
 
     def forward(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(N, 3) world points -> (SDF (N,) in truncation units, RGB (N, 3) in [0, 1])."""
-        inputs = self.decoder_input(self.normalise(points))
-        blob = inputs[:, : self.one_blob.output_dim]
+        unit = self.normalise(points)
+        if self.backend == "triton":
+            inputs = self.decoder_input(unit)
+            # OneBlob depends on no parameter: detached, the colour decoder's backward skips
+            # its columns (as it does for the separately computed OneBlob below).
+            blob = inputs[:, : self.one_blob.output_dim].detach()
+        else:
+            blob = self.one_blob(unit)
+            inputs = torch.cat([blob, self.hash_grid(unit)], dim=1)
         geometry = self.geometry_mlp(inputs)
         rgb = torch.sigmoid(self.colour_mlp(torch.cat([blob, geometry[:, 1:]], dim=1)))
         return geometry[:, 0], rgb
