@@ -45,6 +45,8 @@ from naruto_agent.mapping import (
     NeuralMapperConfig,
     TsdfMapperConfig,
     TsdfUncertaintyMapper,
+    resolve_backend,
+    resolve_device,
 )
 from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.evaluation import evaluate_reconstruction
@@ -72,6 +74,9 @@ class Args:
     """timed iterations per hash-grid implementation in the speed test (0 skips it)"""
     device: str = "auto"
     """torch device of the neural mapper"""
+    backend: str = "auto"
+    """compute path of the neural mapper's runs: auto (Triton on CUDA where installed),
+    torch (the reference) or triton; the speed test times both paths where Triton runs"""
     active_score: str = "surface"
     """how neural_active scores its ray pool: "surface" (the 11 samples around the measured
     depth), "grid" (the uncertainty grid at the measured point, no field query), "rendered"
@@ -114,18 +119,23 @@ def render_pixels(
 def time_iteration(
     scene: Scene, renderer: RgbdRenderer, poses: np.ndarray, bounds: np.ndarray, args: Args
 ) -> dict[str, float]:
-    """Seconds per mapping iteration of 2048 + 100 rays: batched vs plain hash grid."""
+    """Seconds per mapping iteration of 2048 + 100 rays: batched vs plain hash grid (both
+    PyTorch), and the fast path (Triton kernels, fixed shapes) where it runs (CUDA)."""
     camera = renderer.camera
     rgb, depth = renderer.render(poses[0])
     results: dict[str, float] = {}
     variants = {
-        "batched hash grid (published 43 samples)": (None, None),
-        "batched hash grid (samples > 0.2 m behind depth skipped)": (0.2, None),
-        "plain per-level hash grid (published 43 samples)": (None, NaiveHashGridEncoding),
+        "batched hash grid (published 43 samples)": (None, None, "torch"),
+        "batched hash grid (samples > 0.2 m behind depth skipped)": (0.2, None, "torch"),
+        "plain per-level hash grid (published 43 samples)": (None, NaiveHashGridEncoding, "torch"),
     }
-    for name, (cull, encoding) in variants.items():
+    if fast_path_runs(args.device):
+        variants["fast path, Triton (published 43 samples)"] = (None, None, "triton")
+        variants["fast path, Triton (samples > 0.2 m behind depth masked)"] = (0.2, None, "triton")
+    for name, (cull, encoding, backend) in variants.items():
         config = NeuralMapperConfig(
             device=args.device,
+            backend=backend,
             seed=args.seed,
             first_frame_iterations=0,
             cull_behind_depth_m=cull,
@@ -145,8 +155,19 @@ def time_iteration(
                 torch.cuda.synchronize()
             durations.append(time.perf_counter() - start)
         results[name] = float(np.median(durations[2:]))  # the first two warm up
-        print(f"  {name}: {results[name] * 1e3:.0f} ms per iteration", flush=True)
+        print(f"  {name}: {results[name] * 1e3:.1f} ms per iteration", flush=True)
     return results
+
+
+def fast_path_runs(device: str) -> bool:
+    """Whether the Triton fast path runs compiled on this device (not the interpreter)."""
+    torch_device = resolve_device(device)
+    if torch_device.type != "cuda":
+        return False
+    try:
+        return resolve_backend("triton", torch_device) == "triton"
+    except ValueError:
+        return False
 
 
 def time_active_scoring(
@@ -161,7 +182,11 @@ def time_active_scoring(
     picked: dict[str, set[int]] = {}
     frames = [(index, *renderer.render(poses[index])) for index in range(0, min(50, len(poses)), 5)]
     config = NeuralMapperConfig(
-        device=args.device, seed=args.seed, first_frame_iterations=20, active_sampling=False
+        device=args.device,
+        backend=args.backend,
+        seed=args.seed,
+        first_frame_iterations=20,
+        active_sampling=False,
     )
     mapper = NeuralMapper(bounds, camera, config)
     for index, rgb, depth in frames:
@@ -184,7 +209,7 @@ def time_active_scoring(
         picked[score] = set(torch.topk(scores, config.active_top_rays).indices.tolist())
         name = f"active ray scoring, {score} (8192-ray pool)"
         results[name] = float(np.median(durations[2:]))
-        print(f"  {name}: {results[name] * 1e3:.0f} ms per iteration", flush=True)
+        print(f"  {name}: {results[name] * 1e3:.1f} ms per iteration", flush=True)
     for score in ("surface", "grid"):
         shared = len(picked["rendered"] & picked[score]) / max(len(picked["rendered"]), 1)
         print(f"  top-500 rays {score} shares with rendered: {shared:.0%}", flush=True)
@@ -201,7 +226,11 @@ def run_neural(
     active: bool,
 ) -> tuple[NeuralMapper, dict[str, float]]:
     config = NeuralMapperConfig(
-        device=args.device, seed=args.seed, active_sampling=active, active_score=args.active_score
+        device=args.device,
+        backend=args.backend,
+        seed=args.seed,
+        active_sampling=active,
+        active_score=args.active_score,
     )
     mapper = NeuralMapper(bounds, renderer.camera, config)
     render_seconds = 0.0
@@ -223,6 +252,7 @@ def run_neural(
         "mapping_s": total - render_seconds,
         "iterations": mapper.stats.iterations,
         "ms_per_iteration": mapper.stats.seconds_per_iteration * 1e3,
+        "backend": mapper.backend,
         "keyframes": mapper.keyframes.num_keyframes,
     }
 
@@ -263,18 +293,19 @@ def main() -> None:
     camera = PinholeCamera()
     renderer = RgbdRenderer(scene, camera, max_depth_m=5.0)
     bounds = scene.bounds + np.array([[-1.0], [1.0]]) * args.bounds_padding_m
-    device = NeuralMapperConfig(device=args.device)
-    from naruto_agent.mapping import resolve_device
-
-    torch_device = resolve_device(device.device)
+    torch_device = resolve_device(args.device)
+    backend = resolve_backend(args.backend, torch_device)
     print(
-        f"device: {torch_device}, torch threads: {torch.get_num_threads()}, frames: {len(poses)}",
+        f"device: {torch_device}, backend: {backend}, torch threads: {torch.get_num_threads()}, "
+        f"frames: {len(poses)}",
         flush=True,
     )
 
     results: dict[str, object] = {
         "args": dataclasses.asdict(args),
         "device": str(torch_device),
+        "backend": backend,
+        "gpu": torch.cuda.get_device_name(torch_device) if torch_device.type == "cuda" else None,
         "torch": torch.__version__,
         "machine": platform.processor() or platform.machine(),
         "cpu_threads": torch.get_num_threads(),
@@ -344,7 +375,7 @@ def print_table(results: dict) -> None:
         print("| hash grid | ms per iteration (2048 + 100 rays) | speed-up vs plain |")
         print("|---|---|---|")
         for name, seconds in results["iteration_speed_s"].items():
-            print(f"| {name} | {seconds * 1e3:.0f} | {results['speedup_vs_plain'][name]:.2f}x |")
+            print(f"| {name} | {seconds * 1e3:.1f} | {results['speedup_vs_plain'][name]:.2f}x |")
     if results.get("active_scoring"):
         print()
         for name, value in results["active_scoring"].items():

@@ -87,6 +87,9 @@ class Args:
     """seed of the env's start pose and of the agent"""
     device: str = "auto"
     """device of the agent's mapper and planner"""
+    backend: str = ""
+    """neural mapper's compute path: auto (Triton on CUDA where installed), torch (the
+    PyTorch reference) or triton; empty keeps the setting of --settings (default auto)"""
     eval_samples: int = 200_000
     """surface samples per mesh for the metrics (200,000 as published)"""
     output_dir: str = str(REPO_ROOT / "benchmarks" / "results")
@@ -351,6 +354,8 @@ def main(args: Args) -> dict:
     load_start = os.getloadavg()
     env_kwargs = json_object(args.env_kwargs, "--env-kwargs", "env arguments")
     settings = json_object(args.settings, "--settings", "NarutoPolicy settings")
+    if args.backend:
+        settings["neural"] = {**settings.get("neural", {}), "backend": args.backend}
     # One step more than the budget, so the env's final-metrics wrapper (which scores on
     # truncation) does not run inside a timed step; the metrics are computed below.
     env = gym.make(
@@ -479,6 +484,7 @@ def main(args: Args) -> dict:
         "neural_mapper_settings": policy.mapper.config.to_dict()
         if args.mapper == "neural"
         else None,
+        "neural_mapper_backend": getattr(policy.mapper, "backend", None),
         "mapping_iterations": int(getattr(getattr(policy.mapper, "stats", None), "iterations", 0)),
         "time_per_step_detail_ms": detail_ms,
         "published_v100_ms_per_frame": PUBLISHED_MS_PER_FRAME,
@@ -524,7 +530,9 @@ def main(args: Args) -> dict:
     env.close()
 
     print(
-        f"\nNARUTO ({args.mapper} mapper) on {args.scene}, {steps_run} steps, "
+        f"\nNARUTO ({args.mapper} mapper"
+        + (f", {record['neural_mapper_backend']} backend" if args.mapper == "neural" else "")
+        + f") on {args.scene}, {steps_run} steps, "
         f"image scale {args.image_scale} ({base.camera.width} x {base.camera.height})"
     )
     marks = np.linspace(0, steps_run, 6).astype(int)

@@ -2,13 +2,15 @@
 
 * :class:`NeuralMapper`: Co-SLAM-style neural field (OneBlob + hash grid, bias-free MLPs,
   SDF volume rendering) mapped with known poses, NARUTO's uncertainty grid and active ray
-  sampling. Pure PyTorch; ``device="auto"`` uses CUDA when present.
+  sampling. PyTorch (the reference); ``device="auto"`` uses CUDA when present, where
+  ``backend="auto"`` runs the field's encodings as fused Triton kernels.
 * :class:`TsdfUncertaintyMapper`: TSDF fusion plus a count-derived uncertainty grid, same
   interface, much faster.
 
 Both give the planner ``planner_view() -> (SdfVolume, SdfVolume)``.
 """
 
+from naruto_agent.mapping.backends import resolve_backend
 from naruto_agent.mapping.base import Mapper, resolve_device
 from naruto_agent.mapping.config import NeuralMapperConfig
 from naruto_agent.mapping.encoding import HashGridEncoding, NaiveHashGridEncoding, OneBlobEncoding
@@ -31,6 +33,7 @@ __all__ = [
     "TsdfUncertaintyMapper",
     "UncertaintyGrid",
     "gaussian_nll",
+    "resolve_backend",
     "resolve_device",
     "select_active_rays",
 ]

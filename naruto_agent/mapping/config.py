@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Literal
 
+from naruto_agent.mapping.backends import BACKENDS
+
 #: Active-sampling scores (see ``NeuralMapperConfig.active_score``).
 ACTIVE_SCORES = ("rendered", "surface", "grid")
 
@@ -74,6 +76,11 @@ class NeuralMapperConfig:
 
     Device and seed:
         device: "auto" (CUDA when present), "cpu", "cuda[:N]".
+        backend: how the field's encodings are computed. "torch" is the PyTorch reference
+            (the CPU default); "triton" runs fused Triton kernels that compute the same
+            function in a few launches (:mod:`naruto_agent.mapping.triton_kernels`; CUDA,
+            ``pip install triton``); "auto" (default) takes Triton on a CUDA GPU where it is
+            installed, PyTorch everywhere else. A GPU speed-up.
         seed: seeds the parameter initialisation and every ray draw.
         tune_cpu_allocator: on a CPU, let glibc keep freed tensor memory for reuse
             (:mod:`naruto_agent.mapping.cpu_allocator`; process-wide: an iteration no
@@ -132,6 +139,7 @@ class NeuralMapperConfig:
     observed_rays_per_frame: int = 2048
 
     device: str = "auto"
+    backend: Literal["auto", "torch", "triton"] = "auto"
     seed: int = 0
     tune_cpu_allocator: bool = True
 
@@ -181,6 +189,8 @@ class NeuralMapperConfig:
             raise ValueError(
                 f"active_score must be one of {ACTIVE_SCORES}, got {self.active_score!r}"
             )
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
         if self.cull_behind_depth_m is not None and self.cull_behind_depth_m < self.truncation_m:
             raise ValueError(
                 "cull_behind_depth_m must be at least truncation_m (samples inside the "

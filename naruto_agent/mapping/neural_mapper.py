@@ -17,6 +17,7 @@ which picks the same pixels (same draws) from the full images.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,6 +25,7 @@ import numpy as np
 import torch
 import trimesh
 
+from naruto_agent.mapping.backends import resolve_backend
 from naruto_agent.mapping.base import check_bounds, check_frame, resolve_device
 from naruto_agent.mapping.config import NeuralMapperConfig
 from naruto_agent.mapping.cpu_allocator import keep_freed_memory_for_reuse
@@ -38,6 +40,7 @@ from naruto_agent.mapping.observed_space import (
 )
 from naruto_agent.mapping.rendering import (
     RayBatch,
+    fast_compositing_error,
     mapping_losses,
     measured_point_variance,
     render_rays,
@@ -50,6 +53,11 @@ from naruto_agent.mapping.uncertainty_grid import UncertaintyGrid
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 _QUERY_CHUNK = 65_536
+# On a GPU a query takes more points at once: fewer launches and host round trips (the
+# planner view's ~10^5-10^6 voxels in one or a few passes), memory is no concern.
+_GPU_QUERY_CHUNK = 1 << 20
+# Rays rendered at once when the PyTorch path scores the active-sampling pool.
+_SCORING_CHUNK = 4096
 
 
 @dataclass
@@ -120,7 +128,12 @@ class NeuralMapper:
         if self._device.type == "cpu" and self.config.tune_cpu_allocator:
             keep_freed_memory_for_reuse()
         torch.manual_seed(self.config.seed)
-        self.field = NeuralField(self.bounds, self.config, hash_encoding_cls).to(self._device)
+        self._backend = resolve_backend(self.config.backend, self._device)
+        self.field = NeuralField(
+            self.bounds, self.config, hash_encoding_cls, backend=self._backend
+        ).to(self._device)
+        if self._backend == "triton":
+            self._check_fast_path()
         self.uncertainty = UncertaintyGrid(
             self.bounds,
             self.config.uncertainty_voxel_m,
@@ -149,6 +162,19 @@ class NeuralMapper:
         )
         self.stats = MappingStats()
 
+    def _check_fast_path(self) -> None:
+        """Compile the Triton kernels and compare them with the reference once: "auto" falls
+        back to the PyTorch path with a warning when they fail, "triton" raises."""
+        error = self.field.fast_path_error() or fast_compositing_error(
+            self._device, self.config.truncation_m
+        )
+        if error is None:
+            return
+        if self.config.backend == "triton":
+            raise RuntimeError(f"{error}; use backend='torch' (the reference) on this machine")
+        warnings.warn(f"{error}; the neural mapper uses the PyTorch path", stacklevel=3)
+        self._backend = self.field.backend = "torch"
+
     def _adam(self, parameters, lr: float) -> torch.optim.Optimizer:  # noqa: ANN001
         # Co-SLAM's betas; the fused kernel when this torch has it for the device.
         parameters = list(parameters)
@@ -160,6 +186,16 @@ class NeuralMapper:
     @property
     def device(self) -> torch.device:
         return self._device
+
+    @property
+    def _query_chunk(self) -> int:
+        return _GPU_QUERY_CHUNK if self._device.type == "cuda" else _QUERY_CHUNK
+
+    @property
+    def backend(self) -> str:
+        """The compute path in use: "torch" (the reference) or "triton" (fused kernels),
+        resolved from ``config.backend`` and the device."""
+        return self._backend
 
     @property
     def active_sampling(self) -> bool:
@@ -357,12 +393,20 @@ class NeuralMapper:
             return surface_variance(self.field, self.uncertainty, rays, self.config)
         if self.config.active_score == "grid":
             return measured_point_variance(self.uncertainty, rays)
+        # The fast path scores the whole pool at once (its memory is no concern on a GPU).
+        fixed = self._backend == "triton"
+        chunk = len(rays) if fixed else _SCORING_CHUNK
         scores = []
-        for begin in range(0, len(rays), 4096):
-            part = rays.select(slice(begin, begin + 4096))
+        for begin in range(0, len(rays), max(chunk, 1)):
+            part = rays.select(slice(begin, begin + chunk))
             scores.append(
                 render_rays(
-                    self.field, part, self.config, self.uncertainty, with_colour=False
+                    self.field,
+                    part,
+                    self.config,
+                    self.uncertainty,
+                    with_colour=False,
+                    fixed_shape=fixed,
                 ).variance
             )
         return torch.cat(scores)
@@ -382,10 +426,17 @@ class NeuralMapper:
     def train_iteration(self, rays: RayBatch) -> dict[str, float]:
         """One optimisation step on a batch of rays; returns the loss values."""
         cfg = self.config
+        fixed = self._backend == "triton"
         output = render_rays(
-            self.field, rays, cfg, self.uncertainty, self.generator, perturb=cfg.perturb
+            self.field,
+            rays,
+            cfg,
+            self.uncertainty,
+            self.generator,
+            perturb=cfg.perturb,
+            fixed_shape=fixed,
         )
-        losses = mapping_losses(output, rays, cfg)
+        losses = mapping_losses(output, rays, cfg, fixed_shape=fixed)
         if cfg.smoothness_weight > 0:
             losses["smoothness"] = smoothness_loss(
                 self.field, self._bounds_tensor, cfg, self.generator
@@ -396,9 +447,9 @@ class NeuralMapper:
         total.backward()
         self.optimiser.step()
         self.uncertainty_optimiser.step()
-        result = {name: float(value.detach()) for name, value in losses.items()}
-        result["total"] = float(total.detach())
-        return result
+        # One transfer for all the values (each float() of a device tensor waits on it).
+        values = torch.stack([*losses.values(), total]).detach().tolist()
+        return dict(zip([*losses, "total"], values, strict=True))
 
     # -- queries --------------------------------------------------------------------------
     @torch.no_grad()
@@ -406,8 +457,9 @@ class NeuralMapper:
         """(N,) signed distance in metres at (N, 3) world points (positive in free space)."""
         points = np.asarray(points, dtype=np.float32).reshape(-1, 3)
         out = np.empty(len(points), dtype=np.float64)
-        for begin in range(0, len(points), _QUERY_CHUNK):
-            chunk = torch.from_numpy(points[begin : begin + _QUERY_CHUNK]).to(self._device)
+        step = self._query_chunk
+        for begin in range(0, len(points), step):
+            chunk = torch.from_numpy(points[begin : begin + step]).to(self._device)
             values = self.field.sdf(chunk) * self.config.truncation_m
             out[begin : begin + len(chunk)] = values.cpu().numpy()
         return out
@@ -417,8 +469,9 @@ class NeuralMapper:
         """(N, 3) uint8 colour of the field at world points."""
         points = np.asarray(points, dtype=np.float32).reshape(-1, 3)
         out = np.empty((len(points), 3), dtype=np.uint8)
-        for begin in range(0, len(points), _QUERY_CHUNK):
-            chunk = torch.from_numpy(points[begin : begin + _QUERY_CHUNK]).to(self._device)
+        step = self._query_chunk
+        for begin in range(0, len(points), step):
+            chunk = torch.from_numpy(points[begin : begin + step]).to(self._device)
             _, rgb = self.field(chunk)
             out[begin : begin + len(chunk)] = (
                 (rgb * 255.0 + 0.5).clamp(0, 255).to(torch.uint8).cpu().numpy()

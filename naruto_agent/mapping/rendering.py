@@ -128,34 +128,112 @@ def render_rays(
     generator: torch.Generator | None = None,
     perturb: bool = False,
     with_colour: bool = True,
+    fixed_shape: bool = False,
 ) -> RenderOutput:
-    """Render colour, depth and (with a grid) variance of a batch of rays."""
+    """Render colour, depth and (with a grid) variance of a batch of rays.
+
+    ``fixed_shape`` evaluates the field at every sample, culled ones included, and masks
+    the culled ones afterwards (SDF -1, colour and variance 0: what the compact path gives
+    them, with zero gradient): the same result, but every tensor's shape follows from the
+    batch size alone, so nothing waits for the device to count the kept samples (the fast
+    GPU path; on a CPU the compact evaluation is cheaper).
+    """
     z = sample_depths(rays.depth, config, generator, perturb)
     count, samples = z.shape
     evaluated = torch.ones_like(z, dtype=torch.bool)
     if config.cull_behind_depth_m is not None:
         valid = (rays.depth > 0)[:, None]
         evaluated = ~(valid & (z > rays.depth[:, None] + config.cull_behind_depth_m))
-    flat = evaluated.reshape(-1).nonzero().squeeze(1)
-    ray_of_sample = torch.div(flat, samples, rounding_mode="floor")
-    points = (
-        rays.origins[ray_of_sample] + rays.directions[ray_of_sample] * z.reshape(-1)[flat, None]
-    )
-    if with_colour:
-        sdf_values, rgb_values = field(points)
-        rgb_samples = _scatter(rgb_values, flat, (count, samples), 0.0)
+    if fixed_shape:
+        points = (rays.origins[:, None, :] + rays.directions[:, None, :] * z[:, :, None]).reshape(
+            -1, 3
+        )
+        if with_colour:
+            sdf_values, rgb_values = field(points)
+            rgb_samples = torch.where(
+                evaluated[:, :, None], rgb_values.view(count, samples, 3), 0.0
+            )
+        else:
+            sdf_values, rgb_samples = field.sdf(points), None
+        sdf = torch.where(evaluated, sdf_values.view(count, samples), _CULLED_SDF)
     else:
-        sdf_values, rgb_samples = field.sdf(points), None
-    sdf = _scatter(sdf_values, flat, (count, samples), _CULLED_SDF)
+        flat = evaluated.reshape(-1).nonzero().squeeze(1)
+        ray_of_sample = torch.div(flat, samples, rounding_mode="floor")
+        points = (
+            rays.origins[ray_of_sample] + rays.directions[ray_of_sample] * z.reshape(-1)[flat, None]
+        )
+        if with_colour:
+            sdf_values, rgb_values = field(points)
+            rgb_samples = _scatter(rgb_values, flat, (count, samples), 0.0)
+        else:
+            sdf_values, rgb_samples = field.sdf(points), None
+        sdf = _scatter(sdf_values, flat, (count, samples), _CULLED_SDF)
+    sigma2 = None
+    if uncertainty is not None:
+        if fixed_shape:
+            sigma2 = torch.where(evaluated, uncertainty.variance(points).view(count, samples), 0.0)
+        else:
+            sigma2 = _scatter(uncertainty.variance(points), flat, (count, samples), 0.0)
+    if fixed_shape and field.backend == "triton":
+        # The weights, their sums and their gradients in one kernel per direction.
+        from naruto_agent.mapping import triton_kernels
+
+        depth, rgb, variance = triton_kernels.composite(
+            sdf,
+            z,
+            rgb_samples,
+            sigma2,
+            config.truncation_m,
+            sigma_to_weights=not config.uncertainty_detach_geometry,
+        )
+        return RenderOutput(rgb, depth, variance, sdf, z, evaluated)
     weights = truncated_weights(sdf, z, config.truncation_m)
     rgb = (weights[:, :, None] * rgb_samples).sum(dim=1) if rgb_samples is not None else None
     depth = (weights * z).sum(dim=1)
     variance = None
-    if uncertainty is not None:
-        sigma2 = _scatter(uncertainty.variance(points), flat, (count, samples), 0.0)
+    if sigma2 is not None:
         w = weights.detach() if config.uncertainty_detach_geometry else weights
         variance = (w * w * sigma2).sum(dim=1)
     return RenderOutput(rgb, depth, variance, sdf, z, evaluated)
+
+
+def fast_compositing_error(device: torch.device, truncation_m: float = 0.1) -> str | None:
+    """Why the Triton compositing kernel cannot be trusted on ``device``, or None when it can.
+
+    Renders a few random rays (values and gradients) with the kernel and with
+    :func:`truncated_weights` and compares them; this also compiles the kernel. A failure to
+    compile or launch is reported, not raised.
+    """
+    generator = torch.Generator().manual_seed(0)
+    z = torch.sort(5.0 * torch.rand(8, 43, generator=generator), dim=1).values.to(device)
+    sdf = (0.4 * torch.rand(8, 43, generator=generator) - 0.2).to(device)
+    rgb = torch.rand(8, 43, 3, generator=generator).to(device)
+    sigma2 = (0.01 + torch.rand(8, 43, generator=generator)).to(device)
+    results = []
+    try:
+        from naruto_agent.mapping import triton_kernels
+
+        for fused in (True, False):
+            inputs = [t.clone().requires_grad_() for t in (sdf, rgb, sigma2)]
+            with torch.enable_grad():
+                if fused:
+                    depth, colour, variance = triton_kernels.composite(
+                        inputs[0], z, inputs[1], inputs[2], truncation_m
+                    )
+                else:
+                    weights = truncated_weights(inputs[0], z, truncation_m)
+                    depth = (weights * z).sum(dim=1)
+                    colour = (weights[:, :, None] * inputs[1]).sum(dim=1)
+                    variance = (weights * weights * inputs[2]).sum(dim=1)
+                total = depth.sum() + colour.sum() + variance.sum()
+                grads = torch.autograd.grad(total, inputs)
+            results.append([t.detach() for t in (depth, colour, variance, *grads)])
+    except Exception as error:  # noqa: BLE001 (any compile or launch failure)
+        return f"the Triton compositing kernel failed: {type(error).__name__}: {error}"
+    for fast, reference in zip(*results, strict=True):
+        if not torch.allclose(fast, reference, rtol=1e-3, atol=1e-5):
+            return "the Triton compositing kernel differs from the PyTorch reference"
+    return None
 
 
 def surface_variance(
@@ -232,9 +310,16 @@ def smoothness_loss(
 
 
 def mapping_losses(
-    output: RenderOutput, rays: RayBatch, config: NeuralMapperConfig
+    output: RenderOutput, rays: RayBatch, config: NeuralMapperConfig, fixed_shape: bool = False
 ) -> dict[str, torch.Tensor]:
-    """The unweighted Co-SLAM losses and NARUTO's NLL (when a variance was rendered)."""
+    """The unweighted Co-SLAM losses and NARUTO's NLL (when a variance was rendered).
+
+    Each loss is a mean over the rays or samples it applies to, 0 when there are none.
+    ``fixed_shape`` computes the same means as masked sums over all rays and samples,
+    without boolean indexing or host-side tests (the fast GPU path: no device sync).
+    """
+    if fixed_shape:
+        return _masked_mapping_losses(output, rays, config)
     valid = rays.depth > 0
     zero = output.depth.new_zeros(())
     losses: dict[str, torch.Tensor] = {}
@@ -264,6 +349,43 @@ def mapping_losses(
             )
         else:
             losses["uncertainty"] = zero
+    return losses
+
+
+def _masked_mean(values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean of ``values`` where ``mask`` (0 where it is nowhere true), with no device sync.
+
+    ``torch.where`` rather than a product, so a non-finite value outside the mask (a
+    variance of a ray with no depth, say) cannot leak in, in the value or the gradient.
+    """
+    total = torch.where(mask, values, 0.0).sum()
+    return total / mask.sum().clamp(min=1)
+
+
+def _masked_mapping_losses(
+    output: RenderOutput, rays: RayBatch, config: NeuralMapperConfig
+) -> dict[str, torch.Tensor]:
+    valid = rays.depth > 0
+    losses: dict[str, torch.Tensor] = {}
+    rgb_error = (output.rgb - rays.rgb).square().sum(dim=1)
+    # The reference averages over the valid rays' three channels.
+    losses["rgb"] = _masked_mean(rgb_error, valid) / 3.0
+    losses["depth"] = _masked_mean((output.depth - rays.depth).square(), valid)
+    target = rays.depth[:, None]
+    tr = config.truncation_m
+    has_depth = valid[:, None] & output.evaluated
+    front = has_depth & (output.z < target - tr)
+    band = has_depth & ~front & (output.z <= target + tr)
+    losses["free_space"] = _masked_mean((output.sdf - 1.0).square(), front)
+    losses["sdf"] = _masked_mean((output.z + output.sdf * tr - target).square(), band)
+    if output.variance is not None:
+        depth_hat = output.depth
+        if config.uncertainty_detach_geometry:
+            depth_hat = depth_hat.detach()
+        variance = torch.where(valid, output.variance, 1.0)
+        losses["uncertainty"] = _masked_mean(
+            (depth_hat - rays.depth).square() / (2.0 * variance), valid
+        ) + 0.5 * _masked_mean(torch.log(variance), valid)
     return losses
 
 
