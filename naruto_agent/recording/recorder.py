@@ -83,8 +83,8 @@ class EpisodeRecorder:
         camera: PinholeCamera,
         title: str = "naruto-gym episode",
         live: str | None = None,
-        map_faces: int = 60_000,
-        depth_every: int = 2,
+        map_faces: int = 40_000,
+        depth_every: int = 5,
         jpeg_quality: int = 80,
     ) -> None:
         if not rerun_available():
@@ -119,8 +119,10 @@ class EpisodeRecorder:
     def _at(self, step: int) -> None:
         self.stream.set_time(TIMELINE, sequence=int(step))
 
-    def log_scene(self, mesh: trimesh.Trimesh, max_faces: int = 60_000) -> None:
-        """The ground truth, once (static), grey, simplified to ``max_faces`` triangles."""
+    def log_scene(self, scene: Any, max_faces: int = 60_000) -> None:
+        """The ground truth (anything with ``vertices`` and ``faces``), once (static), pale
+        grey, simplified to ``max_faces`` triangles."""
+        mesh = trimesh.Trimesh(np.asarray(scene.vertices), np.asarray(scene.faces), process=False)
         simple = simplify_mesh(mesh, max_faces)
         self.stream.log(
             "world/ground_truth",
@@ -182,7 +184,6 @@ class EpisodeRecorder:
             self._rr.Mesh3D(
                 vertex_positions=np.asarray(simple.vertices, np.float32),
                 triangle_indices=np.asarray(simple.faces, np.uint32),
-                vertex_normals=np.asarray(simple.vertex_normals, np.float32),
                 vertex_colors=None if colours is None else colours.astype(np.uint8),
             ),
         )
