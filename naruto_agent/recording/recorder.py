@@ -224,6 +224,17 @@ class EpisodeRecorder:
         if callable(view_layers):
             self.log_layers(step, list(view_layers()))
 
+    def observe(self, step: int, observation: dict[str, Any], info: dict[str, Any],
+                policy: Any = None, map_mesh: Callable[[], trimesh.Trimesh] | None = None,
+                map_every: int = 50, last: bool = False) -> None:
+        """One step in full: :meth:`log_step`, the policy's layers, and the map from
+        ``map_mesh()`` every ``map_every`` steps and at the ``last``."""
+        self.log_step(step, observation, info)
+        if policy is not None:
+            self.log_policy(step, policy)
+        if map_mesh is not None and (last or (map_every > 0 and step % map_every == 0)):
+            self.log_map(step, map_mesh())
+
     def log_scores(self, step: int, scores: dict[str, Any] | None) -> None:
         """The completion ratios of a checkpoint's scores (those that are not None)."""
         self._at(step)
