@@ -77,8 +77,8 @@ class DemoArgs:
     """surface samples per mesh of the final metrics (200,000 as published)"""
     gif_frames: int = 60
     """frames of the animated GIF (0: no GIF)"""
-    gif_width: int = 480
-    """width of the GIF's frames in pixels"""
+    gif_width: int = 720
+    """width of the GIF's frames in pixels (ground truth, RGB and depth, the agent's map)"""
     viewer: bool = True
     """write the 3D view (viewer.html; needs the viewer extra)"""
     record: bool = True
