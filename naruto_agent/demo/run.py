@@ -90,7 +90,7 @@ class DemoArgs:
     live_url: str = ""
     """address of a running Rerun viewer for --live (HOST:PORT or
     rerun+http://HOST:PORT/proxy); empty: spawn one here"""
-    map_snapshots: int = 20
+    map_snapshots: int = 10
     """times the agent's map is taken over the episode, for the recording and the GIF"""
     progress: bool = True
     """show a progress bar"""

@@ -83,7 +83,7 @@ class EpisodeRecorder:
         camera: PinholeCamera,
         title: str = "naruto-gym episode",
         live: str | None = None,
-        map_faces: int = 40_000,
+        map_faces: int = 30_000,
         depth_every: int = 5,
         jpeg_quality: int = 80,
     ) -> None:
