@@ -33,7 +33,6 @@ from naruto_agent.policies.config import FrontierConfig, PassiveConfig, RandomCo
 from naruto_agent.policies.frontier import FrontierPolicy
 from naruto_agent.policies.layers import (
     BoxesLayer,
-    Layer,
     LinesLayer,
     PointsLayer,
     ScalarLayer,
@@ -58,7 +57,6 @@ __all__ = [
     "EnvContext",
     "FrontierConfig",
     "FrontierPolicy",
-    "Layer",
     "LinesLayer",
     "OccupancyGrid",
     "OwnReconstruction",
