@@ -174,6 +174,19 @@ def test_an_unreachable_viewer_fails_at_once_with_what_to_do(tmp_path):
     assert time.perf_counter() - started < 10
 
 
+def test_a_viewer_that_cannot_start_fails_with_what_to_do():
+    import os
+
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        pytest.skip("a display is there: a spawned viewer would open a window")
+    from naruto_agent.recording.live import DEFAULT_PORT, listening
+
+    if listening("127.0.0.1", DEFAULT_PORT):
+        pytest.skip("a Rerun viewer already listens on this machine")
+    with pytest.raises(LiveViewerError, match="no display"):
+        reach_viewer("spawn", wait_s=5)
+
+
 # -- the benchmark's --record -------------------------------------------------------------
 def test_benchmark_records_every_episode(tmp_path):
     from naruto_agent.benchmark.cli import main
