@@ -30,6 +30,11 @@ LAYERS: dict[str, tuple[str, ...]] = {
         "naruto_gym", "naruto_agent.mapping", "naruto_agent.planning", "naruto_agent.guards",
         "naruto_agent.policies",
     ),
+    # Draws what policies show (Policy.view_layers); no policy imports it.
+    "naruto_agent.recording": (
+        "naruto_gym", "naruto_agent.mapping", "naruto_agent.planning", "naruto_agent.guards",
+        "naruto_agent.policies", "naruto_agent.naruto",
+    ),
 }
 
 

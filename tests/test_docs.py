@@ -28,6 +28,7 @@ API_PAGES = {
     "naruto_agent.mapping": "mapping",
     "naruto_agent.planning": "planning",
     "naruto_agent.benchmark": "benchmark",
+    "naruto_agent.recording": "recording",
 }
 
 

@@ -16,6 +16,7 @@ Example::
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 import time
@@ -26,6 +27,7 @@ from typing import Any
 from naruto_agent.benchmark.executors import pending_specs, run_local, run_ray
 from naruto_agent.benchmark.plots import plot_curves, plot_trajectories
 from naruto_agent.benchmark.records import load_records, write_json_atomic
+from naruto_agent.benchmark.runner import run_episode_safe
 from naruto_agent.benchmark.spec import build_specs
 from naruto_agent.benchmark.tables import failure_lines, markdown_table, summarise
 from naruto_gym.cli_args import dataclass_parser
@@ -78,6 +80,9 @@ class Args:
     """JSON dict of extra env arguments, e.g. '{"max_depth_m": 5.0}'"""
     plots: bool = True
     """write the plots"""
+    record: bool = False
+    """write a Rerun recording of every episode run, OUT_DIR/recordings/EPISODE.rrd (needs
+    the viewer extra; local workers only)"""
     progress: bool = True
     """show a progress bar"""
 
@@ -143,6 +148,27 @@ def check_policies(policies: list[str]) -> None:
             policy_class(policy)
 
 
+def recording_fn(args: Args) -> dict[str, Any]:
+    """``run_local``'s ``episode_fn`` that records each episode under
+    ``OUT_DIR/recordings`` with ``--record`` (empty otherwise).
+
+    Raises:
+        SystemExit: ``--record`` with Ray, or without rerun-sdk (the message says what to do).
+    """
+    if not args.record:
+        return {}
+    from naruto_agent.recording import rerun_available
+    from naruto_agent.recording.live import RERUN_EXTRA_HINT
+
+    if args.ray_address:
+        raise SystemExit("naruto-benchmark: --record runs with local workers only (drop "
+                         "--ray-address)")
+    if not rerun_available():
+        raise SystemExit(f"naruto-benchmark: --record needs rerun-sdk: {RERUN_EXTRA_HINT}")
+    folder = str(Path(args.out_dir) / "recordings")
+    return {"episode_fn": functools.partial(run_episode_safe, record_dir=folder)}
+
+
 def run(args: Args) -> int:
     """Run the comparison; returns the number of failed episodes."""
     check_policies(args.policies)
@@ -174,7 +200,8 @@ def run(args: Args) -> int:
         if args.ray_address:
             failed = run_ray(todo, args.out_dir, args.ray_address, args.progress)
         else:
-            failed = run_local(todo, args.out_dir, args.workers, args.progress)
+            failed = run_local(todo, args.out_dir, args.workers, args.progress,
+                               **recording_fn(args))
     summary = write_reports(args.out_dir, args.plots)
     out_dir = Path(args.out_dir)
     print((out_dir / "results.md").read_text())

@@ -70,12 +70,16 @@ def timed_step(
     return observation, terminated, truncated, info
 
 
-def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
+def run_episode(
+    spec: EpisodeSpec, progress: bool = False, record_dir: str | None = None
+) -> dict[str, Any]:
     """Run one episode and return its record (raises on any error).
 
     Args:
         spec: the episode.
         progress: show a per-step progress bar.
+        record_dir: write a Rerun recording of the episode under this folder
+            (``SCENE/POLICY/seedN.rrd``; see :mod:`naruto_agent.recording`).
     """
     from tqdm.auto import tqdm
 
@@ -98,6 +102,10 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
         observation, info = env.reset(seed=spec.seed, options=policy.reset_options())
         reset_s = time.perf_counter() - clock
         policy.reset(observation, info, seed=spec.seed)
+        recorder = _recorder(spec, base, record_dir)
+        map_mesh = reconstruction.mesh if reconstruction is not None else None
+        if recorder is not None:
+            recorder.observe(0, observation, info, policy, map_mesh)
         if reconstruction is not None:
             clock = time.perf_counter()
             reconstruction.add_frame(observation["rgb"], observation["depth"], observation["pose"])
@@ -125,14 +133,21 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
             positions.append(np.asarray(observation["pose"], np.float64)[:3, 3].copy())
             if info.get("collided", False):
                 reasons[info.get("collision_reason", "") or "unknown"] += 1
+            if recorder is not None:
+                recorder.observe(step, observation, info, policy, map_mesh,
+                                 last=terminated or truncated or step == spec.steps)
             if reconstruction is not None and step in checkpoints:
                 clock = time.perf_counter()
                 scores = _score(reconstruction, base, spec.checkpoint_samples,
                                 spec.eval_samples_per_m2)
                 evaluation_s += time.perf_counter() - clock
                 completion_curve.append({"step": step, **_curve_point(scores)})
+                if recorder is not None:
+                    recorder.log_scores(step, scores)
             if terminated or truncated:
                 break
+        if recorder is not None:
+            recorder.close()
 
         metrics: dict[str, Any] = {}
         own_metrics: dict[str, Any] | None = None
@@ -175,6 +190,20 @@ def run_episode(spec: EpisodeSpec, progress: bool = False) -> dict[str, Any]:
     finally:
         policy.close()
         env.close()
+
+
+def _recorder(spec: EpisodeSpec, env: Any, record_dir: str | None) -> Any | None:
+    """The episode's recorder under ``record_dir`` (None without one)."""
+    if record_dir is None:
+        return None
+    from pathlib import Path
+
+    from naruto_agent.recording import EpisodeRecorder
+
+    path = Path(record_dir) / f"{spec.episode_id}.rrd"
+    recorder = EpisodeRecorder(path, env.camera, title=spec.episode_id)
+    recorder.log_scene(env.scene)
+    return recorder
 
 
 def _score(
@@ -234,15 +263,18 @@ def failed_record(spec: EpisodeSpec, error: BaseException | str, trace: str = ""
     }
 
 
-def run_episode_safe(spec_data: dict[str, Any] | EpisodeSpec) -> dict[str, Any]:
+def run_episode_safe(
+    spec_data: dict[str, Any] | EpisodeSpec, record_dir: str | None = None
+) -> dict[str, Any]:
     """:func:`run_episode` that returns a ``failed`` record instead of raising.
 
-    Takes the spec as a dict too, which is what worker processes and Ray tasks receive.
+    Takes the spec as a dict too, which is what worker processes and Ray tasks receive;
+    ``record_dir`` as :func:`run_episode`'s.
     """
     spec = spec_data if isinstance(spec_data, EpisodeSpec) else EpisodeSpec.from_dict(spec_data)
     started = time.perf_counter()
     try:
-        return run_episode(spec)
+        return run_episode(spec, record_dir=record_dir)
     except Exception as error:  # noqa: BLE001 (an episode's crash must not stop the others)
         record = failed_record(spec, error, traceback.format_exc())
         record["wall_time_s"] = time.perf_counter() - started

@@ -11,13 +11,18 @@ runs one episode and writes into ``--out`` (default ``outputs/demo``):
 * ``curves.csv`` / ``curves.png``: coverage at every step, completion ratio at a few
   checkpoints (scored with cheaper settings than the final metrics);
 * ``trajectory.png``: the trajectory on the top-down map, with the goals the policy chose;
-* ``episode.gif``: the env's ``rgb_array`` frames (map, RGB, depth), subsampled;
-* ``viewer.html``: a 3D view to open in a browser and turn (reconstruction, ground-truth
-  outline, trajectory, camera frustums); needs the ``viewer`` extra (plotly).
+* ``episode.gif``: the env's ``rgb_array`` frames (map, RGB, depth), subsampled, with the
+  agent's map from above beside each;
+* ``viewer.html``: a 3D view to open in a browser and turn, opening inside the scene
+  (reconstruction cut away, trajectory, camera frustums, goals, a step slider); needs the
+  ``viewer`` extra (plotly);
+* ``episode.rrd``: a Rerun recording to scrub through (``--live`` streams it while the
+  episode runs); needs the ``viewer`` extra (rerun-sdk). See docs/viewer.md.
 
 Modules: :mod:`.run` (arguments and the episode loop), :mod:`.episode` (the record of what an
-episode produced), :mod:`.outputs` (files and pictures), :mod:`.viewer` (the 3D page and its
-reader).
+episode produced), :mod:`.watch` (map snapshots, GIF frames, the recording), :mod:`.outputs`
+(files and pictures), :mod:`.map_picture` (the agent's map from above), :mod:`.viewer` (the
+3D page and its reader).
 """
 
 from naruto_agent.demo.run import DemoArgs, main, parse_args, run_demo

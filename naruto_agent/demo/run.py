@@ -77,10 +77,21 @@ class DemoArgs:
     """surface samples per mesh of the final metrics (200,000 as published)"""
     gif_frames: int = 60
     """frames of the animated GIF (0: no GIF)"""
-    gif_width: int = 480
-    """width of the GIF's frames in pixels"""
+    gif_width: int = 720
+    """width of the GIF's frames in pixels (ground truth, RGB and depth, the agent's map)"""
     viewer: bool = True
     """write the 3D view (viewer.html; needs the viewer extra)"""
+    record: bool = True
+    """write episode.rrd, a Rerun recording of the episode to scrub through (`rerun
+    episode.rrd`; needs the viewer extra)"""
+    live: bool = False
+    """stream the recording to a Rerun viewer while the episode runs (spawns one here, or
+    connects to --live-url)"""
+    live_url: str = ""
+    """address of a running Rerun viewer for --live (HOST:PORT or
+    rerun+http://HOST:PORT/proxy); empty: spawn one here"""
+    map_snapshots: int = 10
+    """times the agent's map is taken over the episode, for the recording and the GIF"""
     progress: bool = True
     """show a progress bar"""
 
@@ -96,8 +107,8 @@ def check_args(args: DemoArgs) -> None:
         raise ValueError(f"--steps must be at least 1, got {args.steps}")
     if not 0 < args.image_scale <= 1:
         raise ValueError(f"--image-scale must be in (0, 1], got {args.image_scale}")
-    if args.checkpoints < 0 or args.gif_frames < 0:
-        raise ValueError("--checkpoints and --gif-frames must be >= 0")
+    if args.checkpoints < 0 or args.gif_frames < 0 or args.map_snapshots < 0:
+        raise ValueError("--checkpoints, --gif-frames and --map-snapshots must be >= 0")
     if args.checkpoint_samples < 1000 or args.eval_samples < 1000:
         raise ValueError("--checkpoint-samples and --eval-samples must be at least 1000")
     if args.gif_width < 32:
@@ -233,14 +244,6 @@ def _curve_point(step: int, metrics: dict[str, Any] | None) -> dict[str, Any]:
     return {"step": step, **{key: (metrics or {}).get(key) for key in keys}}
 
 
-def _frame(env: Any, width: int) -> np.ndarray:
-    from PIL import Image
-
-    picture = Image.fromarray(env.render())
-    height = max(1, round(picture.height * width / picture.width))
-    return np.asarray(picture.resize((width, height), Image.BILINEAR))
-
-
 def make_env(args: DemoArgs, scene: Any, action_mode: str) -> Any:
     """The episode's env: the default camera scaled, the budget as its time limit."""
     import gymnasium as gym
@@ -257,23 +260,28 @@ def make_env(args: DemoArgs, scene: Any, action_mode: str) -> Any:
     )
 
 
-def run_episode(args: DemoArgs, env: Any, policy: Any) -> Episode:
-    """Run one episode of ``policy`` in ``env`` and keep what the outputs need."""
+def run_episode(args: DemoArgs, env: Any, policy: Any, recorder: Any | None = None) -> Episode:
+    """Run one episode of ``policy`` in ``env`` and keep what the outputs need (and write
+    it to ``recorder``, an :class:`~naruto_agent.recording.EpisodeRecorder`, when given)."""
     from tqdm.auto import tqdm
 
     from naruto_agent.benchmark.runner import checkpoint_steps, timed_step
+    from naruto_agent.demo.watch import EpisodeWatch
     from naruto_agent.policies import EnvContext
 
     base = env.unwrapped
     policy.bind(EnvContext.from_env(env, step_budget=args.steps))
     source = _MapSource(policy, base.camera, args.device)
-    times = dict.fromkeys(("policy", "env", "mapping", "pictures", "checkpoints"), 0.0)
+    times = dict.fromkeys(
+        ("policy", "env", "mapping", "pictures", "checkpoints", "recording"), 0.0
+    )
     observation, info = env.reset(seed=args.seed, options=policy.reset_options())
     policy.reset(observation, info, seed=args.seed)
     source.add_frame(observation)
 
-    gif_every = max(1, args.steps // args.gif_frames) if args.gif_frames else 0
-    frames = [(0, _frame(env, args.gif_width))] if gif_every else []
+    watch = EpisodeWatch(env, policy, source.mesh, args.steps, args.gif_frames,
+                         args.gif_width, args.map_snapshots, recorder, times)
+    watch.observe(0, observation, info, last=False)
     checkpoints = set(checkpoint_steps(args.steps, args.checkpoints))
     cheap = {"num_samples": args.checkpoint_samples, "cull_every": CHECKPOINT_CULL_EVERY}
     coverage = [float(info["coverage"])]
@@ -296,30 +304,32 @@ def run_episode(args: DemoArgs, env: Any, policy: Any) -> Episode:
         if info.get("collided", False):
             collisions[info.get("collision_reason", "") or "unknown"] += 1
         last = terminated or truncated or step == args.steps
-        if gif_every and (step % gif_every == 0 or last):
-            clock = time.perf_counter()
-            frames.append((step, _frame(env, args.gif_width)))
-            times["pictures"] += time.perf_counter() - clock
+        watch.observe(step, observation, info, last)
         if step in checkpoints or (last and args.checkpoints > 0):
             clock = time.perf_counter()
-            curve.append(_curve_point(step, _score(env, source.mesh(), **cheap)))
+            mesh = watch.final_mesh(step) if last else None
+            scores = _score(env, source.mesh() if mesh is None else mesh, **cheap)
+            curve.append(_curve_point(step, scores))
+            watch.scores(step, scores)
             times["checkpoints"] += time.perf_counter() - clock
         if step % 10 == 0:
             bar.set_postfix(coverage=f"{100 * coverage[-1]:.1f}%", refresh=False)
         if last:
             break
     bar.close()
+    final_mesh = watch.final_mesh(steps_run)
+    watch.close()
     return Episode(
         steps_run=steps_run,
         coverage=coverage,
         completion_curve=curve,
         poses=base.poses,
         goals=chosen_goals(policy),
-        frames=frames,
+        frames=watch.frames,
         collisions=collisions,
         path_length_m=float(info.get("path_length_m", 0.0)),
         times_s=times,
-        mesh=source.mesh(),
+        mesh=source.mesh() if final_mesh is None else final_mesh,
         map_source=source.label,
         camera_size=(base.camera.height, base.camera.width),
         policy_detail_s=dict(getattr(policy, "timings", {}) or {}),
@@ -360,9 +370,10 @@ def run_demo(args: DemoArgs) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     env = make_env(args, scene, policy.preferred_action_mode)
     try:
+        recorder = _recorder(args, env, out)
         started = time.perf_counter()
         try:
-            episode = run_episode(args, env, policy)
+            episode = run_episode(args, env, policy, recorder)
         finally:
             policy.close()
         loop_s = time.perf_counter() - started
@@ -394,12 +405,28 @@ def run_demo(args: DemoArgs) -> dict[str, Any]:
         metrics["seconds"]["outputs"] = time.perf_counter() - clock
         # From the call on: policy, scene and env built, the episode, scoring, the files.
         metrics["seconds"]["total"] = time.perf_counter() - begun
+        if recorder is not None and recorder.path is not None:
+            written.append(recorder.path)
         metrics["outputs"] = sorted([path.name for path in written] + ["metrics.json"])
         outputs.write_metrics(out / "metrics.json", metrics)
     finally:
         env.close()
     print(outputs.summary_text(metrics, out))
     return metrics
+
+
+def _recorder(args: DemoArgs, env: Any, out: Path) -> Any | None:
+    """The episode's recorder (:func:`~naruto_agent.demo.watch.make_recorder`); a live viewer
+    that cannot be reached is bad input (the message says what to do)."""
+    from naruto_agent.demo.watch import make_recorder
+    from naruto_agent.recording import LiveViewerError
+
+    base = env.unwrapped
+    try:
+        return make_recorder(out / "episode.rrd", base.camera, _title(args), args.record,
+                             args.live, args.live_url, scene=base.scene)
+    except (LiveViewerError, ValueError) as error:
+        raise DemoInputError(str(error)) from error
 
 
 def _title(args: DemoArgs) -> str:

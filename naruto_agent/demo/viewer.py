@@ -1,36 +1,74 @@
 """A 3D view of the episode to open in a browser and turn: ``viewer.html``.
 
-One self-contained HTML page (plotly.js embedded, nothing fetched when it opens) with
+One self-contained page (plotly.js embedded, gzip-packed and unpacked by the browser, so
+nothing is fetched when it opens and the default scene's page stays under 5 MB) with
 
 * ``reconstruction``: the episode's mesh in its own colours, simplified to at most
-  ``max_faces`` triangles so the page stays light;
+  ``max_faces`` triangles, cut away above 80 % of the scene's height (the ceiling);
+* ``walls near the camera``: the walls between the first view's camera and the room, faded,
+  so that the inside shows (a click on the legend hides or shows them);
 * ``ground truth outline``: the ground-truth mesh's feature edges (creases sharper than 30
   degrees and open borders), the longest first when there are too many;
 * ``trajectory``: the camera positions, coloured by step;
 * ``camera frustums``: every n-th camera as a small pyramid;
-* ``goals``: the goals the policy chose.
+* ``goals``: the goals the policy chose;
+* ``camera at step``: the camera at the step a slider under the view picks.
 
-It needs plotly (the ``viewer`` extra: ``pip install "naruto-gym[viewer]"``);
-:func:`write_viewer` says so and writes nothing when it is missing. :func:`read_viewer` reads
-the traces back from a page, for tests and for anyone who wants the data without a browser.
+The first view looks from inside the scene, from a high corner across the trajectory, so the
+path, the cameras and the goals show at once. It needs plotly (the ``viewer`` extra:
+``pip install "naruto-gym[viewer]"``); :func:`write_viewer` says so and writes nothing when it
+is missing. :func:`read_viewer` reads the traces back from a page, for tests and for anyone who
+wants the data without a browser. The page needs a browser with ``DecompressionStream``
+(Chrome 80, Firefox 113, Safari 16.4 or later).
 """
 
 from __future__ import annotations
 
 import base64
+import gzip
+import html
 import json
-import re
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import trimesh
 
+from naruto_agent.recording.meshes import frustum_segments, simplify_mesh, vertex_colours
 from naruto_gym.sensors.pinhole import PinholeCamera
+
+__all__ = [
+    "TRACE_NAMES",
+    "cut_away",
+    "feature_edges",
+    "first_view",
+    "frustum_segments",
+    "plotly_available",
+    "read_viewer",
+    "simplify_mesh",
+    "write_viewer",
+]
 
 VIEWER_EXTRA_HINT = 'pip install "naruto-gym[viewer]"'
 #: Trace names of the page, in drawing order.
-TRACE_NAMES = ("reconstruction", "ground truth outline", "trajectory", "camera frustums", "goals")
+TRACE_NAMES = (
+    "reconstruction",
+    "walls near the camera",
+    "ground truth outline",
+    "trajectory",
+    "camera frustums",
+    "goals",
+    "camera at step",
+)
+#: The reconstruction is cut away above this share of the scene's height (the ceiling).
+CUT_HEIGHT = 0.8
+#: Faces this close to a wall plane of the scene's box near the first camera are faded.
+WALL_BAND_M = 0.3
+#: Positions of the step slider at most (the last step always one of them).
+SLIDER_STEPS = 60
+_FIGURE_ID = "naruto-figure"
+_PLOTLY_ID = "plotly-gzip"
 
 
 def plotly_available() -> bool:
@@ -68,81 +106,111 @@ def feature_edges(
     return segments
 
 
-def frustum_segments(poses: np.ndarray, camera: PinholeCamera, depth_m: float = 0.25) -> np.ndarray:
-    """(8 N, 2, 3) line segments of N camera pyramids (apex to 4 corners, then the rim).
+def first_view(bounds: np.ndarray, positions: np.ndarray) -> dict[str, np.ndarray]:
+    """Where the first view's camera stands and what it looks at, in world metres.
+
+    The camera stands inside the scene's box, high (just under the cut height), in the
+    corner farthest from the trajectory's centre, and looks at that centre a little below,
+    so the path lies in front of it.
 
     Args:
-        poses: (N, 4, 4) camera-to-world poses (OpenCV axes).
-        camera: intrinsics giving the field of view.
-        depth_m: z-depth of the pyramid's base.
+        bounds: (2, 3) scene box.
+        positions: (N, 3) camera positions of the episode.
+
+    Returns:
+        ``eye`` and ``centre`` (3,) world points, and ``corner`` (2,) the signs (-1 or +1)
+        of the box corner the eye stands in, along x and y.
     """
-    poses = np.asarray(poses, np.float64).reshape(-1, 4, 4)
-    u = np.array([0.0, camera.width, camera.width, 0.0]) - 0.5
-    v = np.array([0.0, 0.0, camera.height, camera.height]) - 0.5
-    corners_camera = depth_m * np.stack(
-        [(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones(4)], axis=1
-    )
-    corners = np.einsum("nij,kj->nki", poses[:, :3, :3], corners_camera) + poses[:, None, :3, 3]
-    apex = np.repeat(poses[:, None, :3, 3], 4, axis=1)
-    spokes = np.stack([apex, corners], axis=2)
-    rim = np.stack([corners, np.roll(corners, -1, axis=1)], axis=2)
-    return np.concatenate([spokes, rim], axis=1).reshape(-1, 2, 3)
+    bounds = np.asarray(bounds, np.float64)
+    middle = bounds.mean(axis=0)
+    extent = bounds[1] - bounds[0]
+    target = np.asarray(positions, np.float64).reshape(-1, 3).mean(axis=0) if len(positions) \
+        else middle
+    corners = np.array([[sx, sy] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)])
+    corner_xy = middle[:2] + 0.5 * corners * extent[:2]
+    corner = corners[np.argmax(np.linalg.norm(corner_xy - target[:2], axis=1))]
+    eye = middle.copy()
+    eye[:2] += corner * 0.5 * extent[:2] * 0.85
+    eye[2] = bounds[0, 2] + (CUT_HEIGHT - 0.05) * extent[2]
+    centre = target.copy()
+    centre[2] = bounds[0, 2] + 0.3 * extent[2]
+    return {"eye": eye, "centre": centre, "corner": corner}
 
 
-def simplify_mesh(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
-    """The mesh with at most ``max_faces`` triangles (vertex clustering, colours averaged).
+def cut_away(mesh: trimesh.Trimesh, bounds: np.ndarray,
+             corner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(F,) bool masks of the faces to show and of those to fade.
 
-    The cluster size grows until the mesh fits; a mesh already small enough comes back as is.
+    Faces wholly above :data:`CUT_HEIGHT` of the box's height are dropped (the ceiling);
+    upright faces within :data:`WALL_BAND_M` of the two wall planes of the box that meet in
+    ``corner`` (the first camera's corner) are faded; the rest are shown.
+
+    Args:
+        mesh: the reconstruction.
+        bounds: (2, 3) scene box.
+        corner: (2,) signs of the camera's corner along x and y (see :func:`first_view`).
     """
-    if len(mesh.faces) <= max_faces:
-        return mesh
-    import open3d as o3d
+    bounds = np.asarray(bounds, np.float64)
+    faces = np.asarray(mesh.faces)
+    if not len(faces):
+        return np.zeros(0, bool), np.zeros(0, bool)
+    triangles = np.asarray(mesh.vertices, np.float64)[faces]
+    top = bounds[0, 2] + CUT_HEIGHT * (bounds[1, 2] - bounds[0, 2])
+    kept = triangles[:, :, 2].min(axis=1) <= top
+    centres = triangles.mean(axis=1)
+    upright = np.abs(np.asarray(mesh.face_normals)[:, 2]) < 0.5
+    near_wall = np.zeros(len(faces), bool)
+    for axis in (0, 1):
+        plane = bounds[1 if corner[axis] > 0 else 0, axis]
+        near_wall |= np.abs(centres[:, axis] - plane) < WALL_BAND_M
+    faded = kept & upright & near_wall
+    return kept & ~faded, faded
 
-    legacy = o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(np.asarray(mesh.vertices, np.float64)),
-        o3d.utility.Vector3iVector(np.asarray(mesh.faces, np.int32)),
-    )
-    colours = _vertex_colours(mesh)
+
+def _mesh_trace(go: Any, mesh: trimesh.Trimesh, mask: np.ndarray, name: str,
+                opacity: float) -> Any:
+    """A plotly Mesh3d of the faces of ``mask``: float32 vertices, uint16 indices where they
+    fit, 12-bit hex vertex colours (compact in the page)."""
+    faces = np.asarray(mesh.faces)[mask]
+    used, inverse = np.unique(faces.reshape(-1), return_inverse=True)
+    faces = inverse.reshape(-1, 3)
+    vertices = np.asarray(mesh.vertices, np.float32)[used]
+    index_type = np.uint16 if len(used) < 65536 else np.uint32
+    colours = vertex_colours(mesh)
+    style: dict[str, Any] = {"color": "lightsteelblue"}
     if colours is not None:
-        legacy.vertex_colors = o3d.utility.Vector3dVector(colours / 255.0)
-    extent = float(np.max(mesh.bounds[1] - mesh.bounds[0]))
-    # Faces scale with the inverse square of the cluster size: start from that estimate.
-    spacing = float(np.median(mesh.edges_unique_length)) if len(mesh.faces) else extent
-    cluster = max(spacing * np.sqrt(len(mesh.faces) / max_faces), 1e-4)
-    while True:
-        simple = legacy.simplify_vertex_clustering(cluster)
-        if len(simple.triangles) <= max_faces or cluster > extent:
-            break
-        cluster *= 1.25
-    vertex_colors = (
-        (np.asarray(simple.vertex_colors) * 255).round().astype(np.uint8)
-        if simple.has_vertex_colors()
-        else None
-    )
-    return trimesh.Trimesh(
-        np.asarray(simple.vertices),
-        np.asarray(simple.triangles),
-        vertex_colors=vertex_colors,
-        process=False,
+        nibbles = np.clip(np.round(colours[used] / 17.0), 0, 15).astype(int)
+        style = {"vertexcolor": [f"#{r:x}{g:x}{b:x}" for r, g, b in nibbles]}
+    return go.Mesh3d(
+        x=vertices[:, 0], y=vertices[:, 1], z=vertices[:, 2],
+        i=faces[:, 0].astype(index_type), j=faces[:, 1].astype(index_type),
+        k=faces[:, 2].astype(index_type),
+        name=name, showlegend=True, opacity=opacity, flatshading=False,
+        lighting={"ambient": 0.6, "diffuse": 0.6, "specular": 0.05}, hoverinfo="skip",
+        **style,
     )
 
 
-def _vertex_colours(mesh: trimesh.Trimesh) -> np.ndarray | None:
-    if getattr(mesh.visual, "kind", None) != "vertex":
-        return None
-    return np.asarray(mesh.visual.vertex_colors, np.float64)[:, :3]
-
-
-def _segments_trace(go: Any, segments: np.ndarray, name: str, colour: str) -> Any:
+def _segments_trace(go: Any, segments: np.ndarray, name: str, colour: str,
+                    width: int = 2) -> Any:
     """A plotly line trace of (E, 2, 3) segments: plain lists, None between segments (plotly's
-    line breaks), coordinates rounded to mm."""
+    line breaks), coordinates rounded to cm."""
     coordinates: tuple[list, list, list] = ([], [], [])
-    for start, end in np.round(np.asarray(segments, np.float64), 3):
+    for start, end in np.round(np.asarray(segments, np.float64), 2):
         for axis in range(3):
             coordinates[axis].extend((float(start[axis]), float(end[axis]), None))
     x, y, z = coordinates
-    line = {"color": colour, "width": 2}
+    line = {"color": colour, "width": width}
     return go.Scatter3d(x=x, y=y, z=z, mode="lines", name=name, line=line, hoverinfo="skip")
+
+
+def _normalised(point: np.ndarray, bounds: np.ndarray) -> dict[str, float]:
+    """A world point in plotly's scene coordinates (the box's centre at 0, its longest side
+    1 long, as the manual aspect ratio of :func:`write_viewer` sets)."""
+    middle = bounds.mean(axis=0)
+    scale = float(np.max(bounds[1] - bounds[0]))
+    x, y, z = (np.asarray(point, np.float64) - middle) / scale
+    return {"x": float(x), "y": float(y), "z": float(z)}
 
 
 # -- the page ---------------------------------------------------------------------------------
@@ -154,7 +222,7 @@ def write_viewer(
     camera: PinholeCamera,
     goals: np.ndarray | None = None,
     title: str = "",
-    max_faces: int = 120_000,
+    max_faces: int = 40_000,
     frustums: int = 40,
     quiet: bool = False,
 ) -> Path | None:
@@ -163,7 +231,7 @@ def write_viewer(
     Args:
         path: the HTML file to write.
         mesh: the reconstruction.
-        scene: the ground truth (anything with ``vertices`` and ``faces``).
+        scene: the ground truth (anything with ``vertices``, ``faces`` and ``bounds``).
         poses: (N, 4, 4) camera-to-world poses of the episode.
         camera: the frames' intrinsics (for the frustums).
         goals: (G, 3) goals the policy chose.
@@ -179,81 +247,146 @@ def write_viewer(
     import plotly.graph_objects as go
 
     poses = np.asarray(poses, np.float64).reshape(-1, 4, 4)
-    traces = []
+    positions = poses[:, :3, 3]
+    bounds = np.asarray(getattr(scene, "bounds", None) if hasattr(scene, "bounds") else
+                        [np.min(scene.vertices, 0), np.max(scene.vertices, 0)], np.float64)
+    view = first_view(bounds, positions)
     shown = simplify_mesh(mesh, max_faces)
-    if len(shown.faces):
-        colours = _vertex_colours(shown)
-        vertices = np.asarray(shown.vertices, np.float32)
-        faces = np.asarray(shown.faces, np.int32)
-        mesh_style: dict[str, Any] = (
-            {"vertexcolor": [f"rgb({r},{g},{b})" for r, g, b in colours.astype(int)]}
-            if colours is not None
-            else {"color": "lightsteelblue"}
-        )
-        traces.append(
-            go.Mesh3d(
-                x=vertices[:, 0],
-                y=vertices[:, 1],
-                z=vertices[:, 2],
-                i=faces[:, 0],
-                j=faces[:, 1],
-                k=faces[:, 2],
-                name="reconstruction",
-                showlegend=True,
-                flatshading=False,
-                lighting={"ambient": 0.6, "diffuse": 0.6, "specular": 0.05},
-                hoverinfo="skip",
-                **mesh_style,
-            )
-        )
-    outline = feature_edges(scene.vertices, scene.faces)
-    traces.append(_segments_trace(go, outline, "ground truth outline", "rgba(40,40,40,0.55)"))
-    positions = np.round(poses[:, :3, 3], 4)
+    solid, faded = cut_away(shown, bounds, view["corner"])
+    traces = [
+        _mesh_trace(go, shown, solid, "reconstruction", 1.0),
+        _mesh_trace(go, shown, faded, "walls near the camera", 0.15),
+    ]
+    outline = feature_edges(scene.vertices, scene.faces, max_edges=3000)
+    traces.append(_segments_trace(go, outline, "ground truth outline", "rgba(40,40,40,0.45)"))
+    rounded = np.round(positions, 3)
     traces.append(
         go.Scatter3d(
-            x=positions[:, 0].tolist(),
-            y=positions[:, 1].tolist(),
-            z=positions[:, 2].tolist(),
-            mode="lines",
-            name="trajectory",
-            line={"color": list(range(len(positions))), "colorscale": "Plasma", "width": 5},
-            text=[f"step {step}" for step in range(len(positions))],
-            hoverinfo="text",
+            x=rounded[:, 0].tolist(), y=rounded[:, 1].tolist(), z=rounded[:, 2].tolist(),
+            mode="lines", name="trajectory",
+            line={"color": list(range(len(rounded))), "colorscale": "Plasma", "width": 6},
+            text=[f"step {step}" for step in range(len(rounded))], hoverinfo="text",
         )
     )
     chosen = np.unique(np.linspace(0, len(poses) - 1, max(frustums, 1)).round().astype(int))
-    cameras = frustum_segments(poses[chosen], camera)
-    traces.append(_segments_trace(go, cameras, "camera frustums", "royalblue"))
+    traces.append(_segments_trace(go, frustum_segments(poses[chosen], camera),
+                                  "camera frustums", "royalblue"))
     goals = np.asarray(goals if goals is not None else np.zeros((0, 3)), np.float64)
-    goals = np.round(goals.reshape(-1, 3), 4)
+    goals = np.round(goals.reshape(-1, 3), 3)
     traces.append(
         go.Scatter3d(
-            x=goals[:, 0].tolist(),
-            y=goals[:, 1].tolist(),
-            z=goals[:, 2].tolist(),
-            mode="markers",
-            name="goals",
-            marker={"symbol": "diamond", "size": 5, "color": "gold"},
-            text=[f"goal {index + 1}" for index in range(len(goals))],
-            hoverinfo="text",
+            x=goals[:, 0].tolist(), y=goals[:, 1].tolist(), z=goals[:, 2].tolist(),
+            mode="markers", name="goals",
+            marker={"symbol": "diamond", "size": 6, "color": "gold",
+                    "line": {"color": "black", "width": 1}},
+            text=[f"goal {index + 1}" for index in range(len(goals))], hoverinfo="text",
         )
     )
-    figure = go.Figure(traces)
+    steps = np.unique(np.linspace(0, len(poses) - 1, min(SLIDER_STEPS, len(poses)))
+                      .round().astype(int))
+    current = len(traces)
+    traces.append(_step_trace(go, poses, camera, int(steps[-1])))
+    frames = [go.Frame(name=str(step), data=[_step_trace(go, poses, camera, int(step))],
+                       traces=[current]) for step in steps]
+    figure = go.Figure(traces, frames=frames)
+    extent = bounds[1] - bounds[0]
+    ratio = extent / float(np.max(extent))
+    axis = {"showbackground": False, "showgrid": False, "zeroline": False}
     figure.update_layout(
         title=title,
         margin={"l": 0, "r": 0, "t": 40, "b": 0},
+        paper_bgcolor="white",
         scene={
-            "aspectmode": "data",
-            "xaxis_title": "x (m)",
-            "yaxis_title": "y (m)",
-            "zaxis_title": "z (m)",
+            "aspectmode": "manual",
+            "aspectratio": {"x": float(ratio[0]), "y": float(ratio[1]), "z": float(ratio[2])},
+            "xaxis": {**axis, "range": [float(bounds[0, 0]), float(bounds[1, 0])],
+                      "title": "x (m)"},
+            "yaxis": {**axis, "range": [float(bounds[0, 1]), float(bounds[1, 1])],
+                      "title": "y (m)"},
+            "zaxis": {**axis, "range": [float(bounds[0, 2]), float(bounds[1, 2])],
+                      "title": "z (m)"},
+            "camera": {
+                "eye": _normalised(view["eye"], bounds),
+                "center": _normalised(view["centre"], bounds),
+                "up": {"x": 0.0, "y": 0.0, "z": 1.0},
+                "projection": {"type": "perspective"},
+            },
         },
-        legend={"itemclick": "toggle"},
+        legend={"itemclick": "toggle", "x": 0.0, "y": 0.98, "bgcolor": "rgba(255,255,255,0.7)"},
+        sliders=[{
+            "active": len(steps) - 1,
+            "currentvalue": {"prefix": "camera at step "},
+            "pad": {"t": 10, "b": 10},
+            "steps": [
+                {"label": str(step), "method": "animate",
+                 "args": [[str(step)], {"mode": "immediate", "frame": {"duration": 0,
+                                                                       "redraw": True},
+                                        "transition": {"duration": 0}}]}
+                for step in steps
+            ],
+        }],
     )
     path = Path(path)
-    # Plotly.js embedded, MathJax left out: the page opens without a network.
-    figure.write_html(path, include_plotlyjs=True, include_mathjax=False, full_html=True)
+    path.write_text(_page(figure, title), encoding="utf-8")
     return path
+
+
+def _step_trace(go: Any, poses: np.ndarray, camera: PinholeCamera, step: int) -> Any:
+    """The camera of one step: a larger frustum, for the slider."""
+    segments = frustum_segments(poses[step][None], camera, depth_m=0.4)
+    trace = _segments_trace(go, segments, "camera at step", "crimson", width=6)
+    trace.update(text=[f"step {step}"] * len(trace.x), hoverinfo="text")
+    return trace
+
+
+def _plotly_js() -> str:
+    """plotly.js as shipped with plotly.py, gzip-compressed and base64-encoded."""
+    import plotly
+
+    source = Path(os.path.dirname(plotly.__file__), "package_data", "plotly.min.js")
+    return base64.b64encode(gzip.compress(source.read_bytes(), 9, mtime=0)).decode("ascii")
+
+
+_LOADER = """
+(async function () {
+  var status = document.getElementById("status");
+  try {
+    var packed = document.getElementById("%(plotly)s").textContent.trim();
+    var bytes = Uint8Array.from(atob(packed), function (c) { return c.charCodeAt(0); });
+    var stream = new Blob([bytes]).stream().pipeThrough(new DecompressionStream("gzip"));
+    var source = await new Response(stream).text();
+    var script = document.createElement("script");
+    script.textContent = source;
+    document.head.appendChild(script);
+    var figure = JSON.parse(document.getElementById("%(figure)s").textContent);
+    figure.config = {responsive: true, displaylogo: false};
+    await Plotly.newPlot("view", figure);
+    status.remove();
+    document.body.setAttribute("data-rendered", "yes");
+  } catch (error) {
+    status.textContent = "The 3D view could not be shown (" + error + "). It needs a browser " +
+      "with DecompressionStream: Chrome 80, Firefox 113, Safari 16.4 or later.";
+  }
+})();
+"""
+
+
+def _page(figure: Any, title: str) -> str:
+    """The HTML page: the figure as JSON, plotly.js packed, and the loader that joins them."""
+    import plotly.io as pio
+
+    data = pio.to_json(figure, validate=False, engine="json").replace("</", "<\\/")
+    loader = _LOADER % {"plotly": _PLOTLY_ID, "figure": _FIGURE_ID}
+    return (
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\">"
+        f"<title>{html.escape(title or 'naruto-gym episode')}</title>"
+        "<style>html,body{margin:0;height:100%;font-family:sans-serif}"
+        "#view{width:100%;height:100%}#status{position:absolute;top:12px;left:12px}</style>"
+        "</head><body><div id=\"status\">Loading the 3D view...</div><div id=\"view\"></div>\n"
+        f"<script type=\"application/json\" id=\"{_FIGURE_ID}\">{data}</script>\n"
+        f"<script type=\"application/octet-stream\" id=\"{_PLOTLY_ID}\">{_plotly_js()}</script>\n"
+        f"<script>{loader}</script>\n</body></html>\n"
+    )
 
 
 def read_viewer(path: str | Path) -> dict[str, dict[str, Any]]:
@@ -261,21 +394,31 @@ def read_viewer(path: str | Path) -> dict[str, dict[str, Any]]:
 
     Numeric arrays plotly stored base64-encoded (``{"dtype", "bdata"}``) come back decoded;
     line coordinates with breaks (None) come back as float arrays with NaN at the breaks.
+    The slider's frames come back under the key ``"frames"`` (a list of ``(name, traces)``).
 
     Raises:
-        ValueError: the file holds no plotly figure.
+        ValueError: the file holds no figure of this module.
+    """
+    figure = read_figure(path)
+    traces = {trace.get("name", str(index)): _decode(trace)
+              for index, trace in enumerate(figure.get("data", []))}
+    return traces
+
+
+def read_figure(path: str | Path) -> dict[str, Any]:
+    """The whole figure of a page (``data``, ``layout``, ``frames``) as plotly JSON.
+
+    Raises:
+        ValueError: the file holds no figure of this module.
     """
     text = Path(path).read_text(encoding="utf-8")
-    match = re.search(r"Plotly\.newPlot\(\s*", text)
-    if match is None:
-        raise ValueError(f"{path} holds no plotly figure (no Plotly.newPlot call)")
-    decoder = json.JSONDecoder()
-    _, end = decoder.raw_decode(text, match.end())  # the div's id
-    comma = re.compile(r"\s*,\s*").match(text, end)
-    if comma is None:
-        raise ValueError(f"{path}: unexpected text after the figure's div id")
-    data, _ = decoder.raw_decode(text, comma.end())
-    return {trace.get("name", str(index)): _decode(trace) for index, trace in enumerate(data)}
+    marker = f'id="{_FIGURE_ID}">'
+    start = text.find(marker)
+    if start < 0:
+        raise ValueError(f"{path} holds no plotly figure (no {_FIGURE_ID} block)")
+    start += len(marker)
+    end = text.find("</script>", start)
+    return json.loads(text[start:end])
 
 
 _DTYPES = {

@@ -51,6 +51,7 @@ from naruto_agent.naruto.move_checks import MoveChecker
 from naruto_agent.naruto.recovery import BlockedSpace, ProgressMonitor
 from naruto_agent.naruto.scan_checks import NarutoScanChecks
 from naruto_agent.naruto.state_machine import MoveCheck, NarutoStateMachine, Plan, State
+from naruto_agent.naruto.view_layers import naruto_layers
 from naruto_agent.planning.rotation import image_view_test
 from naruto_agent.policies.base import (
     EnvContext,
@@ -61,6 +62,7 @@ from naruto_agent.policies.base import (
     clip_pose_action,
     pose_action,
 )
+from naruto_agent.policies.layers import Layer
 from naruto_agent.policies.registry import register_policy
 
 #: The phases whose seconds ``NarutoPolicy.timings`` holds.
@@ -245,6 +247,11 @@ class NarutoPolicy(Policy):
         if self.agent_map is None:
             return None
         return OwnReconstruction(self.mesh(), self.mapper.sdf)
+
+    def view_layers(self) -> list[Layer]:
+        """The current goal, planned path and view targets, the goals chosen, the frontier
+        and the most uncertain surfaces (:mod:`naruto_agent.naruto.view_layers`)."""
+        return naruto_layers(self.machine.plan, self.plans, self.agent_map)
 
     # -- public seams ------------------------------------------------------------------------
     def refresh_view(self) -> None:

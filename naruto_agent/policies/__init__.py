@@ -9,6 +9,8 @@
   the open-scan guard they share is :class:`~naruto_agent.guards.ScanGuard`.
 * :class:`CallablePolicy`, :class:`SB3Policy`, :func:`as_policy`: wrap a function or a
   Stable-Baselines3 model.
+* :class:`PointsLayer`, :class:`LinesLayer`, :class:`BoxesLayer`, :class:`ScalarLayer`:
+  what a policy shows of its thinking (:meth:`Policy.view_layers`) in a recording.
 * :func:`register_policy`, :func:`make_policy`, :func:`policy_class`, :func:`policy_names`:
   the registry (``"passive"``, ``"random"``, ``"frontier"``, ``"naruto"``, and any
   ``"package.module:ClassName"``).
@@ -29,6 +31,12 @@ from naruto_agent.policies.adapters import (
 from naruto_agent.policies.base import EnvContext, OwnReconstruction, Policy, pose_action
 from naruto_agent.policies.config import FrontierConfig, PassiveConfig, RandomConfig
 from naruto_agent.policies.frontier import FrontierPolicy
+from naruto_agent.policies.layers import (
+    BoxesLayer,
+    LinesLayer,
+    PointsLayer,
+    ScalarLayer,
+)
 from naruto_agent.policies.passive import PassivePolicy, load_trajectory, subsample_poses
 from naruto_agent.policies.random_policy import RandomPolicy
 from naruto_agent.policies.registry import (
@@ -44,18 +52,22 @@ from naruto_agent.policies.registry import (
 __all__ = [
     "LAZY_POLICIES",
     "POLICIES",
+    "BoxesLayer",
     "CallablePolicy",
     "EnvContext",
     "FrontierConfig",
     "FrontierPolicy",
+    "LinesLayer",
     "OccupancyGrid",
     "OwnReconstruction",
     "PassiveConfig",
     "PassivePolicy",
+    "PointsLayer",
     "Policy",
     "RandomConfig",
     "RandomPolicy",
     "SB3Policy",
+    "ScalarLayer",
     "ScanGuard",
     "ScanGuardConfig",
     "action_mode_of_space",

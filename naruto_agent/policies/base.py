@@ -25,6 +25,7 @@ from typing import Any, ClassVar, NamedTuple
 import gymnasium as gym
 import numpy as np
 
+from naruto_agent.policies.layers import Layer
 from naruto_gym.geometry.transforms import quaternion_from_pose
 from naruto_gym.sensors.pinhole import PinholeCamera
 
@@ -172,6 +173,17 @@ class Policy(ABC):
         """The policy's own map, scored by the benchmark harness beside the reference map;
         None (the default) for policies that build none."""
         return None
+
+    def view_layers(self) -> list[Layer]:
+        """What the policy wants shown of its thinking now, as named layers (points, line
+        strips, boxes, scalars of :mod:`naruto_agent.policies.layers`); none by default.
+
+        A recorder (``naruto-demo``, ``naruto-benchmark --record``) calls it after ``act``
+        every few steps and draws the layers beside the camera and the map, so a policy of
+        one's own shows its targets and plans too. It must only read the policy's state
+        (calling it must not change what the policy does) and stay cheap.
+        """
+        return []
 
     def close(self) -> None:  # noqa: B027 (optional hook, empty by default)
         """Free resources (optional)."""

@@ -31,6 +31,7 @@ from naruto_agent.policies.base import (
     pose_action,
 )
 from naruto_agent.policies.config import FrontierConfig, build_config
+from naruto_agent.policies.layers import Layer, LinesLayer, PointsLayer, subsample
 from naruto_agent.policies.registry import register_policy
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, rotation_angle_between
 
@@ -124,6 +125,23 @@ class FrontierPolicy(Policy):
         pose = np.asarray(observation["pose"], np.float64)
         self._integrate(observation["depth"], pose)
         self._start_look_around(pose, focus=None)
+
+    def view_layers(self) -> list[Layer]:
+        """The frontier not yet visited, the goal the policy heads for with the rest of its
+        path, and the goals it reached (see :meth:`Policy.view_layers`)."""
+        if self.grid is None or self._visited is None:
+            return []
+        frontier = self.grid.cell_to_world(np.argwhere(self.grid.frontier() & ~self._visited))
+        layers: list[Layer] = [
+            PointsLayer("frontier", subsample(frontier, 3000), colour=(80, 220, 120)),
+            PointsLayer("goals chosen", np.reshape(self.visited_goals, (-1, 3)),
+                        colour=(255, 255, 255), radius_m=0.04),
+        ]
+        if self._goal_cell is not None and self.state == "move":
+            goal = self.grid.cell_to_world(np.reshape(self._goal_cell, (1, 3)))
+            layers.append(PointsLayer("goal", goal, colour=(255, 200, 0), radius_m=0.08))
+            layers.append(LinesLayer("planned path", (self._path,), colour=(0, 200, 255)))
+        return layers
 
     # -- helpers -------------------------------------------------------------------------
     def _integrate(self, depth: np.ndarray, pose: np.ndarray) -> None:

@@ -11,8 +11,10 @@ import trimesh
 from PIL import Image
 
 from naruto_agent.demo import main, parse_args, run_demo
+from naruto_agent.demo.map_picture import UNMAPPED_RGB
 from naruto_agent.demo.outputs import CURVE_COLUMNS
-from naruto_agent.demo.viewer import TRACE_NAMES, plotly_available, read_viewer
+from naruto_agent.demo.viewer import TRACE_NAMES, plotly_available, read_figure, read_viewer
+from naruto_agent.recording import rerun_available
 from naruto_gym.scenes.catalogue import resolve_scene
 
 STEPS = 12
@@ -43,6 +45,8 @@ def naruto_run(tmp_path_factory):
             "160",
             "--checkpoints",
             "1",
+            "--map-snapshots",
+            "3",
             *FAST,
         ]
     )
@@ -75,6 +79,7 @@ def test_metrics_json_holds_the_scores(naruto_run):
         "trajectory.png",
         "episode.gif",
         *(["viewer.html"] if plotly_available() else []),
+        *(["episode.rrd"] if rerun_available() else []),
     }
 
 
@@ -129,6 +134,10 @@ def test_gif_holds_the_subsampled_frames(naruto_run):
         gif.seek(gif.n_frames - 1)
         last = np.asarray(gif.convert("RGB"))
     assert last.std() > 0  # a picture, not a blank frame
+    # The agent's map from above is the right-hand panel: part mapped, part not yet.
+    right = last[:, -last.shape[1] // 5:].reshape(-1, 3).astype(int)
+    unmapped = np.all(np.abs(right - UNMAPPED_RGB) <= 12, axis=1)
+    assert 0.05 < unmapped.mean() < 0.95
 
 
 def test_trajectory_picture_is_written(naruto_run):
@@ -157,12 +166,40 @@ def test_viewer_page_holds_the_episode(naruto_run):
     # The outline's walls span the ground truth's bounding box.
     outline = traces["ground truth outline"]
     bounds = resolve_scene("replica_like_room").bounds
-    assert np.nanmin(outline["x"]) == pytest.approx(bounds[0, 0], abs=1e-3)
-    assert np.nanmax(outline["z"]) == pytest.approx(bounds[1, 2], abs=1e-3)
+    assert np.nanmin(outline["x"]) == pytest.approx(bounds[0, 0], abs=6e-3)  # cm in the page
+    assert np.nanmax(outline["z"]) == pytest.approx(bounds[1, 2], abs=6e-3)
     # Every frustum is 8 segments of 3 entries (start, end, break); first apex = start pose.
     frustums = traces["camera frustums"]
     assert len(frustums["x"]) % 24 == 0 and len(frustums["x"]) > 0
-    assert np.allclose([frustums[a][0] for a in "xyz"], positions[0], atol=2e-3)
+    assert np.allclose([frustums[a][0] for a in "xyz"], positions[0], atol=6e-3)
+    # The first view looks from inside the scene's box; a slider runs over the steps.
+    layout = read_figure(out / "viewer.html")["layout"]
+    eye, ratio = layout["scene"]["camera"]["eye"], layout["scene"]["aspectratio"]
+    assert all(abs(eye[axis]) < 0.5 * ratio[axis] for axis in "xyz")
+    labels = [step["label"] for step in layout["sliders"][0]["steps"]]
+    assert labels == [str(step) for step in range(STEPS + 1)]
+
+
+def test_recording_replays_the_episode_with_the_map_growing(naruto_run):
+    pytest.importorskip("rerun", reason="the viewer extra (rerun-sdk) is not installed")
+    from naruto_agent.recording import read_recording
+
+    out, metrics = naruto_run
+    contents = read_recording(out / "episode.rrd")
+    every_step = list(range(STEPS + 1))
+    for entity in ("world/camera", "world/camera/rgb", "metrics/coverage (%)",
+                   "world/policy/frontier", "world/policy/goals chosen"):
+        assert contents.steps[entity] == every_step, entity
+    assert contents.steps["world/map"][0] == 0 and contents.steps["world/map"][-1] == STEPS
+    assert len(contents.steps["world/map"]) > 2
+    assert contents.steps["metrics/completion ratio (%)"][-1] == STEPS
+    assert "world/policy/uncertain surfaces" in contents.steps
+    assert contents.steps["world/ground_truth"] == []
+    # The last map is the scored mesh, simplified.
+    assert 0 < len(contents.map_faces) <= min(metrics["mesh_faces"], 30_000)
+    bounds = resolve_scene("replica_like_room").bounds
+    assert np.all(contents.map_vertices >= bounds[0] - 0.1)
+    assert np.all(contents.map_vertices <= bounds[1] + 0.1)
 
 
 def test_frontier_policy_runs_and_is_scored_on_the_reference_map(tmp_path):

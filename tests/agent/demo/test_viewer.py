@@ -69,10 +69,104 @@ def test_written_page_reads_back(tmp_path):
     )
     traces = viewer.read_viewer(path)
     assert tuple(traces) == viewer.TRACE_NAMES
-    assert len(traces["reconstruction"]["i"]) == len(recon.faces)
+    # Faces wholly above 80 % of the box's height are cut away (the icosphere's cap).
+    top = box.bounds[0, 2] + viewer.CUT_HEIGHT * 3.0
+    kept = int(np.sum(recon.vertices[recon.faces][:, :, 2].min(axis=1) <= top))
+    assert 0 < kept < len(recon.faces)
+    assert len(traces["reconstruction"]["i"]) + len(traces["walls near the camera"]["i"]) == kept
     assert np.allclose(traces["trajectory"]["x"], poses[:, 0, 3])
     assert len(traces["camera frustums"]["x"]) == 3 * 8 * 3
     assert np.allclose(traces["goals"]["z"], [1.0])
+
+
+def test_cut_away_drops_the_ceiling_and_fades_the_walls_by_the_camera():
+    room = trimesh.creation.box(extents=(4.0, 4.0, 3.0))
+    room.apply_translation([2.0, 2.0, 1.5])
+    bounds = room.bounds
+    view = viewer.first_view(bounds, np.array([[3.0, 3.0, 1.5]]))
+    assert np.all(view["corner"] == [-1, -1])  # the corner farthest from the path
+    assert np.all((view["eye"] > bounds[0]) & (view["eye"] < bounds[1]))
+    room = room.subdivide().subdivide()
+    shown, faded = viewer.cut_away(room, bounds, view["corner"])
+    centres = room.triangles_center
+    assert not np.any(shown & (centres[:, 2] > 2.9)) and not np.any(faded & (centres[:, 2] > 2.9))
+    assert np.all(np.minimum(centres[faded, 0], centres[faded, 1]) < viewer.WALL_BAND_M)
+    far_walls = (centres[:, 0] > 3.9) | (centres[:, 1] > 3.9)
+    assert np.all(shown[far_walls & (centres[:, 2] < 2.0)])
+
+
+def test_page_of_a_full_default_scene_map_stays_under_5_mb(tmp_path):
+    pytest.importorskip("plotly", reason="the viewer extra (plotly) is not installed")
+    import gymnasium as gym
+
+    import naruto_gym  # noqa: F401
+
+    env = gym.make("NarutoRecon-v0", scene="replica_like_room", image_scale=0.25)
+    base = env.unwrapped
+    scene = base.scene
+    # A map as dense as a 1000-step episode's (hundreds of thousands of coloured faces).
+    dense = trimesh.Trimesh(scene.vertices, scene.faces, process=False).subdivide_to_size(0.03)
+    dense.visual.vertex_colors = np.random.default_rng(0).integers(0, 255, (len(dense.vertices), 4))
+    assert len(dense.faces) > 200_000
+    turns = np.linspace(0.0, 6 * np.pi, 1001)
+    poses = np.repeat(np.eye(4)[None], len(turns), axis=0)
+    poses[:, 0, 3], poses[:, 1, 3], poses[:, 2, 3] = 2.5 + np.cos(turns), 2.5 + np.sin(turns), 1.4
+    goals = np.random.default_rng(1).uniform(1.0, 4.0, (40, 3))
+    page = viewer.write_viewer(tmp_path / "view.html", dense, scene, poses, base.camera, goals)
+    env.close()
+    assert page.stat().st_size <= 5_000_000
+    layout = viewer.read_figure(page)["layout"]
+    assert len(layout["sliders"][0]["steps"]) == viewer.SLIDER_STEPS
+
+
+def _browser():
+    """A headless Chromium through Playwright (its own, or NARUTO_CHROMIUM's executable with
+    NARUTO_CHROMIUM_ARGS), or a skip."""
+    import os
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    manager = sync_api.sync_playwright().start()
+    args = ["--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+            "--ignore-gpu-blocklist", *os.environ.get("NARUTO_CHROMIUM_ARGS", "").split()]
+    try:
+        browser = manager.chromium.launch(
+            executable_path=os.environ.get("NARUTO_CHROMIUM") or None, args=args)
+    except Exception as error:  # noqa: BLE001 (no browser installed: nothing to test with)
+        manager.stop()
+        pytest.skip(f"no headless Chromium could be started: {str(error).splitlines()[0]}")
+    return manager, browser
+
+
+def test_page_renders_in_a_headless_browser(tmp_path):
+    pytest.importorskip("plotly", reason="the viewer extra (plotly) is not installed")
+    manager, browser = _browser()
+    box = trimesh.creation.box(extents=(4.0, 4.0, 3.0))
+    box.apply_translation([2.0, 2.0, 1.5])
+    recon = box.subdivide().subdivide()
+    poses = np.repeat(np.eye(4)[None], 30, axis=0)
+    poses[:, 0, 3] = np.linspace(1.0, 3.0, 30)
+    poses[:, 1, 3], poses[:, 2, 3] = 2.0, 1.4
+    page_path = viewer.write_viewer(tmp_path / "view.html", recon, box, poses,
+                                    PinholeCamera().scaled(0.1), np.array([[2.0, 2.0, 1.0]]))
+    try:
+        page = browser.new_page(viewport={"width": 900, "height": 600})
+        errors = []
+        page.on("pageerror", lambda error: errors.append(str(error)))
+        page.goto(page_path.as_uri())
+        page.wait_for_selector("body[data-rendered=yes]", timeout=120_000)
+        assert page.locator(".gl-container canvas, canvas").count() > 0
+        assert page.locator(".slider-container").count() == 1
+        shot = page.screenshot()
+    finally:
+        browser.close()
+        manager.stop()
+    assert not errors
+    from io import BytesIO
+
+    from PIL import Image
+
+    picture = np.asarray(Image.open(BytesIO(shot)).convert("RGB"))
+    assert picture.std() > 10  # drawn, not a blank page
 
 
 def test_missing_plotly_skips_the_page_with_a_message(tmp_path, monkeypatch, capsys):
