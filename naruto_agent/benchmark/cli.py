@@ -89,6 +89,8 @@ class Args:
     """size classes of --suite (small, apartment, house; default all)"""
     variant: str = "closed"
     """variant of the --suite scenes: closed or open (no ceiling, holes)"""
+    suite_limit: int = 0
+    """run only the first N scenes of each --suite class (0: all; for quick checks)"""
     plots: bool = True
     """write the plots"""
     progress: bool = True
@@ -177,7 +179,7 @@ def episode_specs(args: Args, argv: list[str] | None = None) -> list[EpisodeSpec
         return build_specs(
             args.scenes, args.policies, args.seeds, args.steps or DEFAULT_STEPS, **settings
         )
-    scenes = suite.select_scenes(args.suite, args.size_class, args.variant)
+    scenes = suite.select_scenes(args.suite, args.size_class, args.variant, args.suite_limit)
     specs = suite.suite_specs(scenes, args.policies, args.seeds, args.steps, **settings)
     suite.write_manifest(
         args.out_dir, suite.manifest_entries(scenes, args.steps), args.suite, argv

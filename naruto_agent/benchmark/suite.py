@@ -42,13 +42,22 @@ def suite_module() -> Any:
 
 
 def select_scenes(
-    split: str, size_classes: list[str] | None = None, variant: str = "closed"
+    split: str, size_classes: list[str] | None = None, variant: str = "closed", limit: int = 0
 ) -> list[Any]:
     """The suite's :class:`SuiteScene` entries of a split, classes and variant.
 
+    Args:
+        split: ``"test"`` or ``"train"``.
+        size_classes: the classes (default: all).
+        variant: ``"closed"`` or ``"open"``.
+        limit: keep the first ``limit`` scenes of each class (0: all), for quick checks.
+
     Raises:
-        ValueError: an unknown split, class or variant (the message lists the known ones).
+        ValueError: an unknown split, class or variant (the message lists the known ones), or
+            a negative limit.
     """
+    if limit < 0:
+        raise ValueError(f"the suite limit must be >= 0 (0: every scene), got {limit}")
     suite = suite_module()
     if split not in SPLITS:
         raise ValueError(f"unknown suite split {split!r}; use one of {', '.join(SPLITS)}")
@@ -60,7 +69,16 @@ def select_scenes(
         )
     if variant not in suite.VARIANTS:
         raise ValueError(f"unknown variant {variant!r}; use one of {', '.join(suite.VARIANTS)}")
-    return list(suite.suite_scenes(split=split, size_classes=classes, variants=(variant,)))
+    scenes = list(suite.suite_scenes(split=split, size_classes=classes, variants=(variant,)))
+    if limit:
+        taken: dict[str, int] = {}
+        kept = []
+        for entry in scenes:
+            taken[entry.size_class] = taken.get(entry.size_class, 0) + 1
+            if taken[entry.size_class] <= limit:
+                kept.append(entry)
+        scenes = kept
+    return scenes
 
 
 def suite_specs(

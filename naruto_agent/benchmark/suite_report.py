@@ -43,6 +43,15 @@ METRICS: tuple[tuple[str, str, int], ...] = (
     ("Path (m)", "path_m", 1),
     ("Refusals", "refusals", 1),
 )
+EFFICIENCY_KEYS: tuple[str, ...] = (
+    "completion_ratio_pct", "auc_steps", "auc_path",
+    *(f"steps_to_{p}" for p in THRESHOLDS_PCT), *(f"metres_to_{p}" for p in THRESHOLDS_PCT),
+)
+"""The leaderboard's first table: how far and how fast."""
+QUALITY_KEYS: tuple[str, ...] = (
+    "completion_ratio_pct", "accuracy_cm", "completion_cm", "mad_cm", "path_m", "refusals"
+)
+"""The leaderboard's second table: the map's quality and the walk."""
 PAIRED_METRICS: tuple[str, ...] = ("completion_ratio_pct", "auc_steps", "auc_path")
 """The values compared pair by pair (the others depend on whether a level was reached)."""
 CLASS_ORDER = ("small", "apartment", "house", "all", "other")
@@ -148,14 +157,20 @@ def _cell(stat: dict[str, Any] | None, decimals: int) -> str:
     return text
 
 
-def class_table(rows: dict[str, dict[str, Any]]) -> str:
-    """Markdown table of one class's :func:`class_summary` rows: mean [95 % interval]."""
-    header = ["Policy", "Episodes", "Scenes", *[title for title, _, _ in METRICS]]
+def class_table(rows: dict[str, dict[str, Any]], keys: tuple[str, ...] | None = None) -> str:
+    """Markdown table of one class's :func:`class_summary` rows: mean [95 % interval].
+
+    Args:
+        rows: policy -> its row.
+        keys: the columns (keys of :data:`METRICS`; default all).
+    """
+    columns = [column for column in METRICS if keys is None or column[1] in keys]
+    header = ["Policy", "Episodes", "Scenes", *[title for title, _, _ in columns]]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     ranked = sorted(rows.items(), key=lambda item: -(item[1]["auc_steps"]["mean"] or -1.0))
     for policy, row in ranked:
         cells = [policy, str(row["episodes"]), str(row["scenes"])]
-        for _, key, decimals in METRICS:
+        for _, key, decimals in columns:
             cell = _cell(row[key], decimals)
             if "reached" in row[key]:
                 cell += f" ({row[key]['reached']}/{row['episodes']})"
