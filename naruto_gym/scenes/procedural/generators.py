@@ -15,6 +15,7 @@ from typing import Literal
 import numpy as np
 
 from naruto_gym.scenes.mesh_scene import Scene
+from naruto_gym.scenes.procedural.corridors import corridor_partition
 from naruto_gym.scenes.procedural.furnishing import furnish
 from naruto_gym.scenes.procedural.furniture import ROOM_KIND_ORDER
 from naruto_gym.scenes.procedural.layout import SceneLayout
@@ -72,6 +73,9 @@ def generate_layout(
     furniture_density: float = 1.0,
     extra_door_probability: float = 0.35,
     object_gap_m: float = 0.4,
+    corridor_width: float = 0.0,
+    corridor_branch: bool = False,
+    clutter: float = 0.0,
 ) -> SceneLayout:
     """Draw a furnished floor plan from a seed.
 
@@ -89,6 +93,14 @@ def generate_layout(
             doorway, which makes loops in the room graph.
         object_gap_m: plan gap kept between furniture and to walls (except the back of
             wall-standing furniture).
+        corridor_width: 0 splits the footprint into rooms that open into each other; a
+            width (at least 1.1 m) draws a house plan instead: a hallway spine with rooms on
+            both sides (see :func:`~naruto_gym.scenes.procedural.corridors.corridor_partition`;
+            ``num_rooms`` then counts the rooms, not the corridors).
+        corridor_branch: with a corridor, add a second one at right angles to the spine.
+        clutter: scales the probability of the small clutter objects (boxes, stray chairs,
+            baskets, see :mod:`~naruto_gym.scenes.procedural.clutter`) placed in every room
+            besides its furniture; 0 places none.
 
     Returns:
         A :class:`SceneLayout`.
@@ -119,10 +131,24 @@ def generate_layout(
         raise ValueError(f"wall_thickness must be in (0, 0.5] m, got {wall_thickness}")
     if furniture_density < 0:
         raise ValueError(f"furniture_density must be >= 0, got {furniture_density}")
+    if clutter < 0:
+        raise ValueError(f"clutter must be >= 0, got {clutter}")
+    if corridor_width != 0 and not 1.1 <= corridor_width <= 3.0:
+        raise ValueError(
+            f"corridor_width must be 0 (no corridor) or in [1.1, 3.0] m, got {corridor_width}"
+        )
     rng = np.random.default_rng(int(seed))
-    cells, doors = partition(
-        rng, width, depth, int(num_rooms), min_room_size, wall_thickness, door_width, door_height
-    )
+    corridor_cells: list[int] = []
+    if corridor_width > 0:
+        cells, doors, corridor_cells = corridor_partition(
+            rng, width, depth, int(num_rooms), float(corridor_width), bool(corridor_branch),
+            min_room_size, wall_thickness, door_width, door_height,
+        )
+    else:
+        cells, doors = partition(
+            rng, width, depth, int(num_rooms), min_room_size, wall_thickness, door_width,
+            door_height,
+        )
     doors = [Doorway(d.along, d.coord, d.lo, d.hi, d.height,
                      door_rooms(d, cells, wall_thickness)) for d in doors]
     # Extra doorways make loops: exploring agents then have more than one way round.
@@ -140,12 +166,17 @@ def generate_layout(
             doors.append(Doorway(along, coord, start, round(start + door_width, 3), door_height,
                                  (a, b)))
     # Room kinds: the largest is the living room, the smallest may be a bathroom.
-    by_area = sorted(range(len(cells)), key=lambda i: (-cells[i].area, i))
-    kinds = [""] * len(cells)
+    # Corridors keep their kind; in a house plan every small room may be a bathroom.
+    by_area = sorted((i for i in range(len(cells)) if i not in corridor_cells),
+                     key=lambda i: (-cells[i].area, i))
+    kinds = ["corridor" if i in corridor_cells else "" for i in range(len(cells))]
     for rank, index in enumerate(by_area):
+        last = rank == len(by_area) - 1 or (
+            bool(corridor_cells) and rank >= 0.75 * len(by_area) and rank % 2 == 1
+        )
         if rank == 0:
             kinds[index] = "living_room"
-        elif rank == len(cells) - 1 and len(cells) >= 4 and cells[index].area < 9.0:
+        elif last and len(by_area) >= 4 and cells[index].area < 9.0:
             kinds[index] = "bathroom"
         else:
             kinds[index] = ROOM_KIND_ORDER[(rank - 1) % len(ROOM_KIND_ORDER)]
@@ -157,7 +188,8 @@ def generate_layout(
                           room_interior(cell, width, depth, wall_thickness)))
     objects: list[PlacedObject] = []
     for index, room in enumerate(rooms):
-        objects += furnish(rng, index, room, doors, height, furniture_density, object_gap_m)
+        objects += furnish(rng, index, room, doors, height, furniture_density, object_gap_m,
+                           clutter=0.0 if room.kind == "corridor" else clutter)
     room_points, clearances = [], []
     for index, room in enumerate(rooms):
         point, clearance = _clearance_point(room, [o for o in objects if o.room == index], height)
