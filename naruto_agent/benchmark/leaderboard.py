@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from naruto_agent.benchmark.records import STATUS_OK, load_records
-from naruto_agent.benchmark.suite import read_manifest
+from naruto_agent.benchmark.suite import read_manifest, suite_module
 from naruto_agent.benchmark.suite_report import (
     EFFICIENCY_KEYS,
     QUALITY_KEYS,
@@ -52,6 +52,8 @@ def _machine_line(machine: dict[str, Any]) -> str:
         f"{machine.get('host')}: {machine.get('platform')}, {machine.get('cpus')} CPU cores, "
         f"{gpu}, Python {machine.get('python')}, naruto-gym {machine.get('naruto_gym')}"
         f" (commit {machine.get('commit') or 'unknown'})"
+        + (f", load {machine['load_average'][0]:.1f} at the start"
+           if machine.get("load_average") else "")
     )
 
 
@@ -65,6 +67,28 @@ def _runs_section(manifest: dict[str, Any]) -> list[str]:
         seen.add(key)
         lines += [SKIP, "```bash", run["command"], "```", "", f"on {key[1]}.", ""]
     return lines
+
+
+def _partial_note(manifest: dict[str, Any]) -> str | None:
+    """A warning when the run is shorter than the suite: fewer test scenes or a cut budget."""
+    suite = suite_module()
+    by_class: dict[str, list[dict[str, Any]]] = {}
+    for entry in manifest.get("scenes", {}).values():
+        by_class.setdefault(entry["size_class"], []).append(entry)
+    partial = []
+    for size_class, entries in by_class.items():
+        if size_class not in suite.SIZE_CLASSES:
+            continue
+        budgets = sorted({entry["budget"] for entry in entries})
+        full = suite.budget(size_class)
+        listed = len(suite.test_seeds(size_class))
+        if budgets != [full] or (manifest.get("split") == "test" and len(entries) < listed):
+            partial.append(f"{size_class}: {len(entries)} of {listed} test scenes, "
+                           f"{'/'.join(map(str, budgets))} of {full} steps")
+    if not partial:
+        return None
+    return ("**A shortened run, not the suite's figures** (" + "; ".join(partial)
+            + "): run the whole split for the leaderboard.")
 
 
 def _scenes_section(manifest: dict[str, Any], records: list[dict[str, Any]]) -> list[str]:
@@ -131,6 +155,7 @@ def leaderboard_markdown(
         "are in `naruto_agent.benchmark.efficiency`; the [policies page](policies.md) says "
         "what each policy does.",
         "",
+        *([note, ""] if (note := _partial_note(manifest)) else []),
         "## Add your policy",
         "",
         "Run the command below with your policy added to `--policies` "

@@ -149,6 +149,7 @@ def machine() -> dict[str, Any]:
         "python": platform.python_version(),
         "naruto_gym": package,
         "commit": _git_commit(),
+        "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
     }
 
 
