@@ -105,3 +105,19 @@ def test_a_tiny_suite_run_resumes_after_a_kill_and_makes_the_leaderboard(tmp_pat
     page = leaderboard_markdown(out_dir, tmp_path / "img")
     assert "## small" in page and "--suite test" in page
     assert (tmp_path / "img" / "leaderboard_curves.png").is_file()
+
+
+def test_a_suite_runs_on_ray_unchanged(tmp_path):
+    ray = pytest.importorskip("ray")
+    argv = ["--suite", "test", "--size-class", "small", "--suite-limit", "1",
+            "--policies", "random", *TINY, "--out-dir", str(tmp_path / "ray")]
+    ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
+    try:
+        assert main([*argv, "--ray-address", "auto"]) == 0
+    finally:
+        ray.shutdown()
+    assert main([*argv[:-1], str(tmp_path / "local"), "--workers", "0"]) == 0
+    by_ray, local = load_records(tmp_path / "ray"), load_records(tmp_path / "local")
+    assert [r["episode_id"] for r in by_ray] == [r["episode_id"] for r in local]
+    assert by_ray[0]["trajectory"] == local[0]["trajectory"]
+    assert read_manifest(tmp_path / "ray")["scenes"] == read_manifest(tmp_path / "local")["scenes"]
