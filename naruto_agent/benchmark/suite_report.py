@@ -79,17 +79,18 @@ def _ordered(names: Any) -> list[str]:
 
 
 def grouped_values(
-    records: list[dict[str, Any]], manifest: dict[str, Any] | None
+    records: list[dict[str, Any]], manifest: dict[str, Any] | None, by_scene: bool = False
 ) -> dict[str, dict[str, list[tuple[str, int, dict[str, Any]]]]]:
-    """class -> policy -> [(scene, seed, episode values)] of the successful records."""
+    """class (or scene, with ``by_scene``) -> policy -> [(scene, seed, episode values)] of the
+    successful records."""
     groups: dict[str, dict[str, list[tuple[str, int, dict[str, Any]]]]] = defaultdict(
         lambda: defaultdict(list)
     )
     for record in records:
         if record.get("status") != STATUS_OK:
             continue
-        size_class = size_class_of(record, manifest)
-        groups[size_class][record["policy"]].append(
+        group = record["scene"] if by_scene else size_class_of(record, manifest)
+        groups[group][record["policy"]].append(
             (record["scene"], int(record["seed"]), episode_values(record))
         )
     return groups
@@ -100,11 +101,13 @@ def class_summary(
     manifest: dict[str, Any] | None = None,
     resamples: int = RESAMPLES,
     seed: int = SEED,
+    by_scene: bool = False,
 ) -> dict[str, dict[str, dict[str, Any]]]:
     """class -> policy -> metric -> ``{"mean", "low", "high", "n"}`` (plus ``episodes``,
-    ``scenes`` and, for the levels, ``reached`` out of ``episodes``)."""
+    ``scenes`` and, for the levels, ``reached`` out of ``episodes``); with ``by_scene`` the
+    same per scene (the interval then spans its seeds)."""
     summary: dict[str, dict[str, dict[str, Any]]] = {}
-    for size_class, by_policy in grouped_values(records, manifest).items():
+    for size_class, by_policy in grouped_values(records, manifest, by_scene).items():
         summary[size_class] = {}
         for policy, members in sorted(by_policy.items()):
             row: dict[str, Any] = {
@@ -210,9 +213,12 @@ def per_scene_table(entries: list[dict[str, Any]], metric: str = "auc_steps") ->
 
 
 def statistics_markdown(
-    summary: dict[str, dict[str, dict[str, Any]]], paired: dict[str, list[dict[str, Any]]]
+    summary: dict[str, dict[str, dict[str, Any]]],
+    paired: dict[str, list[dict[str, Any]]],
+    per_scene: dict[str, dict[str, dict[str, Any]]] | None = None,
 ) -> str:
-    """Every class's table, then its paired comparisons."""
+    """Every class's table, then its paired comparisons; then, given ``per_scene``, the
+    efficiency table of every scene."""
     parts = [
         "Mean [95 % bootstrap interval over scenes and seeds]; steps and metres to a level are "
         "averaged over the episodes that reached it (reached / episodes). Rows by AUC steps.\n"
@@ -223,6 +229,10 @@ def statistics_markdown(
         if entries:
             parts.append(f"### Paired differences ({size_class})\n\n{paired_table(entries)}")
             parts.append(f"Per scene, AUC steps:\n\n{per_scene_table(entries)}")
+    if per_scene:
+        parts.append("## Per scene (mean [interval over seeds])\n")
+        for scene in sorted(per_scene):
+            parts.append(f"### {scene}\n\n{class_table(per_scene[scene], EFFICIENCY_KEYS)}")
     return "\n".join(parts)
 
 
@@ -235,6 +245,7 @@ def write_statistics(
     manifest = read_manifest(out_dir)
     summary = class_summary(records, manifest)
     paired = paired_summary(records, manifest)
+    per_scene = class_summary(records, manifest, by_scene=True)
     data = {
         "confidence": CONFIDENCE,
         "resamples": RESAMPLES,
@@ -242,9 +253,10 @@ def write_statistics(
         "suite_version": (manifest or {}).get("suite_version"),
         "classes": summary,
         "paired": paired,
+        "scenes": per_scene,
     }
     write_json_atomic(out_dir / STATISTICS_JSON, data)
-    (out_dir / STATISTICS_MD).write_text(statistics_markdown(summary, paired))
+    (out_dir / STATISTICS_MD).write_text(statistics_markdown(summary, paired, per_scene))
     if plots and summary:
         from naruto_agent.benchmark.suite_plots import plot_class_curves, plot_paired
 
