@@ -34,10 +34,13 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from naruto_gym.scenes.procedural import SIZE_CLASSES_VERSION
 from naruto_gym.scenes.stream import SPLIT_SEEDS
 
-SUITE_VERSION = "1"
-"""Version of the suite: bumped whenever the scenes, seeds or budgets of a name change."""
+_SEEDS_AND_BUDGETS_VERSION = 1
+SUITE_VERSION = f"{_SEEDS_AND_BUDGETS_VERSION}.{SIZE_CLASSES_VERSION}"
+"""Version of the suite, ``"<seeds and budgets>.<scenes>"``: either part is bumped whenever
+the seeds or budgets, or the scenes of a name change."""
 
 SIZE_CLASSES = ("small", "apartment", "house")
 """The size classes, smallest first."""
@@ -59,6 +62,7 @@ BUDGETS = {"small": 400, "apartment": 800, "house": 1500}
 covered every surface at the end (see the scenes page for the coverage curves it rests on)."""
 
 TEST_SEEDS_PER_CLASS = 8
+"""How many test scenes each size class has."""
 _TEST_START = SPLIT_SEEDS["test"][0]
 _TEST_SEEDS = {
     size_class: tuple(range(_TEST_START, _TEST_START + TEST_SEEDS_PER_CLASS))

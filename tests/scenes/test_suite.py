@@ -3,6 +3,8 @@ scene for every policy (spawnable start, open doorways, every room reachable).""
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 import pytest
 
@@ -11,9 +13,12 @@ from naruto_gym.scenes import suite as suite_module
 from naruto_gym.scenes.catalogue import resolve_scene
 from naruto_gym.scenes.procedural import (
     SIZE_CLASS_KINDS,
+    SIZE_CLASSES_VERSION,
     generate_layout,
     make_random_scene,
+    scene_to_ply_bytes,
     size_class_layout,
+    size_class_scene,
 )
 from naruto_gym.scenes.scene_cache import CACHE_DIR_ENV, cache_dir, size_class_path
 from naruto_gym.scenes.stream import SPLIT_SEEDS, parse_procedural_name
@@ -203,3 +208,24 @@ def test_scenes_are_generated_once_into_the_cache(tmp_path, monkeypatch):
     closed_up = RayCaster(scene.vertices, scene.faces).cast(start, np.array([[0.0, 0, 1]]))
     open_up = RayCaster(opened.vertices, opened.faces).cast(start, np.array([[0.0, 0, 1]]))
     assert closed_up.hit_mask.all() and not open_up.hit_mask.any()
+
+
+# One scene per class, pinned: a generator change that gives a seed another scene must bump
+# SIZE_CLASSES_VERSION (the cache folder and SUITE_VERSION follow), then update these.
+PINNED_SCENES = {
+    ("small", 1000001): "422aaa0923b411b22ab3cc1fa31b7093914005bb3afde3702934294936f09396",
+    ("flat", 1000001): "9ed9c116c83182145ec66c898292dd510c18f1b124f9425080eb17ae0629746f",
+    ("house", 1000001): "7d922b3dc1d6f93734fe44fcece40f66f7245c3c215f1a8a186ad52d4c0b1860",
+}
+
+
+@pytest.mark.parametrize("key", sorted(PINNED_SCENES), ids=lambda key: f"{key[0]}-{key[1]}")
+def test_suite_scenes_are_pinned_to_their_version(key):
+    kind, seed = key
+    digest = hashlib.sha256(scene_to_ply_bytes(size_class_scene(kind, seed))).hexdigest()
+    assert digest == PINNED_SCENES[key], (
+        f"{kind} seed {seed} gives another scene than in size-class version "
+        f"{SIZE_CLASSES_VERSION}: bump SIZE_CLASSES_VERSION in "
+        "naruto_gym/scenes/procedural/size_classes.py, then update PINNED_SCENES"
+    )
+    assert SUITE_VERSION.endswith(f".{SIZE_CLASSES_VERSION}")

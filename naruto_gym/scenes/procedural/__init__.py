@@ -56,6 +56,7 @@ from naruto_gym.scenes.procedural.plan import Doorway, Part, PlacedObject, Rect,
 from naruto_gym.scenes.procedural.ply import save_scene_ply, scene_to_ply_bytes
 from naruto_gym.scenes.procedural.size_classes import (
     SIZE_CLASS_KINDS,
+    SIZE_CLASSES_VERSION,
     size_class_layout,
     size_class_scene,
 )
@@ -63,6 +64,7 @@ from naruto_gym.scenes.procedural.size_classes import (
 __all__ = [
     "FLOOR_THICKNESS_M",
     "GENERATOR_VERSION",
+    "SIZE_CLASSES_VERSION",
     "SIZE_CLASS_KINDS",
     "START_HEIGHT_M",
     "Doorway",

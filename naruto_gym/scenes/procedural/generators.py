@@ -22,6 +22,7 @@ from naruto_gym.scenes.procedural.layout import SceneLayout
 from naruto_gym.scenes.procedural.plan import (
     Doorway,
     PlacedObject,
+    Rect,
     Room,
     door_rooms,
     partition,
@@ -36,6 +37,9 @@ SceneKind = Literal["room", "apartment"]
 GENERATOR_VERSION = 1
 
 START_HEIGHT_M = 1.5  # camera height of a standing person, as in Replica trajectories
+
+# Kinds of the rooms of a house plan after its living room, kitchen and dining room.
+HOUSE_ROOM_ORDER = ["bedroom", "office", "bedroom", "bedroom", "office"]
 
 
 def _clearance_point(
@@ -59,6 +63,21 @@ def _clearance_point(
     z = min(START_HEIGHT_M, ceiling - 0.8)
     point = (round(float(grid[best, 0]), 4), round(float(grid[best, 1]), 4), round(z, 4))
     return point, float(min(clearance[best], z, ceiling - z))
+
+
+def _house_kinds(cells: list[Rect], by_area: list[int], kinds: list[str]) -> None:
+    """Room kinds of a plan with corridors, written into ``kinds``: one living room (the
+    largest), one kitchen and one dining room, a bathroom per four rooms among the smallest,
+    the rest bedrooms and offices."""
+    bathrooms = max(1, len(by_area) // 4)
+    for index in reversed(by_area[1:]):
+        if bathrooms and cells[index].area < 9.0:
+            kinds[index] = "bathroom"
+            bathrooms -= 1
+    others = [index for index in by_area if not kinds[index]]
+    order = ["living_room", "kitchen", "dining_room"] + HOUSE_ROOM_ORDER * len(others)
+    for index, kind in zip(others, order, strict=False):
+        kinds[index] = kind
 
 
 def generate_layout(
@@ -166,17 +185,18 @@ def generate_layout(
             doors.append(Doorway(along, coord, start, round(start + door_width, 3), door_height,
                                  (a, b)))
     # Room kinds: the largest is the living room, the smallest may be a bathroom.
-    # Corridors keep their kind; in a house plan every small room may be a bathroom.
+    # Room kinds: the largest is the living room, the smallest may be a bathroom.
     by_area = sorted((i for i in range(len(cells)) if i not in corridor_cells),
                      key=lambda i: (-cells[i].area, i))
     kinds = ["corridor" if i in corridor_cells else "" for i in range(len(cells))]
+    if corridor_cells:
+        _house_kinds(cells, by_area, kinds)
     for rank, index in enumerate(by_area):
-        last = rank == len(by_area) - 1 or (
-            bool(corridor_cells) and rank >= 0.75 * len(by_area) and rank % 2 == 1
-        )
+        if kinds[index]:
+            continue
         if rank == 0:
             kinds[index] = "living_room"
-        elif last and len(by_area) >= 4 and cells[index].area < 9.0:
+        elif rank == len(by_area) - 1 and len(by_area) >= 4 and cells[index].area < 9.0:
             kinds[index] = "bathroom"
         else:
             kinds[index] = ROOM_KIND_ORDER[(rank - 1) % len(ROOM_KIND_ORDER)]

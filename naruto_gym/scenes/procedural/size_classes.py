@@ -32,6 +32,11 @@ from naruto_gym.scenes.procedural.layout import SceneLayout
 #: The scene kinds of the suite's size classes, smallest first.
 SIZE_CLASS_KINDS = ("small", "flat", "house")
 
+#: Bumped whenever a seed of a size class starts giving another scene (a test pins one scene
+#: per class): it names the cache folder of their meshes, so a stale file is never reused,
+#: and the benchmark suite's version follows it.
+SIZE_CLASSES_VERSION = 1
+
 # Salt of the size draw's stream ([seed, salt]), apart from the layout's own stream.
 _SIZE_SALT = {"small": 21, "flat": 22, "house": 23}
 
