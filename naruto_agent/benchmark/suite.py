@@ -179,10 +179,24 @@ def write_manifest(
 
     Scenes of earlier runs into the same folder stay (a class run later joins the table); the
     command and machine of each run are kept in ``runs``.
+
+    Raises:
+        ValueError: the folder holds results of another suite version or split.
     """
     path = Path(out_dir) / MANIFEST_FILE
     manifest = read_manifest(out_dir) or {"scenes": {}, "runs": []}
     suite = suite_module()
+    earlier = manifest.get("suite_version")
+    if earlier is not None and earlier != suite.SUITE_VERSION:
+        raise ValueError(
+            f"{out_dir} holds results of suite version {earlier}, this naruto-gym has version "
+            f"{suite.SUITE_VERSION} (its scenes or budgets differ): give another --out-dir"
+        )
+    if manifest.get("split") not in (None, split):
+        raise ValueError(
+            f"{out_dir} holds results of the {manifest['split']} split: give another --out-dir "
+            f"for the {split} split"
+        )
     manifest["suite_version"] = suite.SUITE_VERSION
     manifest["split"] = split
     manifest["scenes"].update(scenes)

@@ -44,6 +44,14 @@ def test_suite_flags_parse_and_default_to_the_class_budgets(tmp_path):
     assert manifest["suite_version"] == suite.SUITE_VERSION
     assert {entry["size_class"] for entry in manifest["scenes"].values()} == {
         "small", "apartment"}
+    # a folder of another split or suite version is not mixed into
+    with pytest.raises(ValueError, match="split"):
+        episode_specs(parse_args(["--suite", "train", "--size-class", "small",
+                                  "--out-dir", str(tmp_path)]), [])
+    manifest["suite_version"] = "0"
+    (tmp_path / "suite.json").write_text(json.dumps(manifest))
+    with pytest.raises(ValueError, match="suite version 0"):
+        episode_specs(args, [])
     # --scenes runs keep their defaults
     plain = parse_args(["--scenes", "two_rooms", "--policies", "random", "--seeds", "0"])
     assert [spec.steps for spec in episode_specs(plain)] == [500]
