@@ -24,13 +24,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from naruto_agent.benchmark import suite
 from naruto_agent.benchmark.executors import pending_specs, run_local, run_ray
 from naruto_agent.benchmark.plots import plot_curves, plot_trajectories
 from naruto_agent.benchmark.records import load_records, write_json_atomic
 from naruto_agent.benchmark.runner import run_episode_safe
-from naruto_agent.benchmark.spec import build_specs
+from naruto_agent.benchmark.spec import EpisodeSpec, build_specs
+from naruto_agent.benchmark.suite_report import write_statistics
 from naruto_agent.benchmark.tables import failure_lines, markdown_table, summarise
 from naruto_gym.cli_args import dataclass_parser
+
+DEFAULT_STEPS = 500
+DEFAULT_EVAL_POINTS = 4
 
 
 @dataclass
@@ -46,8 +51,8 @@ class Args:
     the working directory is found) or path/to/file.py:ClassName"""
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
     """episode seeds"""
-    steps: int = 500
-    """step budget of every episode"""
+    steps: int | None = None
+    """step budget of every episode (default 500; with --suite each scene's class budget)"""
     up_axis: str = "z"
     """up axis of the mesh paths written without @AXIS: z, y, -y, x, -x, -z or auto (from a
     recognised dataset layout)"""
@@ -59,8 +64,9 @@ class Args:
     """run on Ray instead: auto, HOST:PORT, or local"""
     out_dir: str = "runs/compare_policies"
     """output folder (records/, results.md, summary.json, plots)"""
-    eval_points: int = 4
-    """completion-ratio checkpoints per episode besides the final score (0: final only)"""
+    eval_points: int | None = None
+    """completion-ratio checkpoints per episode besides the final score (0: final only;
+    default 4, with --suite 9)"""
     eval_samples: int = 200_000
     """surface samples per mesh of the final score"""
     checkpoint_samples: int = 50_000
@@ -78,6 +84,15 @@ class Args:
     '{"max_run_steps": 20}' (as naruto-demo takes them)"""
     env_kwargs: str = "{}"
     """JSON dict of extra env arguments, e.g. '{"max_depth_m": 5.0}'"""
+    suite: str | None = None
+    """run the scene suite's split (test or train) instead of --scenes, every scene with its
+    size class's budget"""
+    size_class: list[str] = field(default_factory=list)
+    """size classes of --suite (small, apartment, house; default all)"""
+    variant: str = "closed"
+    """variant of the --suite scenes: closed or open (no ceiling, holes)"""
+    suite_limit: int = 0
+    """run only the first N scenes of each --suite class (0: all; for quick checks)"""
     plots: bool = True
     """write the plots"""
     record: bool = False
@@ -130,6 +145,7 @@ def write_reports(out_dir: str | Path, plots: bool = True) -> dict[str, Any]:
     if plots and records:
         plot_curves(records, out_dir / "curves.png")
         plot_trajectories(records, out_dir)
+    write_statistics(out_dir, records, plots)
     return summary
 
 
@@ -169,17 +185,14 @@ def recording_fn(args: Args) -> dict[str, Any]:
     return {"episode_fn": functools.partial(run_episode_safe, record_dir=folder)}
 
 
-def run(args: Args) -> int:
-    """Run the comparison; returns the number of failed episodes."""
-    check_policies(args.policies)
-    specs = build_specs(
-        args.scenes,
-        args.policies,
-        args.seeds,
-        args.steps,
+def episode_specs(args: Args, argv: list[str] | None = None) -> list[EpisodeSpec]:
+    """The run's episodes: ``--scenes``, or the ``--suite`` selection (whose scenes, command
+    and machine then go to the output folder's ``suite.json``)."""
+    suite_points = suite.DEFAULT_EVAL_POINTS if args.suite else DEFAULT_EVAL_POINTS
+    settings = dict(
         up_axis=args.up_axis,
         image_scale=args.image_scale,
-        eval_points=args.eval_points,
+        eval_points=suite_points if args.eval_points is None else args.eval_points,
         eval_samples=args.eval_samples,
         checkpoint_samples=args.checkpoint_samples,
         eval_samples_per_m2=args.eval_samples_per_m2,
@@ -188,6 +201,22 @@ def run(args: Args) -> int:
         policy_kwargs=_json_dict(args.policy_kwargs, "policy-kwargs"),
         env_kwargs=_json_dict(args.env_kwargs, "env-kwargs"),
     )
+    if not args.suite:
+        return build_specs(
+            args.scenes, args.policies, args.seeds, args.steps or DEFAULT_STEPS, **settings
+        )
+    scenes = suite.select_scenes(args.suite, args.size_class, args.variant, args.suite_limit)
+    specs = suite.suite_specs(scenes, args.policies, args.seeds, args.steps, **settings)
+    suite.write_manifest(
+        args.out_dir, suite.manifest_entries(scenes, args.steps), args.suite, argv
+    )
+    return specs
+
+
+def run(args: Args, argv: list[str] | None = None) -> int:
+    """Run the comparison; returns the number of failed episodes."""
+    check_policies(args.policies)
+    specs = episode_specs(args, argv)
     todo = pending_specs(specs, args.out_dir)
     print(
         f"{len(specs)} episodes, {len(specs) - len(todo)} already done, running {len(todo)} "
@@ -220,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
     """Console entry point (``naruto-benchmark``)."""
     args = parse_args(argv)
     try:
-        failed = run(args)
+        failed = run(args, argv)
     except ValueError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

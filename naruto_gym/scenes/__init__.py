@@ -1,4 +1,5 @@
-"""Scenes: loading meshes, the procedural generator and the shipped catalogue."""
+"""Scenes: loading meshes, the procedural generator, the shipped catalogue and the benchmark
+suite."""
 
 from naruto_gym.scenes.catalogue import (
     DEFAULT_SCENE,
@@ -23,11 +24,24 @@ from naruto_gym.scenes.procedural import (
     random_layout,
     save_scene_ply,
 )
+from naruto_gym.scenes.suite import (
+    SIZE_CLASSES,
+    SUITE_VERSION,
+    VARIANTS,
+    SuiteScene,
+    suite_scenes,
+    test_seeds,
+    train_seeds,
+)
 
 __all__ = [
     "DEFAULT_SCENE",
+    "SIZE_CLASSES",
+    "SUITE_VERSION",
+    "VARIANTS",
     "Scene",
     "SceneLayout",
+    "SuiteScene",
     "available_scenes",
     "generate_apartment",
     "generate_layout",
@@ -42,4 +56,7 @@ __all__ = [
     "scene_from_trimesh",
     "scene_info",
     "scene_path",
+    "suite_scenes",
+    "test_seeds",
+    "train_seeds",
 ]

@@ -92,7 +92,9 @@ class ScenePool:
         if first is not None:
             return first
         spec = next(s for s in self._streams if s is not None)
-        return self._cached((spec.kind, spec.draw_seed(np.random.default_rng(0))), spec)
+        return self._cached(
+            (spec.kind, spec.draw_seed(np.random.default_rng(0)), spec.openings), spec
+        )
 
     def groups(self, agents: np.ndarray, selected: np.ndarray) -> list[np.ndarray]:
         """Indices into ``agents`` (where ``selected``), grouped by the agents' scene, groups
@@ -140,7 +142,8 @@ class ScenePool:
         keys: list[tuple | None] = []
         for agent, rng in zip(agents, rngs, strict=True):
             stream = self._streams[agent]
-            keys.append(None if stream is None else (stream.kind, stream.draw_seed(rng)))
+            keys.append(None if stream is None
+                        else (stream.kind, stream.draw_seed(rng), stream.openings))
         missing = {key: self._streams[agent] for agent, key in zip(agents, keys, strict=True)
                    if key is not None and key not in self._cache}
         built: dict[tuple, SceneRuntime] = {}

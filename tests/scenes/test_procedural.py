@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import hashlib
-from collections import deque
 
 import numpy as np
 import pytest
@@ -22,9 +21,12 @@ from naruto_gym.scenes.procedural import (
     scene_to_ply_bytes,
 )
 from naruto_gym.sensors.raycaster import RayCaster
-
-AGENT_RADIUS_M = 0.05
-FURNITURE_EXCLUDED = {"painting", "rug", "ceiling_light"}
+from tests.scenes.layout_checks import (
+    FURNITURE_EXCLUDED,
+    assert_doorways_open,
+    assert_furniture_clear,
+)
+from tests.scenes.layout_checks import reachable_rooms as _reachable_rooms
 
 
 def _digest(scene: Scene) -> str:
@@ -34,35 +36,6 @@ def _digest(scene: Scene) -> str:
 def _unit_directions(count: int, seed: int) -> np.ndarray:
     directions = np.random.default_rng(seed).normal(size=(count, 3))
     return directions / np.linalg.norm(directions, axis=1, keepdims=True)
-
-
-def _reachable_rooms(layout: SceneLayout, caster: RayCaster, z: float, step: float = 0.1):
-    """Rooms whose free point a breadth-first search over free plan cells reaches from the
-    start position, on a grid at height ``z``."""
-    width, depth, _ = layout.size
-    xs = np.arange(step / 2, width, step)
-    ys = np.arange(step / 2, depth, step)
-    grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)
-    points = np.concatenate([grid.reshape(-1, 2), np.full((grid.shape[0] * grid.shape[1], 1), z)],
-                            axis=1)
-    free = (caster.unsigned_distance(points) >= AGENT_RADIUS_M + 0.03).reshape(grid.shape[:2])
-
-    def cell_of(point) -> tuple[int, int]:
-        return (int(np.clip(round((point[0] - step / 2) / step), 0, len(xs) - 1)),
-                int(np.clip(round((point[1] - step / 2) / step), 0, len(ys) - 1)))
-
-    start = cell_of(layout.start_position)
-    assert free[start], "start cell is not free"
-    seen = np.zeros_like(free)
-    seen[start] = True
-    queue = deque([start])
-    while queue:
-        i, j = queue.popleft()
-        for a, b in ((i + 1, j), (i - 1, j), (i, j + 1), (i, j - 1)):
-            if 0 <= a < free.shape[0] and 0 <= b < free.shape[1] and free[a, b] and not seen[a, b]:
-                seen[a, b] = True
-                queue.append((a, b))
-    return [index for index, point in enumerate(layout.room_points) if seen[cell_of(point)]]
 
 
 # ---------------------------------------------------------------------------------------
@@ -131,13 +104,7 @@ def built(request):
 
 def test_doorways_are_open(built):
     layout, _, caster = built
-    for door in layout.doorways:
-        near, far = door.passage(depth=0.6, z=1.0)
-        assert caster.segment_is_free(near, far, clearance=AGENT_RADIUS_M), door
-        # ...and the doorway is an opening, not just a hole: its lintel closes it above.
-        centre = 0.5 * (near + far)
-        up = caster.cast_distance(centre[None], np.array([[0.0, 0.0, 1.0]]))[0]
-        assert up == pytest.approx(door.height - 1.0, abs=1e-3)
+    assert_doorways_open(layout, caster)
 
 
 def test_every_room_is_reachable_from_the_start(built):
@@ -166,27 +133,7 @@ def test_start_and_room_points_are_clear(built):
 
 def test_furniture_keeps_gaps_and_leaves_doorways_free(built):
     layout, _, _ = built
-    furniture = [o for o in layout.objects if o.kind not in FURNITURE_EXCLUDED]
-    assert furniture, "no furniture placed"
-    for index, item in enumerate(furniture):
-        room = layout.rooms[item.room]
-        assert room.interior.contains(item.footprint), item.kind
-        for other in furniture[index + 1:]:
-            if other.room != item.room:
-                continue  # back to back across a wall is fine
-            assert not item.footprint.intersects(other.footprint.inflated(0.399)), (
-                item.kind, other.kind)
-        for door in layout.doorways:
-            near, far = door.passage(depth=0.7, z=0.0)
-            lo = np.minimum(near, far)[:2] - 0.05
-            hi = np.maximum(near, far)[:2] + 0.05
-            if door.along == "x":
-                lo[0], hi[0] = door.lo, door.hi
-            else:
-                lo[1], hi[1] = door.lo, door.hi
-            fp = item.footprint
-            assert not (fp.x0 < hi[0] and lo[0] < fp.x1 and fp.y0 < hi[1] and lo[1] < fp.y1), (
-                f"{item.kind} stands in front of a doorway")
+    assert_furniture_clear(layout)
 
 
 def test_colours_are_varied():

@@ -33,7 +33,11 @@ Modules, one job each:
 * :mod:`~naruto_gym.scenes.procedural.mesh_builder`: shaded triangles of primitives;
 * :mod:`~naruto_gym.scenes.procedural.layout`: :class:`SceneLayout` and its mesh (slabs,
   walls, floor tiles, skirting boards);
+* :mod:`~naruto_gym.scenes.procedural.corridors`: house plans with corridors;
+* :mod:`~naruto_gym.scenes.procedural.clutter`: small clutter objects for lived-in houses;
 * :mod:`~naruto_gym.scenes.procedural.generators`: the public generators;
+* :mod:`~naruto_gym.scenes.procedural.size_classes`: the benchmark suite's size classes
+  (``small``, ``flat``, ``house``);
 * :mod:`~naruto_gym.scenes.procedural.ply`: binary PLY output.
 """
 
@@ -50,10 +54,18 @@ from naruto_gym.scenes.procedural.generators import (
 from naruto_gym.scenes.procedural.layout import FLOOR_THICKNESS_M, SceneLayout
 from naruto_gym.scenes.procedural.plan import Doorway, Part, PlacedObject, Rect, Room
 from naruto_gym.scenes.procedural.ply import save_scene_ply, scene_to_ply_bytes
+from naruto_gym.scenes.procedural.size_classes import (
+    SIZE_CLASS_KINDS,
+    SIZE_CLASSES_VERSION,
+    size_class_layout,
+    size_class_scene,
+)
 
 __all__ = [
     "FLOOR_THICKNESS_M",
     "GENERATOR_VERSION",
+    "SIZE_CLASSES_VERSION",
+    "SIZE_CLASS_KINDS",
     "START_HEIGHT_M",
     "Doorway",
     "Part",
@@ -69,4 +81,6 @@ __all__ = [
     "random_layout",
     "save_scene_ply",
     "scene_to_ply_bytes",
+    "size_class_layout",
+    "size_class_scene",
 ]

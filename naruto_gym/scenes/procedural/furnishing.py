@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from naruto_gym.scenes.procedural.clutter import CLUTTER
 from naruto_gym.scenes.procedural.furniture import FURNITURE, RGB, LocalPart, painting, rug
 from naruto_gym.scenes.procedural.plan import EPS, Doorway, Part, PlacedObject, Rect, Room
 
@@ -119,8 +120,10 @@ def furnish(
     ceiling: float,
     density: float,
     gap: float,
+    clutter: float = 0.0,
 ) -> list[PlacedObject]:
-    """Furniture of the room's kind, then its decorations (see :func:`_decorate`).
+    """Furniture of the room's kind, then clutter, then its decorations (see
+    :func:`_decorate`).
 
     Each optional piece is kept with probability ``probability * density`` and tried at up
     to 40 random places (against a wall or free-standing, as the piece asks) until one
@@ -134,18 +137,28 @@ def furnish(
         ceiling: free height in metres.
         density: scales each optional piece's probability.
         gap: plan gap in metres kept between pieces and to the walls.
+        clutter: scales the probability of each piece of
+            :data:`~naruto_gym.scenes.procedural.clutter.CLUTTER`; 0 places none and draws
+            nothing for it, so layouts without clutter keep their random stream.
 
     Returns:
         The room's placed objects.
     """
     inner = room.interior
-    keepouts = _door_keepouts(room_index, room, doors, reach=min(1.0, 0.35 * min(
-        inner.width, inner.depth)))
+    # In a corridor nothing may stand across from a doorway either: the keep-out spans it.
+    reach = min(inner.width, inner.depth) if room.kind == "corridor" else min(
+        1.0, 0.35 * min(inner.width, inner.depth))
+    keepouts = _door_keepouts(room_index, room, doors, reach=reach)
     placed: list[PlacedObject] = []
     occupied: list[Rect] = []
-    for builder, placement, probability in FURNITURE[room.kind]:
+    pieces = [(builder, placement, probability * density)
+              for builder, placement, probability in FURNITURE[room.kind]]
+    if clutter > 0:
+        pieces += [(builder, placement, probability * clutter)
+                   for builder, placement, probability in CLUTTER]
+    for builder, placement, chance in pieces:
         # Draw the decision and the object whatever happens so the stream stays aligned.
-        wanted = rng.random() < min(1.0, probability * density)
+        wanted = rng.random() < min(1.0, chance)
         width, depth, height, local = builder(rng, ceiling)
         if not wanted:
             continue

@@ -353,6 +353,10 @@ FURNITURE: dict[str, list[tuple]] = {
         (_low_cabinet, "wall", 1.0),
         (_wardrobe, "wall", 0.6), (_plant, "free", 0.6),
     ],
+    # Hallways of the corridor plans: narrow, so only wall-standing pieces.
+    "corridor": [
+        (_low_cabinet, "wall", 0.5), (_bookshelf, "wall", 0.3), (_plant, "wall", 0.4),
+    ],
 }
 ROOM_KIND_ORDER = ["bedroom", "kitchen", "office", "dining_room", "bedroom", "office", "bedroom"]
 

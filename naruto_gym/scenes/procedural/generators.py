@@ -15,12 +15,14 @@ from typing import Literal
 import numpy as np
 
 from naruto_gym.scenes.mesh_scene import Scene
+from naruto_gym.scenes.procedural.corridors import corridor_partition
 from naruto_gym.scenes.procedural.furnishing import furnish
 from naruto_gym.scenes.procedural.furniture import ROOM_KIND_ORDER
 from naruto_gym.scenes.procedural.layout import SceneLayout
 from naruto_gym.scenes.procedural.plan import (
     Doorway,
     PlacedObject,
+    Rect,
     Room,
     door_rooms,
     partition,
@@ -35,6 +37,9 @@ SceneKind = Literal["room", "apartment"]
 GENERATOR_VERSION = 1
 
 START_HEIGHT_M = 1.5  # camera height of a standing person, as in Replica trajectories
+
+# Kinds of the rooms of a house plan after its living room, kitchen and dining room.
+HOUSE_ROOM_ORDER = ["bedroom", "office", "bedroom", "bedroom", "office"]
 
 
 def _clearance_point(
@@ -60,6 +65,21 @@ def _clearance_point(
     return point, float(min(clearance[best], z, ceiling - z))
 
 
+def _house_kinds(cells: list[Rect], by_area: list[int], kinds: list[str]) -> None:
+    """Room kinds of a plan with corridors, written into ``kinds``: one living room (the
+    largest), one kitchen and one dining room, a bathroom per four rooms among the smallest,
+    the rest bedrooms and offices."""
+    bathrooms = max(1, len(by_area) // 4)
+    for index in reversed(by_area[1:]):
+        if bathrooms and cells[index].area < 9.0:
+            kinds[index] = "bathroom"
+            bathrooms -= 1
+    others = [index for index in by_area if not kinds[index]]
+    order = ["living_room", "kitchen", "dining_room"] + HOUSE_ROOM_ORDER * len(others)
+    for index, kind in zip(others, order, strict=False):
+        kinds[index] = kind
+
+
 def generate_layout(
     seed: int,
     size: Sequence[float] = (5.0, 5.0, 3.0),
@@ -72,6 +92,9 @@ def generate_layout(
     furniture_density: float = 1.0,
     extra_door_probability: float = 0.35,
     object_gap_m: float = 0.4,
+    corridor_width: float = 0.0,
+    corridor_branch: bool = False,
+    clutter: float = 0.0,
 ) -> SceneLayout:
     """Draw a furnished floor plan from a seed.
 
@@ -89,6 +112,14 @@ def generate_layout(
             doorway, which makes loops in the room graph.
         object_gap_m: plan gap kept between furniture and to walls (except the back of
             wall-standing furniture).
+        corridor_width: 0 splits the footprint into rooms that open into each other; a
+            width (at least 1.1 m) draws a house plan instead: a hallway spine with rooms on
+            both sides (see :func:`~naruto_gym.scenes.procedural.corridors.corridor_partition`;
+            ``num_rooms`` then counts the rooms, not the corridors).
+        corridor_branch: with a corridor, add a second one at right angles to the spine.
+        clutter: scales the probability of the small clutter objects (boxes, stray chairs,
+            baskets, see :mod:`~naruto_gym.scenes.procedural.clutter`) placed in every room
+            besides its furniture; 0 places none.
 
     Returns:
         A :class:`SceneLayout`.
@@ -119,10 +150,24 @@ def generate_layout(
         raise ValueError(f"wall_thickness must be in (0, 0.5] m, got {wall_thickness}")
     if furniture_density < 0:
         raise ValueError(f"furniture_density must be >= 0, got {furniture_density}")
+    if clutter < 0:
+        raise ValueError(f"clutter must be >= 0, got {clutter}")
+    if corridor_width != 0 and not 1.1 <= corridor_width <= 3.0:
+        raise ValueError(
+            f"corridor_width must be 0 (no corridor) or in [1.1, 3.0] m, got {corridor_width}"
+        )
     rng = np.random.default_rng(int(seed))
-    cells, doors = partition(
-        rng, width, depth, int(num_rooms), min_room_size, wall_thickness, door_width, door_height
-    )
+    corridor_cells: list[int] = []
+    if corridor_width > 0:
+        cells, doors, corridor_cells = corridor_partition(
+            rng, width, depth, int(num_rooms), float(corridor_width), bool(corridor_branch),
+            min_room_size, wall_thickness, door_width, door_height,
+        )
+    else:
+        cells, doors = partition(
+            rng, width, depth, int(num_rooms), min_room_size, wall_thickness, door_width,
+            door_height,
+        )
     doors = [Doorway(d.along, d.coord, d.lo, d.hi, d.height,
                      door_rooms(d, cells, wall_thickness)) for d in doors]
     # Extra doorways make loops: exploring agents then have more than one way round.
@@ -140,12 +185,18 @@ def generate_layout(
             doors.append(Doorway(along, coord, start, round(start + door_width, 3), door_height,
                                  (a, b)))
     # Room kinds: the largest is the living room, the smallest may be a bathroom.
-    by_area = sorted(range(len(cells)), key=lambda i: (-cells[i].area, i))
-    kinds = [""] * len(cells)
+    # Room kinds: the largest is the living room, the smallest may be a bathroom.
+    by_area = sorted((i for i in range(len(cells)) if i not in corridor_cells),
+                     key=lambda i: (-cells[i].area, i))
+    kinds = ["corridor" if i in corridor_cells else "" for i in range(len(cells))]
+    if corridor_cells:
+        _house_kinds(cells, by_area, kinds)
     for rank, index in enumerate(by_area):
+        if kinds[index]:
+            continue
         if rank == 0:
             kinds[index] = "living_room"
-        elif rank == len(cells) - 1 and len(cells) >= 4 and cells[index].area < 9.0:
+        elif rank == len(by_area) - 1 and len(by_area) >= 4 and cells[index].area < 9.0:
             kinds[index] = "bathroom"
         else:
             kinds[index] = ROOM_KIND_ORDER[(rank - 1) % len(ROOM_KIND_ORDER)]
@@ -157,7 +208,8 @@ def generate_layout(
                           room_interior(cell, width, depth, wall_thickness)))
     objects: list[PlacedObject] = []
     for index, room in enumerate(rooms):
-        objects += furnish(rng, index, room, doors, height, furniture_density, object_gap_m)
+        objects += furnish(rng, index, room, doors, height, furniture_density, object_gap_m,
+                           clutter=0.0 if room.kind == "corridor" else clutter)
     room_points, clearances = [], []
     for index, room in enumerate(rooms):
         point, clearance = _clearance_point(room, [o for o in objects if o.room == index], height)

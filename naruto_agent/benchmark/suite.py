@@ -1,0 +1,224 @@
+"""The scene suite as benchmark episodes: ``naruto-benchmark --suite test``.
+
+The suite itself (scenes, size classes, budgets, the fixed test seeds) is named data in
+:mod:`naruto_gym.scenes.suite`; this module turns a selection of it into harness episodes,
+each with its scene's class budget, and keeps a manifest (``suite.json`` in the output folder)
+that says which class, variant and split each scene label belongs to, with the command and the
+machine of each run. Reports read the manifest to group results by class; the episodes
+themselves are ordinary harness episodes, so local workers, Ray and resuming work unchanged.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from naruto_agent.benchmark.records import read_record, write_json_atomic
+from naruto_agent.benchmark.spec import EpisodeSpec, build_specs, parse_scene
+
+MANIFEST_FILE = "suite.json"
+SPLITS = ("test", "train")
+DEFAULT_EVAL_POINTS = 9
+"""Completion-ratio checkpoints of a suite episode besides the final score: one every tenth
+of the budget, so the efficiency metrics (:mod:`~naruto_agent.benchmark.efficiency`) resolve a
+tenth of the budget."""
+
+
+def suite_module() -> Any:
+    """:mod:`naruto_gym.scenes.suite`, or a ValueError saying that this install lacks it."""
+    try:
+        from naruto_gym.scenes import suite
+    except ImportError as error:
+        raise ValueError(
+            "this naruto-gym has no scene suite (naruto_gym.scenes.suite); update naruto-gym"
+        ) from error
+    return suite
+
+
+def select_scenes(
+    split: str, size_classes: list[str] | None = None, variant: str = "closed", limit: int = 0
+) -> list[Any]:
+    """The suite's :class:`SuiteScene` entries of a split, classes and variant.
+
+    Args:
+        split: ``"test"`` or ``"train"``.
+        size_classes: the classes (default: all).
+        variant: ``"closed"`` or ``"open"``.
+        limit: keep the first ``limit`` scenes of each class (0: all), for quick checks.
+
+    Raises:
+        ValueError: an unknown split, class or variant (the message lists the known ones), or
+            a negative limit.
+    """
+    if limit < 0:
+        raise ValueError(f"the suite limit must be >= 0 (0: every scene), got {limit}")
+    suite = suite_module()
+    if split not in SPLITS:
+        raise ValueError(f"unknown suite split {split!r}; use one of {', '.join(SPLITS)}")
+    classes = tuple(size_classes) if size_classes else tuple(suite.SIZE_CLASSES)
+    unknown = [name for name in classes if name not in suite.SIZE_CLASSES]
+    if unknown:
+        raise ValueError(
+            f"unknown size class(es) {unknown}; use some of {', '.join(suite.SIZE_CLASSES)}"
+        )
+    if variant not in suite.VARIANTS:
+        raise ValueError(f"unknown variant {variant!r}; use one of {', '.join(suite.VARIANTS)}")
+    scenes = list(suite.suite_scenes(split=split, size_classes=classes, variants=(variant,)))
+    if limit:
+        taken: dict[str, int] = {}
+        kept = []
+        for entry in scenes:
+            taken[entry.size_class] = taken.get(entry.size_class, 0) + 1
+            if taken[entry.size_class] <= limit:
+                kept.append(entry)
+        scenes = kept
+    return scenes
+
+
+def suite_specs(
+    scenes: list[Any],
+    policies: list[str],
+    seeds: list[int],
+    steps: int | None = None,
+    **settings: Any,
+) -> list[EpisodeSpec]:
+    """The episodes of suite scenes x policies x seeds, each with its scene's class budget.
+
+    Args:
+        scenes: :class:`SuiteScene` entries (:func:`select_scenes`).
+        policies: policy names or import paths.
+        seeds: episode seeds.
+        steps: a budget for every scene instead of the class budgets (short test runs).
+        **settings: further :class:`EpisodeSpec` fields, as :func:`build_specs` takes them.
+    """
+    if not scenes:
+        raise ValueError("the suite selection holds no scene")
+    specs: list[EpisodeSpec] = []
+    for entry in scenes:
+        budget = int(steps) if steps else int(entry.budget)
+        specs += build_specs([entry.scene], policies, seeds, budget, **dict(settings))
+    ids = [spec.episode_id for spec in specs]
+    if len(set(ids)) != len(ids):
+        raise ValueError("two suite scenes share a label; the suite must name them apart")
+    return specs
+
+
+def manifest_entries(scenes: list[Any], steps: int | None = None) -> dict[str, dict[str, Any]]:
+    """Scene label -> its class, variant, split, scene seed, scene string and budget."""
+    entries = {}
+    for entry in scenes:
+        entries[parse_scene(entry.scene).label] = {
+            "scene": entry.scene,
+            "size_class": entry.size_class,
+            "split": entry.split,
+            "seed": int(entry.seed),
+            "variant": entry.variant,
+            "budget": int(steps) if steps else int(entry.budget),
+        }
+    return entries
+
+
+def machine() -> dict[str, Any]:
+    """The machine a run happens on: host, OS, CPU count, GPU, Python and package version."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        package = version("naruto-gym")
+    except PackageNotFoundError:
+        package = "unknown"
+    gpu = None
+    try:
+        import torch
+
+        if torch.cuda.is_available():
+            gpu = torch.cuda.get_device_name(0)
+    except ImportError:
+        pass
+    return {
+        "host": platform.node(),
+        "platform": platform.platform(),
+        "processor": platform.machine(),
+        "cpus": os.cpu_count(),
+        "gpu": gpu,
+        "python": platform.python_version(),
+        "naruto_gym": package,
+        "commit": _git_commit(),
+        "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+    }
+
+
+def _git_commit() -> str | None:
+    """The source tree's commit when it is a git checkout (None otherwise)."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        result = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return result.stdout.strip() or None if result.returncode == 0 else None
+
+
+def write_manifest(
+    out_dir: str | Path,
+    scenes: dict[str, dict[str, Any]],
+    split: str,
+    argv: list[str] | None = None,
+) -> dict[str, Any]:
+    """Add a run's scenes, command and machine to ``out_dir/suite.json``; returns it.
+
+    Scenes of earlier runs into the same folder stay (a class run later joins the table); the
+    command and machine of each run are kept in ``runs``.
+
+    Raises:
+        ValueError: the folder holds results of another suite version or split.
+    """
+    path = Path(out_dir) / MANIFEST_FILE
+    manifest = read_manifest(out_dir) or {"scenes": {}, "runs": []}
+    suite = suite_module()
+    earlier = manifest.get("suite_version")
+    if earlier is not None and earlier != suite.SUITE_VERSION:
+        raise ValueError(
+            f"{out_dir} holds results of suite version {earlier}, this naruto-gym has version "
+            f"{suite.SUITE_VERSION} (its scenes or budgets differ): give another --out-dir"
+        )
+    if manifest.get("split") not in (None, split):
+        raise ValueError(
+            f"{out_dir} holds results of the {manifest['split']} split: give another --out-dir "
+            f"for the {split} split"
+        )
+    manifest["suite_version"] = suite.SUITE_VERSION
+    manifest["split"] = split
+    manifest["scenes"].update(scenes)
+    words = ["naruto-benchmark", *(sys.argv[1:] if argv is None else argv)]
+    manifest["runs"].append({"command": shlex.join(words), "machine": machine()})
+    write_json_atomic(path, manifest)
+    return manifest
+
+
+def read_manifest(out_dir: str | Path) -> dict[str, Any] | None:
+    """``out_dir/suite.json``, or None when the folder holds no suite run."""
+    return read_record(Path(out_dir) / MANIFEST_FILE)
+
+
+def size_class_of(record: dict[str, Any], manifest: dict[str, Any] | None) -> str:
+    """A record's size class from the manifest (``"all"`` outside a suite run)."""
+    if not manifest:
+        return "all"
+    entry = manifest.get("scenes", {}).get(record.get("scene"))
+    return str(entry["size_class"]) if entry else "other"
+
+
+def manifest_json(manifest: dict[str, Any]) -> str:
+    """The manifest as indented JSON (for printing)."""
+    return json.dumps(manifest, indent=1)
