@@ -14,8 +14,10 @@ size, so its mesh never needs to be downloaded:
 
 ``resolve_scene`` is what the environment calls: it accepts a catalogue name, a catalogue
 name with scan openings (``"NAME:OPENINGS"``, an open-scan variant built in memory by
-:func:`catalogue_open_scan`), one fixed generated scene (``"procedural:<kind>:<seed>"``), a
-mesh file path or an already built :class:`~naruto_gym.scenes.mesh_scene.Scene`.
+:func:`catalogue_open_scan`), one fixed generated scene (``"procedural:<kind>:<seed>"``,
+optionally cut open: ``"procedural:house:7:no_ceiling+holes"``; the size classes of the
+benchmark suite are cached on disk by :mod:`naruto_gym.scenes.scene_cache`), a mesh file path
+or an already built :class:`~naruto_gym.scenes.mesh_scene.Scene`.
 """
 
 from __future__ import annotations
@@ -315,8 +317,9 @@ def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z"
     Args:
         name_or_path: a catalogue name (see :func:`available_scenes`), a catalogue name with
             scan openings (``"replica_like_room:no_ceiling+holes"``, see
-            :mod:`naruto_gym.scenes.open_scans`), a path to a mesh file, or a :class:`Scene`
-            (returned unchanged).
+            :mod:`naruto_gym.scenes.open_scans`), a generated scene
+            (``"procedural:<kind>:<seed>[:<openings>]"``, see :mod:`naruto_gym.scenes.stream`),
+            a path to a mesh file, or a :class:`Scene` (returned unchanged).
         up_axis: the up axis of a mesh *file*; catalogue scenes are always z-up and ignore it.
 
     Raises:

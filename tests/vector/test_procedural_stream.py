@@ -27,7 +27,8 @@ def test_names_splits_and_fixed_scenes():
     (train_low, train_high), (test_low, test_high) = SPLIT_SEEDS["train"], SPLIT_SEEDS["test"]
     assert train_high <= test_low or test_high <= train_low
     assert split_of_seed(train_low) == "train" and split_of_seed(test_low) == "test"
-    for bad in ("procedural:house", "procedural:room:val", "procedural:room:1:2"):
+    for bad in ("procedural:castle", "procedural:room:val", "procedural:room:1:2",
+                "procedural:room:1:no_ceiling:2"):
         with pytest.raises(ValueError, match="procedural"):
             parse_procedural_name(bad)
     assert resolve_scene("procedural:room:42").name == "room_42"
