@@ -59,8 +59,7 @@ def face_normals_of(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def check_mesh_arrays(vertices: np.ndarray, faces: np.ndarray, what: str) -> None:
     """Check that (V, 3) ``vertices`` and (F, 3) ``faces`` make a triangle mesh a scene can
-    be built from: at least one triangle, every index a vertex, every vertex finite, and
-    some area.
+    be built from: at least one triangle, every index a vertex, every vertex finite.
 
     Degenerate (zero-area) and duplicate triangles are allowed: ray casts never hit them,
     and scans are full of them.
@@ -91,7 +90,11 @@ def check_mesh_arrays(vertices: np.ndarray, faces: np.ndarray, what: str) -> Non
             "them and the faces that use them, e.g. with trimesh: "
             "mesh.update_vertices(numpy.isfinite(mesh.vertices).all(axis=1))"
         )
-    corners = vertices[faces]
+
+
+def check_mesh_area(vertices: np.ndarray, faces: np.ndarray, what: str) -> None:
+    """Raise ``ValueError`` when every triangle of a mesh has zero area (nothing to see)."""
+    corners = np.asarray(vertices, np.float64)[np.asarray(faces)]
     doubled_areas = np.linalg.norm(
         np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
     )
