@@ -24,6 +24,9 @@ from naruto_gym.sensors.raycaster import RAYCASTER_BACKENDS
 MAX_IMAGE_SIDE = 16_384
 #: The most pixels along either side of the panorama.
 MAX_PANORAMA_SIDE = 8_192
+#: The largest length in metres a setting takes (a thousand kilometres: far past any scene,
+#: and inside float32, in which depth images and observation bounds are stored).
+MAX_LENGTH_M = 1e6
 #: The most coverage samples (each costs a projection per step).
 MAX_COVERAGE_SAMPLES = 10_000_000
 
@@ -119,23 +122,47 @@ def check_settings(settings: Any) -> None:
             f"image from a {camera.width} x {camera.height} camera; the most is "
             f"{MAX_IMAGE_SIDE} pixels a side"
         )
-    check_number("max_depth_m", settings.max_depth_m, low=0.0)
+    check_number("max_depth_m", settings.max_depth_m, low=0.0, high=MAX_LENGTH_M)
     check_panorama_shape(settings.panorama_shape)
-    check_number("agent_radius_m", settings.agent_radius_m, low=0.0)
-    check_number("max_translation_m", settings.max_translation_m, low=0.0)
+    check_number("agent_radius_m", settings.agent_radius_m, low=0.0, high=MAX_LENGTH_M)
+    check_number("max_translation_m", settings.max_translation_m, low=0.0, high=MAX_LENGTH_M)
     check_number("max_rotation_deg", settings.max_rotation_deg, low=0.0, high=180.0)
     if settings.escape_no_hit_threshold is not None:
         check_number("escape_no_hit_threshold", settings.escape_no_hit_threshold, low=0.0,
                      high=1.0, low_open=False)
     check_choice("escape_rule", settings.escape_rule, ESCAPE_RULES)
-    check_number("collision_penalty", settings.collision_penalty)
+    check_number("collision_penalty", settings.collision_penalty, low=-1e12, high=1e12)
     check_integer("coverage_samples", settings.coverage_samples, low=1,
                   high=MAX_COVERAGE_SAMPLES)
-    check_number("coverage_range_m", settings.coverage_range_m, low=0.0)
+    check_number("coverage_range_m", settings.coverage_range_m, low=0.0, high=MAX_LENGTH_M)
     check_bool("observable_only", settings.observable_only)
-    check_number("start_clearance_m", settings.start_clearance_m, low=0.0, low_open=False)
+    check_number("start_clearance_m", settings.start_clearance_m, low=0.0, high=MAX_LENGTH_M,
+                 low_open=False)
     check_choice("raycaster_backend", settings.raycaster_backend, RAYCASTER_BACKENDS)
     check_choice("pinhole_backend", settings.pinhole_backend, PINHOLE_BACKENDS)
+
+
+def check_seed(seed: Any) -> int | None:
+    """A reset seed as Gymnasium takes it: None, or a non-negative Python int (NumPy
+    integers of any width are converted), else a ``ValueError`` saying what to pass."""
+    if seed is None:
+        return None
+    if not _is_integer(seed) or seed < 0:
+        raise ValueError(f"seed must be None or a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def check_env_keywords(
+    render_mode: Any, render_modes: list[str], reconstruct: Any, step_budget: Any
+) -> None:
+    """Check the single env's own keywords (the rest are ``EnvSettings``')."""
+    if render_mode is not None and (
+        not isinstance(render_mode, str) or render_mode not in render_modes
+    ):
+        raise ValueError(f"render_mode must be None or one of {render_modes}, got {render_mode!r}")
+    check_bool("reconstruct", reconstruct)
+    if step_budget is not None:
+        check_integer("step_budget", step_budget, low=1)
 
 
 def check_vector_keywords(max_episode_steps: Any, scene_cache_size: Any) -> None:
