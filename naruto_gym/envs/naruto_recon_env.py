@@ -11,7 +11,7 @@ import numpy as np
 from naruto_gym.coverage import CoverageTracker
 from naruto_gym.envs.scene_runtime import SceneRuntime
 from naruto_gym.envs.settings import EnvSettings
-from naruto_gym.envs.validation import check_env_keywords, check_seed
+from naruto_gym.envs.validation import check_env_keywords, check_reset_options, check_seed
 from naruto_gym.evaluation.scoring import EpisodeReconstruction
 from naruto_gym.geometry.transforms import make_pose, validate_pose
 from naruto_gym.motion.actions import (
@@ -308,7 +308,7 @@ class NarutoReconEnv(gym.Env):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         super().reset(seed=check_seed(seed))
-        options = options or {}
+        options = check_reset_options(options, ("pose",))
         unknown = set(options) - {"pose"}
         if unknown:
             raise ValueError(f"unknown reset options {sorted(unknown)}; supported: ['pose']")

@@ -152,6 +152,18 @@ def check_seed(seed: Any) -> int | None:
     return int(seed)
 
 
+def check_reset_options(options: Any, supported: tuple[str, ...]) -> dict[str, Any]:
+    """Reset ``options`` as a dict (None gives an empty one), else a ``ValueError``."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ValueError(
+            f"reset options must be None or a dict with keys among {list(supported)}, got "
+            f"{type(options).__name__}"
+        )
+    return options
+
+
 def check_env_keywords(
     render_mode: Any, render_modes: list[str], reconstruct: Any, step_budget: Any
 ) -> None:
