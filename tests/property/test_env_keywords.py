@@ -7,7 +7,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import naruto_gym  # noqa: F401
@@ -63,6 +63,7 @@ def _reset_and_step(env: gym.Env) -> None:
 
 
 @pytest.mark.parametrize("keyword", sorted(VALID))
+@settings(max_examples=8)  # per keyword: 20 keywords
 @given(data=st.data())
 def test_every_keyword_is_used_or_refused_by_name(keyword, data):
     value = data.draw(st.one_of(odd_value, VALID[keyword]), label=keyword)
@@ -137,6 +138,7 @@ VECTOR_VALID: dict[str, st.SearchStrategy] = {
 
 
 @pytest.mark.parametrize("keyword", sorted(VECTOR_VALID))
+@settings(max_examples=6)  # per keyword
 @given(data=st.data())
 def test_every_vector_env_keyword_is_used_or_refused_by_name(keyword, data):
     value = data.draw(st.one_of(odd_value, VECTOR_VALID[keyword]), label=keyword)
@@ -169,3 +171,26 @@ def test_max_depth_m_out_of_range_is_refused(value):
     range failed there too."""
     with pytest.raises(ValueError, match="max_depth_m"):
         gym.make("NarutoRecon-v0", max_depth_m=value)
+
+
+@given(actions=st.one_of(odd_value, st.lists(any_float, min_size=1, max_size=14)))
+def test_the_vector_env_steps_or_refuses_any_actions_and_goes_on(actions):
+    env = _vector_env()
+    env.reset(seed=0)
+    try:
+        observations, rewards, _, _, _ = env.step(actions)
+    except ValueError as error:
+        assert "action" in str(error), str(error)
+        observations, rewards, _, _, _ = env.step(env.action_space.sample())
+    assert env.observation_space.contains(observations)
+    assert np.isfinite(rewards).all()
+
+
+_VECTOR: list[NarutoReconVectorEnv] = []
+
+
+def _vector_env() -> NarutoReconVectorEnv:
+    if not _VECTOR:
+        _VECTOR.append(NarutoReconVectorEnv(num_envs=2, scene=small_room(), action_mode="delta",
+                                            **FAST))
+    return _VECTOR[0]
