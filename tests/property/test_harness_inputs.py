@@ -32,7 +32,7 @@ def test_any_damaged_record_reads_as_not_done(tmp_path_factory, content):
     assert not is_done(path, "some-hash") or json.loads(content)["config_hash"] == "some-hash"
 
 
-@pytest.mark.parametrize("damage", ["truncate", "not_json", "empty", "a_list"])
+@pytest.mark.parametrize("damage", ["truncate", "not_json"])  # more kinds: the test above
 def test_a_damaged_record_is_run_again(tmp_path, damage):
     specs = build_specs(["two_rooms"], ["random"], [0], 3, **TINY)
     assert run_local(specs, tmp_path, workers=0, progress=False) == 0
