@@ -311,9 +311,11 @@ class ObservableSurface:
         )
         if len(self.viewpoints) == 0:
             raise ValueError(
-                "found no free viewpoint inside the scene to define its observable surface; "
-                "check the mesh (closed room, normals facing the free space) or switch "
-                "observable-only scoring off"
+                "found no free viewpoint inside the scene to define its observable surface "
+                f"(no point has {clearance_m} m of free space inside the scanned space: the "
+                "scene is too small for the agent, or not a room); check the mesh (its units "
+                "are metres, normals face the free space) or switch observable-only scoring "
+                "off (observable_only=False)"
             )
 
     def mask(self, points: np.ndarray) -> np.ndarray:

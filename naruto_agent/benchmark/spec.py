@@ -14,6 +14,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from naruto_agent.benchmark.checks import check_scene
+
 UP_AXES = ("x", "y", "z", "-x", "-y", "-z", "auto")
 """Up axes of a mesh file (``"auto"``: read from a recognised dataset layout)."""
 TRAJECTORY_FILE = "traj.txt"
@@ -233,6 +235,7 @@ def build_specs(
     specs = []
     for argument in scenes:
         scene = parse_scene(argument, up_axis)
+        check_scene(scene.scene, scene.is_path)
         for policy in policies:
             kwargs = {**default_policy_kwargs(policy, scene), **per_policy.get(policy, {})}
             for seed in seeds:

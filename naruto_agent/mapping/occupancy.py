@@ -25,6 +25,7 @@ import numpy as np
 from scipy import ndimage
 from skimage.graph import MCP_Geometric
 
+from naruto_agent.mapping.grid_memory import check_grid_memory
 from naruto_agent.mapping.occupancy_kernels import empty_sectors_below
 from naruto_gym.motion.scanned_space import ScannedSpaceConfig, support_directions
 from naruto_gym.sensors.pinhole import PinholeCamera
@@ -130,6 +131,7 @@ class OccupancyGrid:
         self.origin = bounds[0].copy()
         self.voxel_size_m = float(voxel_size_m)
         self.shape = tuple(int(n) for n in np.ceil((bounds[1] - bounds[0]) / voxel_size_m))
+        check_grid_memory(self.shape, 5, self.voxel_size_m, "occupancy map")
         self.max_range_m = float(max_range_m)
         self._pixel_stride = int(pixel_stride)
         self.hit_log_odds = float(hit_log_odds)

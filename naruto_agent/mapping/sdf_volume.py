@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import ndimage
 
+from naruto_agent.mapping.grid_memory import check_grid_memory
+
 if TYPE_CHECKING:  # pragma: no cover
     from naruto_gym.scenes.mesh_scene import Scene
     from naruto_gym.sensors.raycaster import RayCaster
@@ -150,7 +152,10 @@ class SdfVolume:
         lower = bounds[0] - padding
         extent = bounds[1] + padding - lower
         counts = np.maximum(np.ceil(extent / voxel_size - 1e-9).astype(int) + 1, 2)
-        return lower, (int(counts[0]), int(counts[1]), int(counts[2]))
+        shape = (int(counts[0]), int(counts[1]), int(counts[2]))
+        # float32 values, and the float64 voxel centres ``from_function`` evaluates.
+        check_grid_memory(shape, 28, voxel_size, "SDF volume")
+        return lower, shape
 
     @classmethod
     def from_function(

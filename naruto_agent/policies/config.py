@@ -176,6 +176,12 @@ class PassiveConfig:
             direction (the wall) and 150 degrees further left (ahead and across the room).
         sweep_pitch_deg: amplitude of the camera's up/down sweep.
         sweep_period_steps: period of the sideways sweep (the pitch sweep uses 1.6 times it).
+        loop_min_steps: a loop of the wall follower is closed when the agent comes back
+            within ``loop_close_m`` of where it was at least this many steps ago ...
+        loop_close_m: ... (see ``loop_min_steps``);
+        loop_min_gain: when a closed loop added less coverage than this (a share, 0..1),
+            the follower leaves that wall across the room to find another one (an island of
+            furniture, or a room it would otherwise circle forever).
     """
 
     fit_to_budget: bool = True
@@ -189,6 +195,9 @@ class PassiveConfig:
     sweep_yaw_deg: float = 100.0
     sweep_pitch_deg: float = 30.0
     sweep_period_steps: int = 50
+    loop_min_steps: int = 80
+    loop_close_m: float = 0.3
+    loop_min_gain: float = 0.02
 
     def __post_init__(self) -> None:
         if not 0.0 < self.scan_height_fraction < 1.0:

@@ -14,8 +14,11 @@
   (past a missing wall, the rim of a floor hole) shows nothing there, so the follower also
   reads where the panorama's downward rays stop hitting (``floor_edge_profile``) as a wall,
   and a move the env still refuses as an escape leaves a virtual wall that the follower
-  follows from then on. Only the bounds, the observations and
-  the step info are used, never the mesh.
+  follows from then on. A wall followed all the way round without adding coverage (an island
+  of furniture, a room circled again and again, the low edge of a partial scan) is left:
+  the agent crosses the room towards its most open side until it meets another wall, and
+  follows that one. Only the bounds, the observations and the step info are used, never the
+  mesh.
 """
 
 from __future__ import annotations
@@ -117,6 +120,7 @@ class PassivePolicy(Policy):
         self._position = np.zeros(3)
         self._refused = RefusedMoves()
         self._last_target: np.ndarray | None = None
+        self._visits: list[tuple[np.ndarray, float]] = []
 
     @property
     def replays(self) -> bool:
@@ -153,6 +157,7 @@ class PassivePolicy(Policy):
         self._recent = []
         self._refused.reset()
         self._last_target = None
+        self._visits = []
 
     # -- replay ------------------------------------------------------------------------
     def _reached(self, pose: np.ndarray, target: np.ndarray) -> bool:
@@ -209,6 +214,32 @@ class PassivePolicy(Policy):
                 self._heading += np.pi / 2.0
                 self._recent.clear()
 
+    def _loop_without_news(self, position: np.ndarray, coverage: float | None) -> bool:
+        """Whether the follower just closed a loop along its wall that added less than
+        ``loop_min_gain`` coverage (False while no coverage is reported)."""
+        if coverage is None or not self._found_wall:
+            return False
+        config = self.config
+        self._visits.append((np.array(position[:2]), float(coverage)))
+        earlier = len(self._visits) - config.loop_min_steps
+        if earlier <= 0:
+            return False
+        points = np.array([point for point, _ in self._visits[:earlier]])
+        close = np.flatnonzero(np.linalg.norm(points - position[:2], axis=1) < config.loop_close_m)
+        if len(close) == 0:
+            return False
+        return coverage - self._visits[close[-1]][1] < config.loop_min_gain
+
+    def _leave_the_wall(self, profile: np.ndarray) -> None:
+        """Head across the room: the most open direction on the side away from the wall
+        (between 30 and 150 degrees left of the walking direction), until another wall."""
+        candidates = self._heading + np.deg2rad(np.arange(30.0, 151.0, 15.0))
+        clearance = [profile_clearance(profile, yaw, np.deg2rad(10.0)) for yaw in candidates]
+        self._heading = float(candidates[int(np.argmax(clearance))])
+        self._found_wall = False
+        self._visits = []
+        self._recent = []
+
     def _act_scripted(self, observation: Observation, info: Info | None) -> np.ndarray:
         pose = np.asarray(observation["pose"], np.float64)
         position = pose[:3, 3]
@@ -221,6 +252,9 @@ class PassivePolicy(Policy):
         panorama = observation["panorama"]
         profile = np.minimum(horizontal_profile(panorama), floor_edge_profile(panorama))
         profile = self._refused.overlay(profile, position)
+        coverage = info.get("coverage") if info else None
+        if self._loop_without_news(position, coverage):
+            self._leave_the_wall(profile)
         self._steer(profile, collided)
         bounds = self.context.bounds
         height = bounds[0, 2] + self.config.scan_height_fraction * (bounds[1, 2] - bounds[0, 2])

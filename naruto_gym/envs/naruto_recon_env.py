@@ -11,6 +11,7 @@ import numpy as np
 from naruto_gym.coverage import CoverageTracker
 from naruto_gym.envs.scene_runtime import SceneRuntime
 from naruto_gym.envs.settings import EnvSettings
+from naruto_gym.envs.validation import check_env_keywords, check_reset_options, check_seed
 from naruto_gym.evaluation.scoring import EpisodeReconstruction
 from naruto_gym.geometry.transforms import make_pose, validate_pose
 from naruto_gym.motion.actions import (
@@ -206,16 +207,7 @@ class NarutoReconEnv(gym.Env):
             raycaster_backend=raycaster_backend,
             pinhole_backend=pinhole_backend,
         )
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(
-                f"render_mode must be None or one of {self.metadata['render_modes']}, "
-                f"got {render_mode!r}"
-            )
-        if step_budget is not None and (
-            isinstance(step_budget, bool) or not isinstance(step_budget, (int, np.integer))
-            or step_budget < 1
-        ):
-            raise ValueError(f"step_budget must be a positive integer or None, got {step_budget!r}")
+        check_env_keywords(render_mode, self.metadata["render_modes"], reconstruct, step_budget)
         # The native ray-casting scene, the coverage samples and the observable surface are
         # built lazily (first reset), after any fork.
         self.runtime = SceneRuntime.load(scene, settings)
@@ -315,8 +307,8 @@ class NarutoReconEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        super().reset(seed=seed)
-        options = options or {}
+        super().reset(seed=check_seed(seed))
+        options = check_reset_options(options, ("pose",))
         unknown = set(options) - {"pose"}
         if unknown:
             raise ValueError(f"unknown reset options {sorted(unknown)}; supported: ['pose']")

@@ -23,7 +23,7 @@ from naruto_gym.motion.actions import DISCRETE_ACTIONS
 from naruto_gym.motion.collision import CollisionChecker
 from naruto_gym.observability import ObservableSurface, sample_free_positions
 from naruto_gym.rendering.topdown import TopDownMap
-from naruto_gym.scenes.mesh_scene import Scene
+from naruto_gym.scenes.mesh_scene import Scene, check_mesh_area
 from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.pinhole import RgbdRenderer
 from naruto_gym.sensors.raycaster import RayCaster
@@ -60,6 +60,7 @@ class SceneRuntime:
         settings: EnvSettings,
         auto_max_triangles_per_pixel: float | None = None,
     ) -> None:
+        check_mesh_area(scene.vertices, scene.faces, f"scene {scene.name!r}")
         self.scene = scene
         self.settings = settings
         self.camera = settings.pinhole_camera

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from naruto_gym.motion.actions import ACTION_MODES
+from naruto_gym.envs.validation import check_settings
 from naruto_gym.sensors.pinhole import PinholeCamera
 
 
@@ -21,8 +21,9 @@ class EnvSettings:
     Arguments for the meaning of each field).
 
     Raises:
-        ValueError: for an unknown ``action_mode``, a non-positive step limit or a
-            non-positive ``image_scale``.
+        ValueError: for a field of the wrong type or out of range (see
+            :func:`naruto_gym.envs.validation.check_settings`): an unknown ``action_mode``,
+            a non-positive ``max_depth_m``, step limit or ``image_scale``, a NaN, ...
     """
 
     up_axis: str = "z"
@@ -45,14 +46,9 @@ class EnvSettings:
     pinhole_backend: str = "raycast"
 
     def __post_init__(self) -> None:
-        if self.action_mode not in ACTION_MODES:
-            raise ValueError(
-                f"action_mode must be one of {ACTION_MODES}, got {self.action_mode!r}"
-            )
-        if self.max_translation_m <= 0 or self.max_rotation_deg <= 0:
-            raise ValueError("max_translation_m and max_rotation_deg must be positive")
-        if self.image_scale <= 0:
-            raise ValueError(f"image_scale must be positive, got {self.image_scale}")
+        check_settings(self)
+        if self.panorama_shape is not None:
+            object.__setattr__(self, "panorama_shape", tuple(int(v) for v in self.panorama_shape))
 
     @property
     def pinhole_camera(self) -> PinholeCamera:

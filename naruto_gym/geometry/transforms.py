@@ -70,7 +70,12 @@ def is_rotation_matrix(matrix: np.ndarray, tolerance: float = 1e-4) -> bool:
 
 def validate_pose(pose: np.ndarray, what: str = "pose") -> np.ndarray:
     """Return ``pose`` as a float64 4x4 rigid transform or raise a ValueError saying why."""
-    pose = np.asarray(pose, dtype=np.float64)
+    try:
+        pose = np.asarray(pose, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"{what} must be a 4x4 camera-to-world matrix of numbers, got {pose!r}"
+        ) from None
     if pose.shape != (4, 4):
         raise ValueError(f"{what} must be a 4x4 camera-to-world matrix, got shape {pose.shape}")
     if not np.all(np.isfinite(pose)):

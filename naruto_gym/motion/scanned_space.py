@@ -35,12 +35,15 @@ from every surface, which is more than half a cell's diagonal (4.3 cm), so some 
 qualifies. Nothing is precomputed at load (an RL env may draw a new scene at every reset),
 and once the corners around a place are known a query casts no ray;
 :meth:`ScannedSpace.fill` evaluates the whole lattice when a complete map is wanted.
+The lattice is dense (a byte per corner), so a scene too large for it at 5 cm (more than
+``MAX_LATTICE_CORNERS`` corners, about 40 x 40 x 10 m) gets a coarser one, and there a move
+close to a surface may find no corner within its clearance and be refused.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
@@ -109,6 +112,24 @@ class ScannedSpaceConfig:
 
 
 _STEEPEST_RING_DEG = 2.0
+
+#: The most lattice corners (one byte each) a scene's lattice holds; a larger scene gets a
+#: coarser lattice, so that its memory stays bounded (64 MiB) whatever the scene's size.
+MAX_LATTICE_CORNERS = 64 * 2**20
+
+
+def lattice_spacing(bounds: np.ndarray, voxel_m: float) -> float:
+    """``voxel_m``, or the smallest coarser spacing at which the lattice over ``bounds`` has
+    at most ``MAX_LATTICE_CORNERS`` corners."""
+    extents = np.maximum(np.asarray(bounds[1], float) - np.asarray(bounds[0], float), 0.0)
+
+    def corners(spacing: float) -> float:
+        return float(np.prod(np.ceil(extents / spacing + 0.5) + 1.0))
+
+    spacing = voxel_m
+    while corners(spacing) > MAX_LATTICE_CORNERS:
+        spacing *= 1.25
+    return spacing
 
 
 def support_directions(config: ScannedSpaceConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -184,6 +205,9 @@ class ScannedSpace:
         self.face_normals = np.asarray(face_normals, np.float64)
         self.config = config or ScannedSpaceConfig()
         bounds = np.asarray(bounds, np.float64)
+        spacing = lattice_spacing(bounds, self.config.voxel_m)
+        if spacing != self.config.voxel_m:  # a very large scene: a coarser lattice
+            self.config = replace(self.config, voxel_m=spacing)
         voxel = self.config.voxel_m
         # Corners sit half a voxel off the bounds, so none lies in the plane of an
         # axis-aligned floor or wall at the bounds (a ray from there is ambiguous).

@@ -311,6 +311,53 @@ def catalogue_open_scan(name: str, seed: int = 0) -> Scene:
 # ---------------------------------------------------------------------------------------
 # One entry point for the environment
 # ---------------------------------------------------------------------------------------
+def check_scene_name(name_or_path: str | os.PathLike | Scene) -> None:
+    """Check what a user passed as ``scene=`` the way :func:`resolve_scene` reads it, without
+    loading or generating anything, so that a tool running many episodes can refuse a typo
+    before the first one starts.
+
+    Raises:
+        ValueError: an unknown name, opening or procedural scene, or a scene stream.
+        FileNotFoundError: a path that does not exist.
+    """
+    if isinstance(name_or_path, Scene) or (
+        isinstance(name_or_path, str) and name_or_path in _ENTRIES
+    ):
+        return
+    if isinstance(name_or_path, str) and name_or_path.partition(":")[0] in _ENTRIES:
+        openings = name_or_path.partition(":")[2]
+        if not openings:
+            raise ValueError(f"scene {name_or_path!r} names no opening; use NAME:OPENINGS")
+        parse_openings(openings)
+        return
+    if isinstance(name_or_path, str) and name_or_path.startswith("procedural:"):
+        if parse_procedural_name(name_or_path).is_stream:
+            raise ValueError(
+                f"scene {name_or_path!r} is a stream (a new scene every reset), not one scene; "
+                "give a seed ('procedural:room:123')"
+            )
+        return
+    if not isinstance(name_or_path, (str, os.PathLike)):
+        raise ValueError(
+            f"scene must be a catalogue name, a mesh path or a Scene, got "
+            f"{type(name_or_path).__name__}"
+        )
+    path = Path(name_or_path).expanduser()
+    if path.is_file():
+        return
+    if isinstance(name_or_path, os.PathLike) or path.suffix.lower() in _MESH_SUFFIXES or len(
+        path.parts
+    ) > 1:
+        raise FileNotFoundError(
+            f"scene file {str(path)!r} does not exist; pass a mesh path or a catalogue name "
+            "(see naruto_gym.scenes.available_scenes())"
+        )
+    raise ValueError(
+        f"unknown scene {str(name_or_path)!r}: not a catalogue name ("
+        f"{', '.join(available_scenes())}) and not an existing mesh file"
+    )
+
+
 def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z") -> Scene:
     """Turn what a user passed as ``scene=`` into a :class:`Scene`.
 

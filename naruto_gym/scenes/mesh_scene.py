@@ -33,6 +33,8 @@ _UP_AXIS_TO_Z: dict[str, np.ndarray] = {
     "-x": np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]),
     "-z": np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]),
 }
+#: Every ``up_axis`` a mesh file can be read with.
+UP_AXES: tuple[str, ...] = (*_UP_AXIS_TO_Z, "auto")
 
 # File layouts whose up axis is fixed by the dataset (``up_axis="auto"``).
 _SCANNET_MESH = re.compile(r"^scene\d{4}_\d{2}_vh_clean(_2)?\.ply$")
@@ -53,6 +55,54 @@ def face_normals_of(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     triangles = np.asarray(vertices, np.float64)[np.asarray(faces)]
     normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
     return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-20)
+
+
+def check_mesh_arrays(vertices: np.ndarray, faces: np.ndarray, what: str) -> None:
+    """Check that (V, 3) ``vertices`` and (F, 3) ``faces`` make a triangle mesh a scene can
+    be built from: at least one triangle, every index a vertex, every vertex finite.
+
+    Degenerate (zero-area) and duplicate triangles are allowed: ray casts never hit them,
+    and scans are full of them.
+
+    Raises:
+        ValueError: what is wrong, and what to do about it.
+    """
+    if vertices.ndim != 2 or vertices.shape[1] != 3:
+        raise ValueError(f"{what}: vertices must have shape (V, 3), got {vertices.shape}")
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise ValueError(
+            f"{what} has no triangles (faces shape {faces.shape}); pass a triangle mesh "
+            "(a point cloud or a line set cannot be ray cast)"
+        )
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        bad = int(np.count_nonzero((faces < 0) | (faces >= len(vertices))))
+        raise ValueError(
+            f"{what}: {bad} face indices lie outside the {len(vertices)} vertices (indices "
+            f"from {int(faces.min())} to {int(faces.max())}); the file is damaged or was cut "
+            "short: re-export the mesh"
+        )
+    finite = np.isfinite(vertices).all(axis=1)
+    if not finite.all():
+        first = int(np.flatnonzero(~finite)[0])
+        raise ValueError(
+            f"{what} has {int(np.count_nonzero(~finite))} vertices with NaN or infinite "
+            f"coordinates (the first is vertex {first}: {vertices[first].tolist()}); remove "
+            "them and the faces that use them, e.g. with trimesh: "
+            "mesh.update_vertices(numpy.isfinite(mesh.vertices).all(axis=1))"
+        )
+
+
+def check_mesh_area(vertices: np.ndarray, faces: np.ndarray, what: str) -> None:
+    """Raise ``ValueError`` when every triangle of a mesh has zero area (nothing to see)."""
+    corners = np.asarray(vertices, np.float64)[np.asarray(faces)]
+    doubled_areas = np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    if not doubled_areas.max() > 0.0:
+        raise ValueError(
+            f"{what} is degenerate: all of its {len(faces)} triangles have zero area; pass a "
+            "mesh with surfaces"
+        )
 
 
 def sample_mesh_surface(
@@ -139,12 +189,13 @@ class Scene:
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, dtype=np.float64)
         self.faces = np.asarray(self.faces, dtype=np.int64)
-        if self.faces.ndim != 2 or self.faces.shape[1] != 3 or len(self.faces) == 0:
-            raise ValueError(
-                f"scene {self.name!r} has no triangles (faces shape {self.faces.shape}); "
-                "pass a triangle mesh"
-            )
+        check_mesh_arrays(self.vertices, self.faces, f"scene {self.name!r}")
         self.corner_colours = np.asarray(self.corner_colours, dtype=np.uint8)
+        if self.corner_colours.shape != (len(self.faces), 3, 3):
+            raise ValueError(
+                f"scene {self.name!r}: corner_colours must have shape ({len(self.faces)}, 3, 3) "
+                f"(RGB at each triangle corner), got {self.corner_colours.shape}"
+            )
         # float32 copy used at render time: avoids a uint8 -> float conversion per frame.
         self._corner_colours_f = self.corner_colours.astype(np.float32)
         # Per triangle: its colour and whether all three corners share it (most triangles of

@@ -28,6 +28,8 @@ import numpy as np
 from naruto_gym.geometry.sweep_kernels import first_blocked_sample, sweep_step_count
 
 RayCasterBackend = Literal["open3d", "embreex"]
+#: The ray-casting backends ``RayCaster`` takes.
+RAYCASTER_BACKENDS: tuple[str, ...] = ("open3d", "embreex")
 
 
 @dataclass(frozen=True)
@@ -78,7 +80,7 @@ class RayCaster:
             raise ValueError(f"vertices must have shape (V, 3), got {self.vertices.shape}")
         if self.faces.ndim != 2 or self.faces.shape[1] != 3 or len(self.faces) == 0:
             raise ValueError(f"faces must have shape (F, 3) with F > 0, got {self.faces.shape}")
-        if backend not in ("open3d", "embreex"):
+        if backend not in RAYCASTER_BACKENDS:
             raise ValueError(f"unknown ray-casting backend {backend!r}; use 'open3d' or 'embreex'")
         self.backend: RayCasterBackend = backend
         self._scene = None

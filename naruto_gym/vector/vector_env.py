@@ -31,6 +31,7 @@ from gymnasium.vector.utils import batch_space
 
 from naruto_gym.envs.scene_runtime import SceneRuntime
 from naruto_gym.envs.settings import EnvSettings
+from naruto_gym.envs.validation import check_vector_keywords
 from naruto_gym.evaluation.scoring import EpisodeReconstruction
 from naruto_gym.geometry.transforms import validate_pose
 from naruto_gym.utils.threads import default_thread_count
@@ -121,8 +122,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             num_envs < 1
         ):
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if max_episode_steps is not None and max_episode_steps < 1:
-            raise ValueError(f"max_episode_steps must be >= 1 or None, got {max_episode_steps}")
+        check_vector_keywords(max_episode_steps, scene_cache_size)
         if render_mode is not None:
             raise ValueError(
                 "the batched vector env does not render; use "
