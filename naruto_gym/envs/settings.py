@@ -13,6 +13,7 @@ import numpy as np
 
 from naruto_gym.motion.actions import ACTION_MODES
 from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.utils.threads import resolve_threads
 
 
 @dataclass(frozen=True)
@@ -43,8 +44,10 @@ class EnvSettings:
     start_clearance_m: float = 0.3
     raycaster_backend: str = "open3d"
     pinhole_backend: str = "raycast"
+    threads: int | None = None
 
     def __post_init__(self) -> None:
+        resolve_threads(self.threads)  # a bad count fails here, with what to pass
         if self.action_mode not in ACTION_MODES:
             raise ValueError(
                 f"action_mode must be one of {ACTION_MODES}, got {self.action_mode!r}"
