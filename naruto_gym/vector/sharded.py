@@ -30,6 +30,7 @@ from gymnasium import spaces
 from naruto_gym.scenes.stream import is_procedural_name, parse_procedural_name
 from naruto_gym.utils.threads import THREADS_ENV_VAR
 from naruto_gym.vector.infos import merge_shard_infos
+from naruto_gym.vector.packed_infos import InfoPacker, InfoUnpacker
 from naruto_gym.vector.shared_buffers import SharedObservations
 
 #: Fewest agents a worker process gets by default: below it the step's fixed cost per process
@@ -90,6 +91,7 @@ def _serve(
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the caller handles Ctrl-C and stops us
     os.environ[THREADS_ENV_VAR] = str(threads)  # Open3D's queries and anything else here
     env = None
+    packer = InfoPacker()
     try:
         env = make_env(**kwargs)
         connection.send(("ok", None))
@@ -102,7 +104,8 @@ def _serve(
                 if command == "close":
                     connection.send(("ok", None))
                     return
-                connection.send(("ok", _answer(env, command, payload, buffers, start, stop)))
+                connection.send(("ok", _answer(env, command, payload, buffers, start, stop,
+                                               packer)))
             except Exception as error:  # noqa: BLE001 - sent to the caller, raised there
                 connection.send(("error", (type(error).__name__, str(error),
                                            traceback.format_exc())))
@@ -118,16 +121,17 @@ def _serve(
 
 
 def _answer(env: Any, command: str, payload: Any, buffers: SharedObservations, start: int,
-            stop: int) -> Any:
+            stop: int, packer: InfoPacker) -> Any:
     if command == "reset":
         seeds, options = payload
         observations, infos = env.reset(seed=seeds, options=options)
         buffers.write(observations, start, stop)
-        return infos
+        return packer.pack({"infos": infos})
     if command == "step":
         observations, rewards, terminated, truncated, infos = env.step(payload)
         buffers.write(observations, start, stop)
-        return rewards, terminated, truncated, infos
+        return packer.pack({"rewards": rewards, "terminated": terminated,
+                            "truncated": truncated, "infos": infos})
     if command == "poses":
         return env.poses
     if command == "rays_cast":
@@ -175,6 +179,7 @@ class ShardedAgents:
         ]
         self.buffers = SharedObservations(observation_space, self.num_envs, context)
         self.threads = max(1, int(threads))
+        self._unpacker = InfoUnpacker(workers)
         self._connections: list[Any] = []
         self._processes: list[Any] = []
         self.closed = False
@@ -247,20 +252,17 @@ class ShardedAgents:
                 chosen.append(k)
             share_options = {**options, "reset_mask": mask[start:stop].copy()}
             payloads.append((list(seeds[start:stop]), share_options))
-        infos = self.call("reset", payloads, chosen)
-        parts = [(info, *self.bounds[k]) for k, info in zip(chosen, infos, strict=True)]
+        answers = self.call("reset", payloads, chosen)
+        parts = [(self._unpacker.unpack(k, answer)["infos"], *self.bounds[k])
+                 for k, answer in zip(chosen, answers, strict=True)]
         return self.buffers.copy(self.threads), merge_shard_infos(parts, self.num_envs)
 
     def step(self, actions: np.ndarray) -> tuple[Any, ...]:
         """Step every agent with its action."""
         answers = self.call("step", [actions[start:stop] for start, stop in self.bounds])
-        rewards, terminated, truncated = (
-            np.concatenate([answer[j] for answer in answers]) for j in range(3)
-        )
-        parts = [(answer[3], *bounds) for answer, bounds in zip(answers, self.bounds,
-                                                                strict=True)]
-        return (self.buffers.copy(self.threads), rewards, terminated, truncated,
-                merge_shard_infos(parts, self.num_envs))
+        merged = self._unpacker.merge(answers, self.bounds, self.num_envs)
+        return (self.buffers.copy(self.threads), merged["rewards"], merged["terminated"],
+                merged["truncated"], merged.get("infos", {}))
 
     def poses(self) -> np.ndarray:
         """(N, 4, 4) every agent's pose."""
