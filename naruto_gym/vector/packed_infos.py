@@ -11,6 +11,7 @@ with one copy per worker.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 from typing import Any
 
@@ -78,7 +79,7 @@ class InfoUnpacker:
             if dtype == "|O":
                 _insert(tree, path, next(objects))
                 continue
-            count = int(np.prod(shape))
+            count = math.prod(shape)
             array = np.frombuffer(packed[1], dtype, count, offset).reshape(shape)
             offset += array.nbytes
             _insert(tree, path, array)
@@ -105,7 +106,7 @@ class InfoUnpacker:
                 merged = np.empty((n, *shape[1:]), dtype)
                 for k, (start, stop) in enumerate(bounds):
                     share = layouts[k][j][2]
-                    part = np.frombuffer(packed[k][1], dtype, int(np.prod(share)), offsets[k])
+                    part = np.frombuffer(packed[k][1], dtype, math.prod(share), offsets[k])
                     merged[start:stop] = part.reshape(share)
                     offsets[k] += part.nbytes
             _insert(tree, path, merged)
