@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import pickle
 import signal
 import traceback
 import weakref
@@ -79,7 +80,12 @@ def several_scenes(scenes: Sequence[Any]) -> bool:
 
 
 class WorkerError(RuntimeError):
-    """A worker process of a sharded batched env failed; the message holds its traceback."""
+    """A worker process of a sharded batched env failed; the message holds its traceback.
+
+    An exception raised in a worker is raised in the caller as the same exception (where it
+    pickles) with a ``WorkerError`` as its cause, so that ``except ValueError`` works as with
+    one process and the worker's traceback is printed with it; a worker that died is a
+    ``WorkerError``."""
 
 
 def _serve(
@@ -107,17 +113,27 @@ def _serve(
                 connection.send(("ok", _answer(env, command, payload, buffers, start, stop,
                                                packer)))
             except Exception as error:  # noqa: BLE001 - sent to the caller, raised there
-                connection.send(("error", (type(error).__name__, str(error),
-                                           traceback.format_exc())))
+                connection.send(("error", _failure(error)))
     except Exception as error:  # noqa: BLE001 - the env could not be built
         try:
-            connection.send(("error", (type(error).__name__, str(error), traceback.format_exc())))
+            connection.send(("error", _failure(error)))
         except (BrokenPipeError, OSError):
             pass
     finally:
         if env is not None:
             env.close()
         connection.close()
+
+
+def _failure(error: Exception) -> tuple[Exception | None, str, str, str]:
+    """What a worker sends of an exception: the exception itself where it pickles (so that
+    the caller raises the same type), its type's name, its message and the traceback."""
+    try:
+        pickle.loads(pickle.dumps(error))
+        sendable: Exception | None = error
+    except Exception:  # noqa: BLE001 - an exception that does not pickle: its text only
+        sendable = None
+    return sendable, type(error).__name__, str(error), traceback.format_exc()
 
 
 def _answer(env: Any, command: str, payload: Any, buffers: SharedObservations, start: int,
@@ -197,7 +213,11 @@ class ShardedAgents:
             self._connections.append(parent_end)
             self._processes.append(process)
         self._finalizer = weakref.finalize(self, _stop, self._connections, self._processes)
-        self._gather(range(workers))  # every env built
+        try:
+            self._gather(range(workers))  # every env built
+        except BaseException:  # an env that could not be built, or Ctrl-C meanwhile
+            self.close()
+            raise
 
     @property
     def workers(self) -> int:
@@ -231,16 +251,19 @@ class ShardedAgents:
             try:
                 status, answer = self._connections[k].recv()
             except (EOFError, OSError):
-                status, answer = "error", ("EOFError", "the worker process died",
+                status, answer = "error", (None, "EOFError", "the worker process died",
                                            f"exit code {self._processes[k].exitcode}")
             if status == "error" and failure is None:
                 failure = (k, answer)
             answers.append(answer)
         if failure is not None:
-            k, (name, message, text) = failure
+            k, (error, name, message, text) = failure
             self.close()
-            raise WorkerError(f"worker process {k} of the batched env raised {name}: {message}\n"
-                              f"\nthe worker's traceback:\n{text}")
+            cause = WorkerError(f"worker process {k} of the batched env raised {name}: "
+                                f"{message}\n\nthe worker's traceback:\n{text}")
+            if error is None:
+                raise cause
+            raise error from cause
         return answers
 
     def reset(self, seeds: Sequence[int | None], mask: np.ndarray,
