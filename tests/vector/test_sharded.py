@@ -126,3 +126,28 @@ def test_keyboard_interrupt_while_stepping_stops_the_workers():
         timer.cancel()
         env.close()
     assert_gone(pids, shm_before)
+
+
+def test_make_vec_shards_a_scene_stream_with_the_same_episodes():
+    """Through ``gym.make_vec``'s vector entry point, on a scene stream with autoresets: the
+    agents' generated scenes, observations and rewards are those of one process."""
+    import gymnasium as gym
+
+    kwargs = {**TINY, "scene": "procedural:room:test", "max_episode_steps": 2}
+    envs = [gym.make_vec("NarutoRecon-v0", num_envs=3, vectorization_mode="vector_entry_point",
+                         workers=workers, **kwargs) for workers in (1, 2)]
+    assert [env.num_workers for env in envs] == [1, 2]
+    results = [env.reset(seed=4)[0] for env in envs]
+    for key in results[0]:
+        np.testing.assert_array_equal(results[0][key], results[1][key], err_msg=key)
+    rng = np.random.default_rng(0)
+    for _ in range(5):  # episodes end every other step: new scenes at the resets
+        action = rng.integers(0, 10, 3)
+        one, sharded = (env.step(action) for env in envs)
+        for key in one[0]:
+            np.testing.assert_array_equal(one[0][key], sharded[0][key], err_msg=key)
+        np.testing.assert_array_equal(one[1], sharded[1])
+        np.testing.assert_array_equal(one[3], sharded[3])
+        np.testing.assert_array_equal(one[4]["coverage"], sharded[4]["coverage"])
+    for env in envs:
+        env.close()
