@@ -31,14 +31,25 @@ Reported, all in one run and process (load average printed beside every figure):
   resets' scene generation is in the figure, beside the same number of agents sharing one
   generated room (``procedural:room:3``).
 
+* the scaling table (issue "Use the whole machine"): the batched env with 256 envs, 64 x 64,
+  panorama off, on 1, 2, 4, 8 and 16 CPUs (up to what the machine has, and all of them),
+  each point timed in a fresh process pinned to that many CPUs (``sched_setaffinity``; its
+  worker processes inherit the mask), with its default workers and threads and with the
+  worker counts of ``scaling_workers``; beside it the best ``AsyncVectorEnv`` of up to as
+  many workers as CPUs, with the same (rasterized) frames, in the same process, and the
+  ratio; scaling efficiency against 2 CPUs; and the single env at 680 x 1200 with rasterized
+  frames on 1, 2 and all CPUs (frames/s).
+
     flock /tmp/naruto_timing.lock python benchmarks/vector_throughput.py
-    python benchmarks/vector_throughput.py --seconds 1 --counts 1 64   # quick look
+    python benchmarks/vector_throughput.py --quick   # a trial of every part, under 2 minutes
 """
 
 from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -51,7 +62,12 @@ import naruto_gym  # noqa: F401  (registers the ids)
 from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.sensors.kernels import fill_world_rays
 from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.utils.threads import default_thread_count
 from naruto_gym.vector import NarutoReconVectorEnv
+from naruto_gym.vector.sharded import default_workers
+
+# The Replica sample (research-only, beside the repository) for the full-resolution rows.
+REPLICA_MESH = Path(__file__).resolve().parents[1].parent / "shared/scenes/replica_office0/mesh.ply"
 
 CAMERAS = {
     64: PinholeCamera(64, 64, 32, 32, 31.5, 31.5),
@@ -85,6 +101,21 @@ class Args:
     batched env with 64 envs, all with the batched env's default frames, are made afresh and
     timed one right after the other, so that the machine's drift over the run falls on both
     alike; the goal's ratio is the median of the rounds' ratios (0: no rounds)"""
+    scaling_cores: list[int] = field(default_factory=lambda: [1, 2, 4, 8, 16])
+    """CPU counts of the scaling table (those above the machine's are left out; the
+    machine's own count is added); empty: no scaling table"""
+    scaling_num_envs: int = 256
+    """envs of the batched env in the scaling table"""
+    scaling_workers: list[int] = field(default_factory=lambda: [1, 2, 4, 8, 16])
+    """worker-process counts timed at each CPU count besides the default (those above the
+    CPU count are left out), to check that the default is the fastest"""
+    hd_scene: str = ""
+    """scene of the 680 x 1200 single-env rows (default: the Replica sample beside the
+    repository, else the default room)"""
+    quick: bool = False
+    """a trial of every part in under 2 minutes: short timings, few rows, 1 and 2 CPUs"""
+    pinned_point: str = ""
+    """(internal) time one scaling point, given as JSON, in this process and print it"""
     output: str = "benchmarks/results/vector_throughput.json"
     """where the JSON goes"""
 
@@ -180,8 +211,125 @@ def time_goal_round(args: Args) -> dict[str, Any]:
     return row
 
 
+def time_single_hd(seconds: float, scene: str) -> dict[str, Any]:
+    """Steps/s (= frames/s) of the single env at 680 x 1200 with rasterized frames."""
+    env = gym.make("NarutoRecon-v0", scene=scene, action_mode="discrete", panorama_shape=None,
+                   pinhole_backend="raster", max_episode_steps=100_000)
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(int(rng.integers(10)))
+    steps, started = 0, time.perf_counter()
+    while time.perf_counter() - started < seconds or steps < 3:
+        env.step(int(rng.integers(10)))
+        steps += 1
+    elapsed = time.perf_counter() - started
+    env.close()
+    return {"frames_per_s": steps / elapsed, "threads": env.unwrapped.renderer.threads,
+            "load": load()}
+
+
+def scaling_point(spec: dict[str, Any]) -> dict[str, Any]:
+    """One point of the scaling table, timed in this process (pinned to ``spec["cores"]``
+    CPUs by its parent): the batched env with its defaults and with each worker count, the
+    AsyncVectorEnv with each worker count (rasterized frames, as the batched env's), and
+    the full-resolution single env where asked."""
+    threads = default_thread_count()
+    n = spec["num_envs"]
+    point: dict[str, Any] = {"cores": spec["cores"], "default_threads": threads,
+                             "default_workers": default_workers(n, threads), "batched": {},
+                             "async": {}}
+    for workers in [None, *spec["workers"]]:
+        if workers == point["default_workers"]:
+            continue  # the default row times it
+        env = NarutoReconVectorEnv(n, workers=workers, max_episode_steps=spec["episode_steps"],
+                                   **env_kwargs(64, False))
+        point["batched"]["default" if workers is None else str(workers)] = time_vector(
+            env, spec["seconds"])
+        env.close()
+    for workers in spec["async_workers"]:
+        env = gym.make_vec("NarutoRecon-v0", num_envs=workers, vectorization_mode="async",
+                           vector_kwargs={"context": "spawn"},
+                           max_episode_steps=spec["episode_steps"],
+                           **env_kwargs(64, False, pinhole_backend="auto"))
+        point["async"][str(workers)] = time_vector(env, spec["seconds"])
+        env.close()
+    if spec["hd_scene"]:
+        point["single_680x1200"] = time_single_hd(spec["seconds"], spec["hd_scene"])
+    return point
+
+
+def pinned(cores: int, spec: dict[str, Any]) -> dict[str, Any]:
+    """:func:`scaling_point` in a fresh Python process pinned to the first ``cores`` CPUs of
+    this one's (its threads and worker processes inherit the mask)."""
+    cpus = sorted(os.sched_getaffinity(0))[:cores]
+    completed = subprocess.run(
+        [sys.executable, __file__, "--pinned-point", json.dumps({**spec, "cores": cores})],
+        preexec_fn=lambda: os.sched_setaffinity(0, cpus), capture_output=True, text=True,
+        check=False,
+    )
+    lines = [line for line in completed.stdout.splitlines() if line.startswith("POINT ")]
+    if completed.returncode != 0 or not lines:
+        raise RuntimeError(f"the {cores}-CPU point failed:\n{completed.stderr[-4000:]}")
+    return json.loads(lines[-1][len("POINT "):])
+
+
+def scaling_table(args: Args) -> dict[str, Any]:
+    """The scaling table: see the module's docstring."""
+    machine = len(os.sched_getaffinity(0))
+    cores = sorted({c for c in args.scaling_cores if c <= machine} | {machine})
+    hd_scene = args.hd_scene or (str(REPLICA_MESH) if REPLICA_MESH.is_file()
+                                 else "replica_like_room")
+    points = []
+    for count in cores:
+        spec = {
+            "num_envs": args.scaling_num_envs, "seconds": args.seconds,
+            "episode_steps": args.episode_steps,
+            "workers": [w for w in args.scaling_workers if w <= count],
+            # Async workers up to the CPU count: powers of two, and the count itself.
+            "async_workers": sorted({w for w in (1, 2, 4, 8, 16, 32, 64) if w <= count}
+                                    | {count}) if not args.quick else [count],
+            "hd_scene": hd_scene if count in (1, 2, machine) else "",
+        }
+        point = pinned(count, spec)
+        batched = {name: row["steps_per_s"] for name, row in point["batched"].items()}
+        point["batched_default_steps_per_s"] = batched["default"]
+        point["batched_best"] = max(batched, key=batched.get)
+        point["best_async_workers"] = max(point["async"],
+                                          key=lambda w: point["async"][w]["steps_per_s"])
+        best_async = point["async"][point["best_async_workers"]]["steps_per_s"]
+        point["ratio_default_vs_best_async"] = batched["default"] / best_async
+        points.append(point)
+        hd = point.get("single_680x1200")
+        print(f"{count:3d} CPUs: batched {args.scaling_num_envs} envs (default: "
+              f"{point['default_workers']} workers) {batched['default']:.0f} steps/s, "
+              + ", ".join(f"workers={name} {value:.0f}" for name, value in batched.items()
+                          if name != "default")
+              + f"; best async ({point['best_async_workers']} workers) {best_async:.0f} steps/s"
+              f" -> {point['ratio_default_vs_best_async']:.2f}x"
+              + (f"; single env 680 x 1200: {hd['frames_per_s']:.1f} frames/s" if hd else "")
+              + f" (load {load()})")
+    two = next((p for p in points if p["cores"] == 2), None)
+    for point in points:
+        if two is not None:
+            point["efficiency_vs_2_cores"] = (
+                point["batched_default_steps_per_s"] / two["batched_default_steps_per_s"]
+                / (point["cores"] / 2))
+    return {"num_envs": args.scaling_num_envs, "machine_cpus": machine, "hd_scene": hd_scene,
+            "points": points}
+
+
 def main(args: Args) -> dict[str, Any]:
     from tqdm.auto import tqdm
+
+    if args.pinned_point:
+        print("POINT " + json.dumps(scaling_point(json.loads(args.pinned_point))))
+        return {}
+    if args.quick:
+        args.seconds, args.counts, args.sizes, args.async_workers = 0.2, [64], [64], [1]
+        args.stream_counts, args.goal_rounds, args.scaling_cores = [], 1, [1, 2]
+        args.scaling_workers = []
+        args.output = args.output.replace(".json", "_quick.json")
 
     results: dict[str, Any] = {"args": asdict(args), "load_start": load(), "cpus": os.cpu_count()}
     print(f"load average at start: {results['load_start']}")
@@ -285,6 +433,14 @@ def main(args: Args) -> dict[str, Any]:
             / results["bare_cast_64_envs"][64]["mrays_per_s"],
         }
         print("goals:", json.dumps(results["goals"], indent=1))
+    if args.scaling_cores:
+        results["scaling"] = scaling_table(args)
+        points = results["scaling"]["points"]
+        print("scaling:", json.dumps([
+            {key: point.get(key) for key in ("cores", "batched_default_steps_per_s",
+                                             "efficiency_vs_2_cores",
+                                             "ratio_default_vs_best_async")}
+            for point in points], indent=1))
     results["load_end"] = load()
     print(f"load average at end: {results['load_end']}")
     path = Path(args.output)

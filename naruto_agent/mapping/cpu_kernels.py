@@ -22,7 +22,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from naruto_gym.utils.threads import run_parallel
+from naruto_gym.utils.threads import resolve_threads, run_parallel
 
 # Below this many points a single call beats the threads' hand-off.
 _MIN_POINTS_PER_THREAD = 8192
@@ -171,11 +171,12 @@ def supports(features_per_level: int) -> bool:
     return features_per_level == 2
 
 
-def _run_split(function, unit: np.ndarray, out: np.ndarray, threads: int, *args) -> None:  # noqa: ANN001
+def _run_split(function, unit: np.ndarray, out: np.ndarray, threads: int | None, *args) -> None:  # noqa: ANN001, E501
     """Run ``function(unit[part], *args, out[part])`` over row ranges on up to ``threads``
-    threads (one call for small inputs)."""
+    threads (None: :func:`~naruto_gym.utils.threads.default_thread_count`; one call for
+    small inputs)."""
     count = unit.shape[0]
-    parts = max(1, min(int(threads), count // _MIN_POINTS_PER_THREAD))
+    parts = max(1, min(resolve_threads(threads), count // _MIN_POINTS_PER_THREAD))
     if parts == 1:
         function(unit, *args, out)
         return
@@ -193,11 +194,12 @@ def hash_grid_features(
     multipliers: np.ndarray,
     num_dense: int,
     table_size: int,
-    threads: int = 1,
+    threads: int | None = None,
 ) -> np.ndarray:
     """(N, 2 L) float32 hash-grid features of (N, 3) unit positions (see the kernel).
 
-    ``threads`` > 1 splits the points over that many threads (the loop releases the GIL).
+    The points are split over ``threads`` threads (the loop releases the GIL; None: the
+    default count, every CPU the process may use).
     """
     unit = np.ascontiguousarray(unit, dtype=np.float32)
     table = np.ascontiguousarray(table, dtype=np.float32)
@@ -220,7 +222,7 @@ def field_inputs(
     table_size: int,
     bins: int,
     cutoff: float,
-    threads: int = 1,
+    threads: int | None = None,
 ) -> np.ndarray:
     """(N, 3 bins + 2 L) float32 geometry-decoder input of (N, 3) unit positions: the
     OneBlob encoding, then the hash-grid features (``NeuralField``'s concatenation)."""

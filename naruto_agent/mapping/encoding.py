@@ -369,7 +369,6 @@ class HashGridEncoding(nn.Module):
             multipliers,
             self.num_dense_levels,
             self.table_size,
-            threads=torch.get_num_threads(),
         )
         return torch.from_numpy(features)
 

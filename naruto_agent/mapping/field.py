@@ -164,7 +164,6 @@ class NeuralField(nn.Module):
             self.hash_grid.table_size,
             self.one_blob.num_bins,
             ONE_BLOB_CUTOFF,
-            threads=torch.get_num_threads(),
         )
         first, _, last = self.geometry_mlp
         hidden = torch.relu(F.linear(torch.from_numpy(inputs), first.weight))

@@ -143,6 +143,10 @@ class NarutoReconEnv(gym.Env):
       colours up to exact edge ties, and faster) or ``"auto"`` (the rasterizer unless the
       mesh has more than 4 triangles per pixel). The panorama, collisions and coverage always
       ray-cast.
+    * ``threads``: threads of the rasterizer and the colour lookup (None: the
+      ``NARUTO_GYM_THREADS`` environment variable, else every CPU the process may run on,
+      one in the worker of an ``AsyncVectorEnv`` or a Ray actor; see
+      :func:`naruto_gym.utils.threads.default_thread_count`).
     * ``reconstruct``: fuse every frame into a reference TSDF map (2 cm voxels) so that any
       policy gets accuracy / completion / completion ratio:
       ``env.unwrapped.reconstruction_metrics()`` gives them at any time, and the info of the
@@ -183,6 +187,7 @@ class NarutoReconEnv(gym.Env):
         start_clearance_m: float = 0.3,
         raycaster_backend: str = "open3d",
         pinhole_backend: str = "raycast",
+        threads: int | None = None,
         reconstruct: bool = False,
         step_budget: int | None = None,
         render_mode: str | None = None,
@@ -206,6 +211,7 @@ class NarutoReconEnv(gym.Env):
             start_clearance_m=start_clearance_m,
             raycaster_backend=raycaster_backend,
             pinhole_backend=pinhole_backend,
+            threads=threads,
         )
         check_env_keywords(render_mode, self.metadata["render_modes"], reconstruct, step_budget)
         # The native ray-casting scene, the coverage samples and the observable surface are

@@ -32,6 +32,24 @@ from naruto_gym.sensors.raycaster import RayCaster
 START_CANDIDATES = 2048
 
 
+def observation_space(settings: EnvSettings) -> spaces.Dict:
+    """The observation space of one agent of an env with ``settings`` (see
+    ``NarutoReconEnv``): it depends on the cameras only, never on the scene."""
+    camera = settings.pinhole_camera
+    observation_spaces: dict[str, spaces.Space] = {
+        "rgb": spaces.Box(0, 255, (camera.height, camera.width, 3), np.uint8),
+        "depth": spaces.Box(0.0, float(settings.max_depth_m), (camera.height, camera.width),
+                            np.float32),
+        "pose": spaces.Box(-np.inf, np.inf, (4, 4), np.float32),
+    }
+    if settings.panorama_shape is not None:
+        panorama = EquirectangularCamera(*settings.panorama_shape)
+        observation_spaces["panorama"] = spaces.Box(
+            0.0, np.inf, (panorama.height, panorama.width), np.float32
+        )
+    return spaces.Dict(observation_spaces)
+
+
 class SceneRuntime:
     """The per-scene building blocks of an env.
 
@@ -68,7 +86,7 @@ class SceneRuntime:
         self.raycaster = RayCaster(scene.vertices, scene.faces, settings.raycaster_backend)
         self.renderer = RgbdRenderer(
             scene, self.camera, float(settings.max_depth_m), self.raycaster,
-            backend=settings.pinhole_backend,
+            backend=settings.pinhole_backend, threads=settings.threads,
         )
         if auto_max_triangles_per_pixel is not None:
             self.renderer.auto_max_triangles_per_pixel = auto_max_triangles_per_pixel
@@ -137,18 +155,7 @@ class SceneRuntime:
     # -- spaces ------------------------------------------------------------------------------
     def observation_space(self) -> spaces.Dict:
         """The observation space of one agent (see ``NarutoReconEnv``)."""
-        height, width = self.camera.height, self.camera.width
-        max_depth_m = float(self.settings.max_depth_m)
-        observation_spaces: dict[str, spaces.Space] = {
-            "rgb": spaces.Box(0, 255, (height, width, 3), np.uint8),
-            "depth": spaces.Box(0.0, max_depth_m, (height, width), np.float32),
-            "pose": spaces.Box(-np.inf, np.inf, (4, 4), np.float32),
-        }
-        if self.panorama_camera is not None:
-            observation_spaces["panorama"] = spaces.Box(
-                0.0, np.inf, (self.panorama_camera.height, self.panorama_camera.width), np.float32
-            )
-        return spaces.Dict(observation_spaces)
+        return observation_space(self.settings)
 
     def action_space(self) -> spaces.Space:
         """The action space of one agent: pose actions are bounded by this scene's box."""

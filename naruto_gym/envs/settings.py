@@ -13,6 +13,7 @@ import numpy as np
 
 from naruto_gym.envs.validation import check_settings
 from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.utils.threads import resolve_threads
 
 
 @dataclass(frozen=True)
@@ -44,8 +45,10 @@ class EnvSettings:
     start_clearance_m: float = 0.3
     raycaster_backend: str = "open3d"
     pinhole_backend: str = "raycast"
+    threads: int | None = None
 
     def __post_init__(self) -> None:
+        resolve_threads(self.threads)  # a bad count fails here, with what to pass
         check_settings(self)
         if self.panorama_shape is not None:
             object.__setattr__(self, "panorama_shape", tuple(int(v) for v in self.panorama_shape))

@@ -18,7 +18,7 @@ from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.kernels import fill_world_rays
 from naruto_gym.sensors.raster import PinholeRasterizer
 from naruto_gym.sensors.raycaster import RayCaster, RayHits
-from naruto_gym.utils.threads import default_thread_count, run_parallel
+from naruto_gym.utils.threads import resolve_threads, run_parallel
 
 PinholeBackend = Literal["raycast", "raster", "auto"]
 PINHOLE_BACKENDS: tuple[str, ...] = ("raycast", "raster", "auto")
@@ -140,8 +140,9 @@ class RgbdRenderer:
             (z-depth of the exact pixel ray, triangle, barycentrics) several times faster on
             full frames. ``"auto"``: the rasterizer when the mesh has at most
             ``auto_max_triangles_per_pixel`` triangles per pixel, else the ray cast.
-        threads: threads for the rasterizer and the colour lookup (default: the CPUs this
-            process may use, at most 2).
+        threads: threads for the rasterizer and the colour lookup (default:
+            :func:`~naruto_gym.utils.threads.default_thread_count`, the CPUs this process
+            may use).
 
     ``auto_max_triangles_per_pixel`` (default ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL``, for
     frames drawn one at a time) is where ``"auto"`` turns to the ray cast; a batched env sets
@@ -162,14 +163,12 @@ class RgbdRenderer:
                 f"unknown pinhole backend {backend!r}; use one of {PINHOLE_BACKENDS} "
                 "('raycast' is the reference, 'raster' the fast rasterizer)"
             )
-        if threads is not None and threads < 1:
-            raise ValueError(f"threads must be at least 1 (or None for the default), got {threads}")
         self.scene = scene
         self.camera = camera or PinholeCamera()
         self.max_depth_m = float(max_depth_m)
         self.raycaster = raycaster or RayCaster(scene.vertices, scene.faces)
         self.backend: PinholeBackend = backend
-        self.threads = int(threads) if threads is not None else default_thread_count()
+        self.threads = resolve_threads(threads)
         self.auto_max_triangles_per_pixel = AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL
         self._rasterizer: PinholeRasterizer | None = None
         self._workers: list[PinholeRasterizer] = []  # per-thread rasterizers of batches

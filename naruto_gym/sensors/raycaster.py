@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 
 from naruto_gym.geometry.sweep_kernels import first_blocked_sample, sweep_step_count
+from naruto_gym.utils.threads import default_thread_count
 
 RayCasterBackend = Literal["open3d", "embreex"]
 #: The ray-casting backends ``RayCaster`` takes.
@@ -147,7 +148,9 @@ class RayCaster:
         """
         rays = np.ascontiguousarray(rays, dtype=np.float32)
         if self.backend == "open3d":
-            result = self.native_scene.cast_rays(self._o3d.core.Tensor.from_numpy(rays))
+            result = self.native_scene.cast_rays(
+                self._o3d.core.Tensor.from_numpy(rays), nthreads=default_thread_count()
+            )
             distance = result["t_hit"].numpy()
             triangle_ids = result["primitive_ids"].numpy().view(np.int32)
             uv = result["primitive_uvs"].numpy()
@@ -169,9 +172,9 @@ class RayCaster:
         rays = np.ascontiguousarray(rays, dtype=np.float32)
         if self.backend == "open3d":
             scene = self.native_scene  # built first: it imports Open3D
-            return scene.test_occlusions(self._o3d.core.Tensor.from_numpy(rays)).numpy().astype(
-                bool
-            )
+            return scene.test_occlusions(
+                self._o3d.core.Tensor.from_numpy(rays), nthreads=default_thread_count()
+            ).numpy().astype(bool)
         return self.cast_packed(rays).hit_mask
 
     def cast_distance(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -182,7 +185,9 @@ class RayCaster:
         """Distance from each point to the closest surface point, (N,) float32 metres."""
         points = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
         # embreex has no closest-point query: both backends answer it with Open3D.
-        return self._open3d_scene().compute_distance(self._o3d.core.Tensor(points)).numpy()
+        return self._open3d_scene().compute_distance(
+            self._o3d.core.Tensor(points), nthreads=default_thread_count()
+        ).numpy()
 
     def _open3d_scene(self):
         if self.backend == "open3d":

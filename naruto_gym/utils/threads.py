@@ -1,16 +1,22 @@
 """The thread pool every compiled loop shares: :func:`run_parallel` and the default count.
 
 The rasterizer, the batched env and the CPU hash grid split their work into parts that run
-compiled code with the GIL released; they hand the parts to one pool per process.
+compiled code with the GIL released; they hand the parts to one pool per process. How many
+threads they use by default follows the machine (:func:`default_thread_count`): every CPU
+the process may run on, one per process in the workers of a multi-process vector env or a
+Ray actor, and ``NARUTO_GYM_THREADS`` overrides both.
 """
 
 from __future__ import annotations
 
 import itertools
+import multiprocessing
 import os
 import queue
 import threading
 from collections.abc import Callable
+
+import numpy as np
 
 
 class _WorkerPool:
@@ -80,12 +86,62 @@ def run_parallel(function, count: int) -> list:
     return results
 
 
-def default_thread_count() -> int:
-    """Threads a rasterizer uses by default: the CPUs this process may run on, at most 2
-    (the development machine's count; env workers of a vector env each run their own
-    renderer, so more would oversubscribe them). Pass ``threads`` to use more."""
+#: The environment variable that sets the thread count of every compiled loop of a process
+#: (the rasterizer, the batched env's loops, Open3D's ray casts and distance queries, the CPU
+#: hash grid) where no ``threads=`` keyword is passed.
+THREADS_ENV_VAR = "NARUTO_GYM_THREADS"
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on (its affinity mask, as ``taskset`` or a container's
+    CPU set restricts it), or every CPU where the platform has no affinity mask."""
     try:
-        available = len(os.sched_getaffinity(0))
+        return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not on Linux
-        available = os.cpu_count() or 1
-    return max(1, min(available, 2))
+        return max(1, os.cpu_count() or 1)
+
+
+def _positive_int(text: str, name: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise ValueError(f"{name}={text!r} must be a positive integer (a thread count); unset it "
+                         "for the default")
+    return value
+
+
+def is_worker_process() -> bool:
+    """Whether this process is one of several that share the machine: a ``multiprocessing``
+    child (the workers of Gymnasium's ``AsyncVectorEnv``) or a Ray worker (an actor or
+    task). Each such process defaults to one thread, or to ``OMP_NUM_THREADS`` where it is
+    set, as Ray sets it to the CPUs an actor asked for."""
+    return multiprocessing.parent_process() is not None or "RAY_RAYLET_PID" in os.environ
+
+
+def default_thread_count() -> int:
+    """Threads a compiled loop uses where its caller passes no ``threads``.
+
+    In this order: the ``NARUTO_GYM_THREADS`` environment variable; in a worker process
+    (:func:`is_worker_process`: one of many env copies, so that N copies do not start N
+    thread pools of every core each) ``OMP_NUM_THREADS`` or else 1; otherwise every CPU the
+    process may run on (:func:`available_cpus`).
+    """
+    text = os.environ.get(THREADS_ENV_VAR, "").strip()
+    if text:
+        return _positive_int(text, THREADS_ENV_VAR)
+    if is_worker_process():
+        text = os.environ.get("OMP_NUM_THREADS", "").strip()
+        return min(_positive_int(text, "OMP_NUM_THREADS"), available_cpus()) if text else 1
+    return available_cpus()
+
+
+def resolve_threads(threads: int | None) -> int:
+    """``threads`` checked (a positive integer), or :func:`default_thread_count` for None."""
+    if threads is None:
+        return default_thread_count()
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ValueError(f"threads must be a positive integer (or None for the default), got "
+                         f"{threads!r}")
+    return int(threads)

@@ -88,3 +88,37 @@ def overwrite_agents(
         else:
             infos[key][agents] = value[agents]
     return infos
+
+
+def merge_shard_infos(parts: list[tuple[dict[str, Any], int, int]], n: int) -> dict[str, Any]:
+    """The infos of ``n`` agents from those of contiguous shares of them.
+
+    Args:
+        parts: each share's infos (laid out over its own agents) with the share's first and
+            past-the-last agent; shares not listed contribute no keys (all masks False).
+        n: the agents in the batch.
+
+    Returns:
+        The infos over all ``n`` agents, as one env would give them: a key any share has
+        becomes an (n, ...) array (zeros, or None for objects, where a share lacks it) with
+        its ``_key`` mask, nested dicts alike.
+    """
+    merged: dict[str, Any] = {}
+    for infos, _, _ in parts:
+        for key, value in infos.items():
+            if key in merged:
+                continue
+            if isinstance(value, dict):
+                merged[key] = merge_shard_infos(
+                    [(share.get(key, {}), start, stop) for share, start, stop in parts], n
+                )
+                continue
+            value = np.asarray(value)
+            shape = (n, *value.shape[1:])
+            array = (np.full(shape, None, object) if value.dtype == object
+                     else np.zeros(shape, value.dtype))
+            for share, start, stop in parts:
+                if key in share:
+                    array[start:stop] = share[key]
+            merged[key] = array
+    return merged

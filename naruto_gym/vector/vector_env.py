@@ -29,18 +29,20 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from naruto_gym.envs.scene_runtime import SceneRuntime
+from naruto_gym.envs.scene_runtime import SceneRuntime, observation_space
 from naruto_gym.envs.settings import EnvSettings
 from naruto_gym.envs.validation import check_vector_keywords
 from naruto_gym.evaluation.scoring import EpisodeReconstruction
 from naruto_gym.geometry.transforms import validate_pose
-from naruto_gym.utils.threads import default_thread_count
+from naruto_gym.sensors.panorama import EquirectangularCamera
+from naruto_gym.utils.threads import resolve_threads
 from naruto_gym.vector.batch_coverage import BatchCoverage
 from naruto_gym.vector.frames import FrameDrawer
 from naruto_gym.vector.infos import agent_info, agents_mask, batch_infos, overwrite_agents
 from naruto_gym.vector.moves import Mover, Moves
 from naruto_gym.vector.scene_pool import ScenePool
 from naruto_gym.vector.scheduling import StepShares
+from naruto_gym.vector.sharded import ShardedAgents, resolve_workers, several_scenes
 
 __all__ = ["NarutoReconVectorEnv", "agent_info", "make_vector_env"]
 
@@ -98,6 +100,15 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
       meshes), else the ray cast: the same frames as the single env's reference ray cast up
       to exact edge ties. Pass ``"raycast"`` for frames equal bit for bit to a default
       ``NarutoReconEnv``'s.
+    * ``workers``: processes the agents are sharded over (None: chosen from the CPUs and
+      ``num_envs``, :func:`~naruto_gym.vector.sharded.default_workers`; one on fewer than 4
+      CPUs). Each worker steps a contiguous share of the agents in its own process with
+      ``threads / workers`` threads and writes the observations into shared memory: the same
+      observations, rewards and infos as one process, where the GIL-bound parts of a step
+      run in parallel too. ``scene_pool`` and ``scene_runtimes`` are only there with one.
+    * ``threads``: CPUs the env's compiled loops use, split between the workers (None: the
+      ``NARUTO_GYM_THREADS`` environment variable, else every CPU the process may run on;
+      see :func:`~naruto_gym.utils.threads.default_thread_count`).
     * every other keyword is ``NarutoReconEnv``'s (``action_mode``, ``camera``,
       ``panorama_shape``, ``reconstruct``, ...). With ``reconstruct=True`` the info of each
       agent's last step (truncated) carries ``"reconstruction"``, as for the single env.
@@ -116,8 +127,10 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         scene_cache_size: int = 8,
         render_mode: str | None = None,
+        workers: int | None = None,
         **env_kwargs: Any,
     ) -> None:
+        self._sharded: ShardedAgents | None = None
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or (
             num_envs < 1
         ):
@@ -146,10 +159,24 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self._reconstruct = bool(env_kwargs.pop("reconstruct", False))
         env_kwargs.pop("render_mode", None)
         self.settings = EnvSettings(**env_kwargs)
+        # Compiled loops (ray filling, shading, coverage) split agents between this many
+        # threads; Open3D's casts use the process's default count.
+        self._threads = resolve_threads(self.settings.threads)
+        self.num_workers = resolve_workers(workers, self.num_envs, self._threads)
 
         scenes = scene if isinstance(scene, (list, tuple)) else [scene] * self.num_envs
         if len(scenes) != self.num_envs:
             raise ValueError(f"scene list has {len(scenes)} entries for num_envs={num_envs}")
+        self._discrete_zeros = np.zeros(self.num_envs, np.int64)
+        self._continuous_zeros = np.zeros((self.num_envs, 7))
+        self._started = False
+        if self.num_workers > 1:
+            self._start_workers(scenes, {
+                **env_kwargs, "max_episode_steps": max_episode_steps,
+                "autoreset_mode": self.autoreset_mode, "scene_cache_size": scene_cache_size,
+                "reconstruct": self._reconstruct, "workers": 1,
+            })
+            return
         self._pool = ScenePool(scenes, self.settings, scene_cache_size)
         template = self._pool.template()
         self.action_mode: str = self.settings.action_mode
@@ -185,10 +212,6 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self._rngs: list[np.random.Generator | None] = [None] * n
         self._reconstructions: list[EpisodeReconstruction | None] = [None] * n
         self._autoreset = np.zeros(n, bool)
-        self._started = False
-        # Compiled loops (ray filling, shading, coverage) split agents between this many
-        # threads; Embree's cast has its own.
-        self._threads = default_thread_count()
         # A step is split into shares of at least this many agents (_move_and_observe),
         # where that pays (None) or always (True: the tests run both ways).
         self._min_agents_per_part = 8
@@ -197,36 +220,73 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self._intrinsic_columns = {
             key: np.full(n, value, type(value)) for key, value in self.camera.as_dict().items()
         }
-        self._discrete_zeros = np.zeros(n, np.int64)
-        self._continuous_zeros = np.zeros((n, 7))
+
+    def _start_workers(self, scenes: list[Any], kwargs: dict[str, Any]) -> None:
+        """Shard the agents over ``num_workers`` processes (:mod:`naruto_gym.vector.sharded`),
+        each stepping its share as an in-process batched env built with ``kwargs``."""
+        self.action_mode = self.settings.action_mode
+        if self.action_mode == "pose" and several_scenes(scenes):
+            raise ValueError(
+                "action_mode='pose' bounds actions by one scene's box; use 'discrete' or "
+                "'delta' with several scenes or a procedural stream"
+            )
+        self.single_observation_space = observation_space(self.settings)
+        self._sharded = ShardedAgents(
+            NarutoReconVectorEnv, self.num_envs, scenes, kwargs, self.single_observation_space,
+            self.num_workers, self._threads,
+        )
+        self.camera = self.settings.pinhole_camera
+        shape = self.settings.panorama_shape
+        self.panorama_camera = EquirectangularCamera(*shape) if shape is not None else None
+        self.max_depth_m = float(self.settings.max_depth_m)
+        self.single_action_space = self._sharded.single_action_space()
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
 
     # -- public views ----------------------------------------------------------------------
     @property
     def poses(self) -> np.ndarray:
         """(N, 4, 4) every agent's camera-to-world pose (a copy)."""
+        if self._sharded is not None:
+            return self._sharded.poses()
         return self._poses.copy()
 
     @property
     def rays_cast(self) -> int:
         """Rays cast so far for frames, panoramas and escape checks."""
+        if self._sharded is not None:
+            return self._sharded.rays_cast()
         return self._frames.rays_cast
 
     @property
     def scene_pool(self) -> ScenePool:
-        """The agents' scenes and the cache of generated ones."""
-        return self._pool
+        """The agents' scenes and the cache of generated ones (in-process envs only)."""
+        return self._in_process("scene_pool")._pool
 
     @property
     def scene_runtimes(self) -> list[SceneRuntime | None]:
         """Per agent, the runtime of its current scene (ray caster, renderer, coverage
-        samples, ...); agents in one scene share it."""
-        return self._pool.runtimes
+        samples, ...); agents in one scene share it (in-process envs only)."""
+        return self._in_process("scene_runtimes")._pool.runtimes
 
     @property
     def scene_envs(self) -> list[SceneRuntime | None]:
         """The earlier name of :attr:`scene_runtimes` (the runtimes have the ``scene``,
         ``bounds``, ``raycaster`` and ``renderer`` its callers read)."""
-        return self._pool.runtimes
+        return self._in_process("scene_envs")._pool.runtimes
+
+    @property
+    def worker_pids(self) -> list[int]:
+        """The process ids of the worker processes (empty with ``workers=1``)."""
+        return [] if self._sharded is None else self._sharded.pids
+
+    def _in_process(self, name: str) -> NarutoReconVectorEnv:
+        if self._sharded is not None:
+            raise RuntimeError(
+                f"{name} lives in the worker processes of an env with workers="
+                f"{self.num_workers}; make the env with workers=1 to reach it"
+            )
+        return self
 
     # -- gymnasium API ---------------------------------------------------------------------
     def reset(
@@ -255,6 +315,11 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                 "with at least one True"
             )
         indices = np.flatnonzero(mask)
+        if self._sharded is not None:
+            self._validate_reset_options(options, np.zeros(0, np.int64))
+            observations, infos = self._sharded.reset(seeds, mask, options)
+            self._started = True
+            return observations, infos
         self._validate_reset_options(options, indices)
         self._reset_agents(indices, [seeds[i] for i in indices], options)
         others = np.flatnonzero(~mask)
@@ -281,6 +346,8 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         if not self._started:
             raise RuntimeError("call reset() before step()")
         discrete, continuous = self._validated_actions(actions)
+        if self._sharded is not None:
+            return self._sharded.step(np.asarray(actions))
         n = self.num_envs
         everyone = np.arange(n)
         if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._autoreset.any():
@@ -338,6 +405,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         # Also reached from __del__ of an env whose constructor raised.
+        sharded = getattr(self, "_sharded", None)
+        if sharded is not None:
+            sharded.close()
         pool = getattr(self, "_pool", None)
         if pool is not None:
             pool.clear()

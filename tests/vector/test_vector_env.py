@@ -57,11 +57,11 @@ def assert_same(vector: Any, sync: Any, where: str) -> None:
 
 def run_both(
     num_envs: int, steps: int, actions: Any, autoreset: AutoresetMode = AutoresetMode.NEXT_STEP,
-    budget: int = 12, seed: int = 3, split: bool = False, **kwargs: Any,
+    budget: int = 12, seed: int = 3, split: bool = False, workers: int = 1, **kwargs: Any,
 ) -> tuple[list[str], NarutoReconVectorEnv]:
     settings = {**SMALL, **kwargs}
     vector = NarutoReconVectorEnv(
-        num_envs, max_episode_steps=budget, autoreset_mode=autoreset, **settings
+        num_envs, max_episode_steps=budget, autoreset_mode=autoreset, workers=workers, **settings
     )
     if split:  # each step in two shares, one per thread, however few the agents and frames
         vector._threads, vector._min_agents_per_part, vector._split_steps = 2, 1, True
@@ -79,47 +79,54 @@ def run_both(
             assert_same(a, b, f"step {step} {name}")
         reasons += [r for r in got[4]["collision_reason"] if r]
     sync.close()
+    vector.close()
     return reasons, vector
 
 
-@pytest.mark.parametrize("split", [False, True])
-def test_matches_sync_vector_env_with_autoreset_next_step(split):
+# In one process (its step in one piece, or split in shares between threads) and sharded over
+# worker processes (agent counts that the workers do not divide).
+SPLIT_OR_WORKERS = [(False, 1), (True, 1), (False, 2), (False, 3)]
+
+
+@pytest.mark.parametrize(("split", "workers"), SPLIT_OR_WORKERS)
+def test_matches_sync_vector_env_with_autoreset_next_step(split, workers):
     rng = np.random.default_rng(0)
     # Mostly forward and down, so that agents reach walls and the floor within the test.
     weights = np.array([4, 1, 1, 1, 0, 12, 1, 0, 0, 0]) / 20
     reasons, vector = run_both(3, 34, lambda _: rng.choice(10, 3, p=weights), budget=25,
-                               split=split)
+                               split=split, workers=workers)
     assert vector.single_observation_space["rgb"].shape == (24, 24, 3)
     assert reasons, "no collision happened: the collision path went untested"
 
 
-@pytest.mark.parametrize("split", [False, True])
-def test_matches_sync_vector_env_same_step_autoreset(split):
+@pytest.mark.parametrize(("split", "workers"), SPLIT_OR_WORKERS)
+def test_matches_sync_vector_env_same_step_autoreset(split, workers):
     rng = np.random.default_rng(1)
-    run_both(2, 16, lambda _: rng.integers(0, 10, 2), AutoresetMode.SAME_STEP, budget=7,
-             split=split)
+    run_both(3, 16, lambda _: rng.integers(0, 10, 3), AutoresetMode.SAME_STEP, budget=7,
+             split=split, workers=workers)
 
 
-@pytest.mark.parametrize("split", [False, True])
+@pytest.mark.parametrize(("split", "workers"), SPLIT_OR_WORKERS)
 @pytest.mark.parametrize("rule", ["published", "scanned_space"])
-def test_matches_sync_in_open_scene_where_escapes_are_refused(rule, split):
+def test_matches_sync_in_open_scene_where_escapes_are_refused(rule, split, workers):
     rng = np.random.default_rng(0)
     # Mostly forward, sometimes sideways, up or turning: some agents reach the open side.
     reasons, _ = run_both(
         3, 60, lambda step: np.zeros(3, int) if step % 3 else rng.choice([0, 2, 3, 4, 6], 3),
-        budget=80, seed=0, split=split, scene=open_room(), escape_rule=rule,
+        budget=80, seed=0, split=split, workers=workers, scene=open_room(), escape_rule=rule,
     )
     assert "surface" in reasons
     if rule == "published":
         assert "escape" in reasons
 
 
-@pytest.mark.parametrize("split", [False, True])
-def test_matches_sync_with_rasterized_frames(split):
+@pytest.mark.parametrize(("split", "workers"), SPLIT_OR_WORKERS)
+def test_matches_sync_with_rasterized_frames(split, workers):
     """Frames of many agents drawn in parallel (one rasterizer per thread, or each share of
     the step in its thread) are each agent's single-env rasterized frame."""
     rng = np.random.default_rng(5)
-    run_both(5, 30, lambda step: rng.integers(0, 10, 5), split=split, pinhole_backend="raster")
+    run_both(5, 30, lambda step: rng.integers(0, 10, 5), split=split, workers=workers,
+             pinhole_backend="raster")
 
 
 def test_default_frames_are_rasterized_where_cheaper():
@@ -139,10 +146,11 @@ def test_default_frames_are_rasterized_where_cheaper():
     assert NarutoReconVectorEnv(2, **settings).scene_runtimes[0].renderer.frame_backend == "raster"
 
 
-def test_matches_sync_with_delta_actions():
+@pytest.mark.parametrize("workers", [1, 2])
+def test_matches_sync_with_delta_actions(workers):
     rng = np.random.default_rng(2)
-    run_both(2, 10, lambda _: rng.uniform(-1, 1, (2, 6)).astype(np.float32),
-             action_mode="delta", panorama_shape=None)
+    run_both(3, 10, lambda _: rng.uniform(-1, 1, (3, 6)).astype(np.float32),
+             action_mode="delta", panorama_shape=None, workers=workers)
 
 
 def test_partial_reset_mask_and_seeds_list():

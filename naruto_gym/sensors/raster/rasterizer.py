@@ -25,7 +25,7 @@ from naruto_gym.sensors.raster.kernels import (
     setup_triangles,
     vertex_outcodes,
 )
-from naruto_gym.utils.threads import default_thread_count, run_parallel
+from naruto_gym.utils.threads import resolve_threads, run_parallel
 
 # Image rows drawn together: a band's z-buffer (16 x 1200 x 12 bytes) stays in the L2 cache.
 BAND_ROWS = 16
@@ -124,10 +124,8 @@ class PinholeRasterizer:
                 f"need a positive image size and focal lengths, got {width} x {height}, "
                 f"fx={fx}, fy={fy}"
             )
-        if threads is not None and threads < 1:
-            raise ValueError(f"threads must be at least 1 (or None for the default), got {threads}")
         self.width, self.height = int(width), int(height)
-        self.threads = int(threads) if threads is not None else default_thread_count()
+        self.threads = resolve_threads(threads)
         self.intrinsics = np.array([fx, fy, cx, cy], dtype=np.float64)
         self._buffers: tuple[np.ndarray, ...] | None = None
         self._splits: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}

@@ -1,0 +1,153 @@
+"""The batched env sharded over worker processes: its shutdown paths leave no process and no
+shared memory behind (its observations are checked against SyncVectorEnv step by step in
+test_vector_env.py)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.vector import NarutoReconVectorEnv
+from naruto_gym.vector.sharded import WorkerError
+
+TINY = {
+    "action_mode": "discrete",
+    "camera": PinholeCamera(16, 16, 8, 8, 7.5, 7.5),
+    "coverage_samples": 500,
+    "panorama_shape": None,
+}
+
+
+def shared_memory_entries() -> set[str]:
+    """The shared-memory files and segments in /dev/shm, but named semaphores: the env
+    makes none, and other processes of a shared machine come and go with theirs."""
+    if not os.path.isdir("/dev/shm"):
+        return set()
+    return {name for name in os.listdir("/dev/shm") if not name.startswith("sem.")}
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, not yet reaped, counts as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().split(") ")[-1][0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def assert_gone(pids: list[int], shm_before: set[str]) -> None:
+    deadline = time.monotonic() + 10
+    while any(alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not [pid for pid in pids if alive(pid)]
+    assert shared_memory_entries() - shm_before == set()
+
+
+@pytest.fixture(scope="module")
+def env_and_shm():
+    shm_before = shared_memory_entries()
+    env = NarutoReconVectorEnv(3, workers=2, max_episode_steps=5, **TINY)
+    yield env, shm_before
+    env.close()
+
+
+def test_close_stops_the_workers_and_leaves_no_shared_memory(env_and_shm):
+    env, shm_before = env_and_shm
+    pids = env.worker_pids
+    assert len(pids) == 2 and all(alive(pid) for pid in pids)
+    assert env.num_workers == 2
+    observations, _ = env.reset(seed=0)
+    assert observations["rgb"].shape == (3, 16, 16, 3)
+    held = {key: value.copy() for key, value in observations.items()}
+    env.step(np.array([0, 1, 2]))
+    for key in held:  # the handed-out arrays are the caller's: the next step leaves them
+        np.testing.assert_array_equal(observations[key], held[key])
+    with pytest.raises(RuntimeError, match="workers=1"):
+        env.scene_runtimes  # noqa: B018
+    with pytest.raises(ValueError, match="discrete actions"):  # checked before the workers
+        env.step(np.array([0, 1]))
+    env.step(np.array([0, 1, 2]))  # still usable
+    env.close()
+    env.close()
+    assert_gone(pids, shm_before)
+    with pytest.raises(RuntimeError, match="closed"):
+        env.step(np.array([0, 1, 2]))
+
+
+def test_an_error_in_a_worker_is_raised_with_its_traceback_and_stops_them():
+    shm_before = shared_memory_entries()
+    env = NarutoReconVectorEnv(3, workers=2, **TINY)
+    pids = env.worker_pids
+    env.reset(seed=0)
+    far = np.eye(4)
+    far[:3, 3] = 100.0  # outside the room: the workers' scenes refuse the start
+    with pytest.raises(ValueError, match="outside") as raised:  # as with one process
+        env.reset(options={"pose": far})
+    cause = raised.value.__cause__
+    assert isinstance(cause, WorkerError)
+    assert "ValueError" in str(cause) and "the worker's traceback" in str(cause)
+    assert "File " in str(cause)
+    assert_gone(pids, shm_before)
+
+
+def test_a_worker_that_dies_is_reported_and_the_others_stopped():
+    shm_before = shared_memory_entries()
+    env = NarutoReconVectorEnv(3, workers=2, **TINY)
+    pids = env.worker_pids
+    env.reset(seed=0)
+    os.kill(pids[1], signal.SIGKILL)
+    with pytest.raises(WorkerError, match="died"):
+        env.step(np.array([0, 1, 2]))
+    assert_gone(pids, shm_before)
+
+
+def test_keyboard_interrupt_while_stepping_stops_the_workers():
+    """Ctrl-C reaches the caller (the workers ignore SIGINT); the workers stop, whether the
+    interrupt came while they stepped (the env closes itself) or between steps (the caller's
+    ``close``, as a ``with`` block or ``finally`` gives it)."""
+    shm_before = shared_memory_entries()
+    env = NarutoReconVectorEnv(3, workers=2, **TINY)
+    pids = env.worker_pids
+    env.reset(seed=0)
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            for _ in range(100_000):
+                env.step(np.array([0, 1, 2]))
+        assert all(alive(pid) for pid in pids) or env._sharded.closed  # noqa: SLF001
+    finally:
+        timer.cancel()
+        env.close()
+    assert_gone(pids, shm_before)
+
+
+def test_make_vec_shards_a_scene_stream_with_the_same_episodes():
+    """Through ``gym.make_vec``'s vector entry point, on a scene stream with autoresets: the
+    agents' generated scenes, observations and rewards are those of one process."""
+    import gymnasium as gym
+
+    kwargs = {**TINY, "scene": "procedural:room:test", "max_episode_steps": 2}
+    envs = [gym.make_vec("NarutoRecon-v0", num_envs=3, vectorization_mode="vector_entry_point",
+                         workers=workers, **kwargs) for workers in (1, 2)]
+    assert [env.num_workers for env in envs] == [1, 2]
+    results = [env.reset(seed=4)[0] for env in envs]
+    for key in results[0]:
+        np.testing.assert_array_equal(results[0][key], results[1][key], err_msg=key)
+    rng = np.random.default_rng(0)
+    for _ in range(5):  # episodes end every other step: new scenes at the resets
+        action = rng.integers(0, 10, 3)
+        one, sharded = (env.step(action) for env in envs)
+        for key in one[0]:
+            np.testing.assert_array_equal(one[0][key], sharded[0][key], err_msg=key)
+        np.testing.assert_array_equal(one[1], sharded[1])
+        np.testing.assert_array_equal(one[3], sharded[3])
+        np.testing.assert_array_equal(one[4]["coverage"], sharded[4]["coverage"])
+    for env in envs:
+        env.close()
