@@ -233,19 +233,24 @@ class ShardedAgents:
     def call(self, command: str, payloads: Sequence[Any] | None = None,
              only: Sequence[int] | None = None) -> list[Any]:
         """Send ``command`` (with each worker's payload) to the workers (all, or ``only``)
-        and return their answers in order; any failure stops every worker and raises."""
+        and return their answers in order; a failure is raised (see :meth:`_raise`)."""
         if self.closed:
             raise RuntimeError("the batched env's worker processes are closed: make a new env")
         chosen = list(range(self.workers)) if only is None else list(only)
         try:
             for k in chosen:
                 self._connections[k].send((command, None if payloads is None else payloads[k]))
-            return self._gather(chosen)
-        except BaseException:  # a worker's error, a dead worker, or Ctrl-C: stop them all
+            answers, failure = self._gather(chosen)
+        except BaseException:  # a dead pipe or Ctrl-C: stop them all
             self.close()
             raise
+        if failure is not None:
+            self._raise(*failure)
+        return answers
 
-    def _gather(self, chosen: Sequence[int]) -> list[Any]:
+    def _gather(self, chosen: Sequence[int]) -> tuple[list[Any], tuple | None]:
+        """Every chosen worker's answer, and the first failure ``(worker, sent error, died)``
+        (all answers are read first, so that the pipes stay in step)."""
         answers, failure = [], None
         for k in chosen:
             try:
@@ -253,18 +258,27 @@ class ShardedAgents:
             except (EOFError, OSError):
                 status, answer = "error", (None, "EOFError", "the worker process died",
                                            f"exit code {self._processes[k].exitcode}")
-            if status == "error" and failure is None:
-                failure = (k, answer)
+                died = True
+            else:
+                died = False
+            if status == "error" and (failure is None or died):
+                failure = (k, answer, died)
             answers.append(answer)
-        if failure is not None:
-            k, (error, name, message, text) = failure
+        return answers, failure
+
+    def _raise(self, k: int, sent: tuple, died: bool) -> None:
+        """Raise a worker's failure in the caller. Bad input (a ``ValueError`` or
+        ``TypeError`` a live worker sent back, such as a reset pose inside furniture) leaves
+        the workers running, so the env stays usable as with one process; anything else
+        stops every worker."""
+        error, name, message, text = sent
+        if died or not isinstance(error, (ValueError, TypeError)):
             self.close()
-            cause = WorkerError(f"worker process {k} of the batched env raised {name}: "
-                                f"{message}\n\nthe worker's traceback:\n{text}")
-            if error is None:
-                raise cause
-            raise error from cause
-        return answers
+        cause = WorkerError(f"worker process {k} of the batched env raised {name}: "
+                            f"{message}\n\nthe worker's traceback:\n{text}")
+        if error is None:
+            raise cause
+        raise error from cause
 
     def reset(self, seeds: Sequence[int | None], mask: np.ndarray,
               options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:

@@ -80,7 +80,7 @@ def test_close_stops_the_workers_and_leaves_no_shared_memory(env_and_shm):
         env.step(np.array([0, 1, 2]))
 
 
-def test_an_error_in_a_worker_is_raised_with_its_traceback_and_stops_them():
+def test_bad_input_in_a_worker_is_raised_with_its_traceback_and_the_env_stays_usable():
     shm_before = shared_memory_entries()
     env = NarutoReconVectorEnv(3, workers=2, **TINY)
     pids = env.worker_pids
@@ -93,6 +93,11 @@ def test_an_error_in_a_worker_is_raised_with_its_traceback_and_stops_them():
     assert isinstance(cause, WorkerError)
     assert "ValueError" in str(cause) and "the worker's traceback" in str(cause)
     assert "File " in str(cause)
+    assert all(alive(pid) for pid in pids)  # bad input: the workers keep running
+    observations, _ = env.reset(seed=1)  # and the same env resets and steps
+    assert observations["rgb"].shape == (3, 16, 16, 3)
+    env.step(np.array([0, 1, 2]))
+    env.close()
     assert_gone(pids, shm_before)
 
 
