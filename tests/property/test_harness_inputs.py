@@ -49,7 +49,7 @@ def test_a_damaged_record_is_run_again(tmp_path, damage):
     ("argument", "message"),
     [(["--scenes", "two_roomz"], "unknown scene"),
      (["--scenes", "two_rooms:no_roof"], "unknown scan opening"),
-     (["--scenes", "procedural:house:3"], "unknown procedural scene"),
+     (["--scenes", "procedural:castle:3"], "unknown procedural scene"),
      (["--scenes", "procedural:room"], "stream"),
      (["--policies", "narutoo"], "unknown policy"),
      (["--policies", "random", "no_such_module:Policy"], "cannot import")],

@@ -366,7 +366,7 @@ def assert_same_depth(cast: np.ndarray, drawn: np.ndarray) -> None:
 
 
 def test_env_pinhole_backend_setting():
-    with pytest.raises(ValueError, match="pinhole backend"):
+    with pytest.raises(ValueError, match="pinhole_backend"):
         gym.make("NarutoRecon-v0", pinhole_backend="gpu")
     kwargs = {"scene": "two_rooms", "image_scale": 0.25, "panorama_shape": None}
     cast = gym.make("NarutoRecon-v0", **kwargs)
