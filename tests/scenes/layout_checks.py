@@ -54,6 +54,22 @@ def assert_doorways_open(layout: SceneLayout, caster: RayCaster) -> None:
         assert up == pytest.approx(door.height - 1.0, abs=1e-3)
 
 
+def assert_rooms_joined(layout: SceneLayout) -> None:
+    """Every room is reached from the first through doorways (the room graph is connected)."""
+    neighbours: dict[int, set[int]] = {i: set() for i in range(len(layout.rooms))}
+    for door in layout.doorways:
+        a, b = door.rooms
+        assert a != b
+        neighbours[a].add(b)
+        neighbours[b].add(a)
+    seen, stack = {0}, [0]
+    while stack:
+        for other in neighbours[stack.pop()] - seen:
+            seen.add(other)
+            stack.append(other)
+    assert seen == set(range(len(layout.rooms)))
+
+
 def assert_furniture_clear(layout: SceneLayout) -> None:
     """Furniture stays inside its room, keeps its gaps and stands in front of no doorway."""
     furniture = [o for o in layout.objects if o.kind not in FURNITURE_EXCLUDED]

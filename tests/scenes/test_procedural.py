@@ -25,6 +25,7 @@ from tests.scenes.layout_checks import (
     FURNITURE_EXCLUDED,
     assert_doorways_open,
     assert_furniture_clear,
+    assert_rooms_joined,
 )
 from tests.scenes.layout_checks import reachable_rooms as _reachable_rooms
 
@@ -73,19 +74,7 @@ def test_apartment_has_rooms_doorways_and_size():
     assert len(scene.faces) <= 50_000
     # The cells tile the footprint exactly.
     assert sum(room.cell.area for room in layout.rooms) == pytest.approx(12.0 * 9.0)
-    # Room graph through doorways is connected.
-    neighbours = {i: set() for i in range(len(layout.rooms))}
-    for door in layout.doorways:
-        a, b = door.rooms
-        assert a != b
-        neighbours[a].add(b)
-        neighbours[b].add(a)
-    seen, stack = {0}, [0]
-    while stack:
-        for other in neighbours[stack.pop()] - seen:
-            seen.add(other)
-            stack.append(other)
-    assert seen == set(range(len(layout.rooms)))
+    assert_rooms_joined(layout)
 
 
 def _layouts_under_test() -> list[tuple[str, SceneLayout]]:

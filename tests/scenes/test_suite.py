@@ -26,6 +26,7 @@ from naruto_gym.sensors.raycaster import RayCaster
 from tests.scenes.layout_checks import (
     assert_doorways_open,
     assert_furniture_clear,
+    assert_rooms_joined,
     reachable_rooms,
 )
 
@@ -145,18 +146,7 @@ def test_test_scenes_keep_the_class_limits(case):
         assert not corridors
     # The cells tile the footprint, and the rooms are joined through doorways.
     assert sum(room.cell.area for room in layout.rooms) == pytest.approx(width * depth)
-    neighbours: dict[int, set[int]] = {i: set() for i in range(len(layout.rooms))}
-    for door in layout.doorways:
-        a, b = door.rooms
-        assert a != b
-        neighbours[a].add(b)
-        neighbours[b].add(a)
-    seen, stack = {0}, [0]
-    while stack:
-        for other in neighbours[stack.pop()] - seen:
-            seen.add(other)
-            stack.append(other)
-    assert seen == set(range(len(layout.rooms)))
+    assert_rooms_joined(layout)
     assert_furniture_clear(layout)
 
 
