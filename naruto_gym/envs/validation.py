@@ -98,6 +98,20 @@ def check_panorama_shape(value: Any) -> tuple[int, int] | None:
     return int(height), int(width)
 
 
+def check_keyword_names(given: Any, accepted: Any, owner: str, hint: str = "") -> None:
+    """Refuse keyword names ``owner`` does not take, with the names it does take.
+
+    Raises:
+        ValueError: an unknown keyword (the message lists the accepted ones and ``hint``).
+    """
+    unknown = sorted(set(given) - set(accepted))
+    if unknown:
+        raise ValueError(
+            f"{owner} got unknown keyword(s) {', '.join(map(repr, unknown))}; it takes "
+            f"{', '.join(sorted(accepted))}{'. ' + hint if hint else ''}"
+        )
+
+
 def check_settings(settings: Any) -> None:
     """Check every field of an ``EnvSettings`` (see ``NarutoReconEnv``'s Arguments).
 

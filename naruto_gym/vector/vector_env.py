@@ -20,6 +20,8 @@ infos.
 
 from __future__ import annotations
 
+import dataclasses
+import inspect
 from collections.abc import Callable
 from typing import Any
 
@@ -31,7 +33,7 @@ from gymnasium.vector.utils import batch_space
 
 from naruto_gym.envs.scene_runtime import SceneRuntime, observation_space
 from naruto_gym.envs.settings import EnvSettings
-from naruto_gym.envs.validation import check_vector_keywords
+from naruto_gym.envs.validation import check_keyword_names, check_vector_keywords
 from naruto_gym.evaluation.scoring import EpisodeReconstruction
 from naruto_gym.geometry.transforms import validate_pose
 from naruto_gym.sensors.panorama import EquirectangularCamera
@@ -158,6 +160,12 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         env_kwargs = {"pinhole_backend": "auto", **env_kwargs}
         self._reconstruct = bool(env_kwargs.pop("reconstruct", False))
         env_kwargs.pop("render_mode", None)
+        check_keyword_names(
+            env_kwargs, {f.name for f in dataclasses.fields(EnvSettings)} | set(
+                inspect.signature(NarutoReconVectorEnv.__init__).parameters) - {
+                "self", "env_kwargs"} | {"reconstruct"},
+            "NarutoReconVectorEnv",
+            "The episode length is max_episode_steps (step_budget is the single env's).")
         self.settings = EnvSettings(**env_kwargs)
         # Compiled loops (ray filling, shading, coverage) split agents between this many
         # threads; Open3D's casts use the process's default count.

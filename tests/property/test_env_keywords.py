@@ -42,6 +42,7 @@ VALID: dict[str, st.SearchStrategy] = {
     "reconstruct": st.booleans(),
     "step_budget": st.one_of(st.none(), st.integers(1, 10**9)),
     "render_mode": st.sampled_from([None, "rgb_array"]),
+    "threads": st.one_of(st.none(), st.integers(1, 4)),
 }
 
 
@@ -121,14 +122,31 @@ VECTOR_VALID: dict[str, st.SearchStrategy] = {
     "max_depth_m": VALID["max_depth_m"],
     "action_mode": VALID["action_mode"],
     "panorama_shape": VALID["panorama_shape"],
+    "workers": st.one_of(st.none(), st.just(1)),
 }
+#: The env's other keywords, which the batched env takes too (or refuses by name).
+SHARED_VALID = {key: value for key, value in VALID.items() if key not in VECTOR_VALID}
 
 
 @pytest.mark.parametrize("keyword", sorted(VECTOR_VALID))
 @settings(max_examples=6)  # per keyword
 @given(data=st.data())
 def test_every_vector_env_keyword_is_used_or_refused_by_name(keyword, data):
-    value = data.draw(st.one_of(odd_value, VECTOR_VALID[keyword]), label=keyword)
+    _check_vector_keyword(keyword, data.draw(st.one_of(odd_value, VECTOR_VALID[keyword]),
+                                             label=keyword))
+
+
+@pytest.mark.parametrize("keyword", sorted(SHARED_VALID))
+@settings(max_examples=3)  # per keyword: the single env's test draws more of each
+@given(data=st.data())
+def test_every_shared_keyword_of_the_vector_env_is_used_or_refused_by_name(keyword, data):
+    _check_vector_keyword(keyword, data.draw(st.one_of(odd_value, SHARED_VALID[keyword]),
+                                             label=keyword))
+
+
+def _check_vector_keyword(keyword: str, value) -> None:
+    """The batched env built with ``keyword=value`` resets and steps inside its spaces, or
+    refuses the value with a ``ValueError`` that names the keyword."""
     if keyword == "num_envs" and isinstance(value, (int, np.integer)) and value > 3:
         return  # valid, but many agents cost time, not correctness
     if keyword == "panorama_shape" and isinstance(value, tuple) and (
@@ -141,7 +159,12 @@ def test_every_vector_env_keyword_is_used_or_refused_by_name(keyword, data):
     except ValueError as error:
         assert keyword in str(error) or (keyword == "autoreset_mode"), str(error)
         return
-    observations, _ = env.reset(seed=0)
+    try:
+        observations, _ = env.reset(seed=0)
+    except RuntimeError as error:  # a valid clearance that this small room cannot give
+        assert "no free start position" in str(error) and keyword in str(error), str(error)
+        env.close()
+        return
     assert env.observation_space.contains(observations)
     observations, rewards, terminated, truncated, infos = env.step(env.action_space.sample())
     assert env.observation_space.contains(observations)
@@ -181,3 +204,11 @@ def _vector_env() -> NarutoReconVectorEnv:
         _VECTOR.append(NarutoReconVectorEnv(num_envs=2, scene=small_room(), action_mode="delta",
                                             **FAST))
     return _VECTOR[0]
+
+
+@pytest.mark.parametrize("keyword", ["step_budget", "max_depht_m"])
+def test_an_unknown_keyword_of_the_vector_env_is_refused_by_name(keyword):
+    """Found by the suites: ``step_budget`` (a single-env keyword) reached the settings'
+    dataclass and failed there with a ``TypeError`` that did not say what to pass."""
+    with pytest.raises(ValueError, match=f"unknown keyword.*'{keyword}'.*max_episode_steps"):
+        NarutoReconVectorEnv(2, scene=small_room(), **{keyword: 5}, **FAST)
