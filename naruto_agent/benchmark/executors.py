@@ -11,6 +11,9 @@ recorded as failed.
 from __future__ import annotations
 
 import multiprocessing
+import os
+import threading
+import time
 from collections.abc import Callable, Iterable
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -51,6 +54,18 @@ class _Progress:
         self.bar.close()
 
 
+def stop_with_parent(parent_pid: int, interval_s: float = 1.0) -> None:
+    """In a worker process: exit as soon as the run that started it is gone (killed), since
+    the episode it is running can no longer be recorded (the run records episodes itself)."""
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(interval_s)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="naruto-stop-with-parent", daemon=True).start()
+
+
 def run_local(
     specs: list[EpisodeSpec],
     out_dir: str | Path,
@@ -81,7 +96,8 @@ def run_local(
         remaining = list(range(len(specs)))
         context = multiprocessing.get_context("spawn")
         while remaining:
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                                       initializer=stop_with_parent, initargs=(os.getpid(),))
             try:
                 futures: dict[Future, int] = {
                     pool.submit(episode_fn, specs[index].as_dict()): index for index in remaining
