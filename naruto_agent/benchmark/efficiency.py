@@ -8,7 +8,11 @@ into such numbers.
 
 **The curve.** A record holds the completion ratio ``c`` (percent) at a few checkpoint steps
 and at its last step (``completion_curve``, see :mod:`~naruto_agent.benchmark.runner`), and
-the camera position after every step (``trajectory``). Between checkpoints ``c`` is taken as
+the camera position after every step (``trajectory``). ``c`` is the completion ratio of the
+*observable* surface where the record has it (the faces a camera inside the scene can see at
+all: the whole-surface ratio also counts the outer faces of solid walls and slabs, so it stays
+near half in a closed house and never reaches the levels below), else of the whole surface.
+Between checkpoints ``c`` is taken as
 linear; before the first step it is 0 (nothing is mapped before the episode starts); after the
 last step it keeps its last value (an episode that ended early keeps what it mapped). The
 path length ``l(t)`` after ``t`` steps is the summed distance between consecutive positions.
@@ -44,14 +48,19 @@ THRESHOLDS_PCT: tuple[int, ...] = (80, 90, 95)
 
 
 def completion_points(record: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-    """Steps and completion ratios (percent) of a record's curve, starting at ``(0, 0)``.
+    """Steps and completion ratios (percent, of the observable surface where recorded) of a
+    record's curve, starting at ``(0, 0)``.
 
     Checkpoints without a completion ratio are left out; a record without any gives the
     single point ``(0, 0)``.
     """
     steps, ratios = [0], [0.0]
-    for point in record.get("completion_curve") or []:
-        value = point.get("completion_ratio_pct")
+    curve = record.get("completion_curve") or []
+    key = ("observable_completion_ratio_pct"
+           if any(point.get("observable_completion_ratio_pct") is not None for point in curve)
+           else "completion_ratio_pct")
+    for point in curve:
+        value = point.get(key)
         if value is None or point.get("step") is None:
             continue
         if int(point["step"]) > steps[-1]:

@@ -33,6 +33,7 @@ STATISTICS_MD = "statistics.md"
 # (column title, episode value key, decimals)
 METRICS: tuple[tuple[str, str, int], ...] = (
     ("Comp. ratio (%)", "completion_ratio_pct", 1),
+    ("Obs. comp. ratio (%)", "observable_completion_ratio_pct", 1),
     ("AUC steps", "auc_steps", 3),
     ("AUC path", "auc_path", 3),
     *((f"Steps to {p} %", f"steps_to_{p}", 0) for p in THRESHOLDS_PCT),
@@ -44,7 +45,7 @@ METRICS: tuple[tuple[str, str, int], ...] = (
     ("Refusals", "refusals", 1),
 )
 EFFICIENCY_KEYS: tuple[str, ...] = (
-    "completion_ratio_pct", "auc_steps", "auc_path",
+    "observable_completion_ratio_pct", "auc_steps", "auc_path",
     *(f"steps_to_{p}" for p in THRESHOLDS_PCT), *(f"metres_to_{p}" for p in THRESHOLDS_PCT),
 )
 """The leaderboard's first table: how far and how fast."""
@@ -52,7 +53,8 @@ QUALITY_KEYS: tuple[str, ...] = (
     "completion_ratio_pct", "accuracy_cm", "completion_cm", "mad_cm", "path_m", "refusals"
 )
 """The leaderboard's second table: the map's quality and the walk."""
-PAIRED_METRICS: tuple[str, ...] = ("completion_ratio_pct", "auc_steps", "auc_path")
+PAIRED_METRICS: tuple[str, ...] = (
+    "observable_completion_ratio_pct", "completion_ratio_pct", "auc_steps", "auc_path")
 """The values compared pair by pair (the others depend on whether a level was reached)."""
 CLASS_ORDER = ("small", "apartment", "house", "all", "other")
 
@@ -62,7 +64,8 @@ def episode_values(record: dict[str, Any]) -> dict[str, float | None]:
     metrics = record.get("metrics") or {}
     values: dict[str, float | None] = {
         key: _number(metrics.get(key))
-        for key in ("completion_ratio_pct", "accuracy_cm", "completion_cm", "mad_cm")
+        for key in ("completion_ratio_pct", "observable_completion_ratio_pct", "accuracy_cm",
+                    "completion_cm", "mad_cm")
     }
     values.update(episode_efficiency(record))
     values["refusals"] = _number(record.get("collisions"))
@@ -188,7 +191,8 @@ def paired_table(entries: list[dict[str, Any]]) -> str:
         "| A | B | Metric | A - B | Scenes | Pairs | Interval excludes 0 |",
         "|---|---|---|---|---|---|---|",
     ]
-    decimals = {"completion_ratio_pct": 2, "auc_steps": 4, "auc_path": 4}
+    decimals = {"completion_ratio_pct": 2, "observable_completion_ratio_pct": 2,
+                "auc_steps": 4, "auc_path": 4}
     for entry in entries:
         overall = entry["overall"]
         lines.append(

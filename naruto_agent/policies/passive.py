@@ -40,6 +40,9 @@ from naruto_agent.policies.config import PassiveConfig, build_config
 from naruto_agent.policies.registry import register_policy
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, validate_pose
 
+HOLD_HEIGHT_STEPS = 20
+"""Steps the wall follower keeps its height after a refused move that changed it."""
+
 
 def load_trajectory(path: str | Path) -> np.ndarray:
     """(N, 4, 4) camera-to-world poses from a text file of one row-major 4x4 matrix per line.
@@ -158,6 +161,7 @@ class PassivePolicy(Policy):
         self._refused.reset()
         self._last_target = None
         self._visits = []
+        self._hold_height = 0
 
     # -- replay ------------------------------------------------------------------------
     def _reached(self, pose: np.ndarray, target: np.ndarray) -> bool:
@@ -264,7 +268,15 @@ class PassivePolicy(Policy):
         # Move only when the way is clear (the turn above may need a few steps).
         if profile_clearance(profile, self._heading, np.deg2rad(20.0)) > 0.25 + step:
             next_position[:2] += direction * step
-        next_position[2] += float(np.clip(height - position[2], -step, step))
+        # A refused move that also climbed or sank (onto a tall cabinet's top, under a
+        # shelf) is tried again at the height the agent has, until it walks clear.
+        if collided and self._last_target is not None and abs(
+                self._last_target[2] - position[2]) > 1e-6:
+            self._hold_height = HOLD_HEIGHT_STEPS
+        if self._hold_height > 0:
+            self._hold_height -= 1
+        else:
+            next_position[2] += float(np.clip(height - position[2], -step, step))
         # Camera: sweep between the wall on the right and across the room, and up and down.
         phase = 2.0 * np.pi * self._step / self.config.sweep_period_steps
         sweep_yaw = float(np.deg2rad(self.config.sweep_yaw_deg))

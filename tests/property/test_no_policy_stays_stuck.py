@@ -85,3 +85,26 @@ def test_the_wall_follower_leaves_a_room_it_has_circled():
     for _ in range(300):
         observation, _, _, _, info = env.step(policy.act(observation, info))
     assert info["coverage"] > 0.6
+
+
+def test_the_wall_follower_walks_off_a_cabinet_it_started_above():
+    """Found by the scene suite's test split: started above a tall cabinet in
+    ``procedural:flat:1000006``, the follower tried to sink to its scan height on every step,
+    each move was refused, and it stayed within half a metre for 800 steps."""
+    import gymnasium as gym
+
+    from naruto_agent.policies import make_policy
+    from naruto_agent.policies.base import EnvContext
+
+    env = gym.make("NarutoRecon-v0", scene="procedural:flat:1000006", image_scale=0.1,
+                   observable_only=False)
+    policy = make_policy("passive")
+    policy.bind(EnvContext.from_env(env, step_budget=800))
+    observation, info = env.reset(seed=0, options=policy.reset_options())
+    policy.reset(observation, info, seed=0)
+    refused = 0
+    for _ in range(60):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+        refused += bool(info["collided"])
+    assert info["path_length_m"] > 2.0 and refused < 10
+    env.close()

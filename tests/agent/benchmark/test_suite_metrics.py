@@ -149,3 +149,16 @@ def test_class_summary_and_paired_summary_of_records():
     assert auc["a"] == "fast" and auc["overall"]["mean"] > 0
     text = statistics_markdown(summary, paired)
     assert "## small" in text and "| fast | slow | auc_steps |" in text
+
+
+def test_the_curve_is_the_observable_surfaces_where_the_record_has_it():
+    """The whole surface's ratio counts faces no camera inside can see (it stays near half in
+    a closed house), so the levels are read on the observable surface's ratio."""
+    curve = [{"step": 5, "completion_ratio_pct": 40.0, "observable_completion_ratio_pct": 80.0},
+             {"step": 10, "completion_ratio_pct": 48.0, "observable_completion_ratio_pct": 96.0}]
+    steps, ratios = completion_points({"completion_curve": curve})
+    np.testing.assert_allclose(ratios, [0.0, 80.0, 96.0])
+    whole = [{key: value for key, value in point.items() if not key.startswith("observable")}
+             for point in curve]
+    np.testing.assert_allclose(completion_points({"completion_curve": whole})[1],
+                               [0.0, 40.0, 48.0])
