@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -61,7 +62,7 @@ def stop_with_parent(parent_pid: int, interval_s: float = 1.0) -> None:
     def watch() -> None:
         while os.getppid() == parent_pid:
             time.sleep(interval_s)
-        os._exit(1)
+        os.kill(os.getpid(), signal.SIGKILL)
 
     threading.Thread(target=watch, name="naruto-stop-with-parent", daemon=True).start()
 

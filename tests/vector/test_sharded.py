@@ -120,6 +120,9 @@ def test_keyboard_interrupt_while_stepping_stops_the_workers():
     env = NarutoReconVectorEnv(3, workers=2, **TINY)
     pids = env.worker_pids
     env.reset(seed=0)
+    # Python's own Ctrl-C handling, whatever an earlier test in this process installed
+    # (Ray's driver, for one, replaces the SIGINT handler).
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
     timer.start()
     try:
@@ -129,6 +132,7 @@ def test_keyboard_interrupt_while_stepping_stops_the_workers():
         assert all(alive(pid) for pid in pids) or env._sharded.closed  # noqa: SLF001
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, previous)
         env.close()
     assert_gone(pids, shm_before)
 
