@@ -176,9 +176,8 @@ def _check_vector_keyword(keyword: str, value) -> None:
     "value", [0, -1, 0.0, -1e-9, float("nan"), float("inf"), "10", None, 3.402823466385289e38]
 )
 def test_max_depth_m_out_of_range_is_refused(value):
-    """Found by the suites (issue 36): ``max_depth_m=0`` was accepted with a warning that a
-    Box has equal bounds, and ``-1`` failed inside Gymnasium's Box; a depth past float32's
-    range failed there too."""
+    """A sensor range of zero, below zero, not finite, not a number or past float32's range
+    is refused by name (the depth space's Box would otherwise take or reject it unclearly)."""
     with pytest.raises(ValueError, match="max_depth_m"):
         gym.make("NarutoRecon-v0", max_depth_m=value)
 
@@ -208,7 +207,7 @@ def _vector_env() -> NarutoReconVectorEnv:
 
 @pytest.mark.parametrize("keyword", ["step_budget", "max_depht_m"])
 def test_an_unknown_keyword_of_the_vector_env_is_refused_by_name(keyword):
-    """Found by the suites: ``step_budget`` (a single-env keyword) reached the settings'
-    dataclass and failed there with a ``TypeError`` that did not say what to pass."""
+    """A keyword the batched env does not take (``step_budget`` is the single env's, the
+    other a typo) is refused by name with what to pass, not by its settings' dataclass."""
     with pytest.raises(ValueError, match=f"unknown keyword.*'{keyword}'.*max_episode_steps"):
         NarutoReconVectorEnv(2, scene=small_room(), **{keyword: 5}, **FAST)

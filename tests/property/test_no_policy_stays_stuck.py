@@ -88,9 +88,9 @@ def test_the_wall_follower_leaves_a_room_it_has_circled():
 
 
 def test_the_wall_follower_walks_off_a_cabinet_it_started_above():
-    """Found by the scene suite's test split: started above a tall cabinet in
-    ``procedural:flat:1000006``, the follower tried to sink to its scan height on every step,
-    each move was refused, and it stayed within half a metre for 800 steps."""
+    """Started above a tall cabinet in ``procedural:flat:1000006``, the follower keeps its
+    height after a refused move that sank, and walks off the cabinet's top before it sinks to
+    its scan height."""
     import gymnasium as gym
 
     from naruto_agent.policies import make_policy
