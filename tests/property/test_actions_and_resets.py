@@ -151,8 +151,8 @@ def test_a_pose_inside_furniture_starts_there_and_moves_out_or_stays():
 
 @pytest.mark.parametrize("seed", [np.int8(3), np.uint16(7), np.int32(11), np.uint64(2**64 - 1)])
 def test_numpy_integer_seeds_are_taken(seed):
-    """Found by the suites (issue 36): Gymnasium refuses NumPy integers as seeds with an
-    error that is not a ValueError; the env takes them as the same Python int."""
+    """NumPy integer seeds, which Gymnasium itself refuses with an error that is not a
+    ValueError, are taken as the same Python int."""
     env = _env("discrete")
     first, _ = env.reset(seed=seed)
     again, _ = env.reset(seed=int(seed))

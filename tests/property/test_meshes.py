@@ -59,8 +59,8 @@ def _box_room(size: float = 3.0) -> trimesh.Trimesh:
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 def test_a_vertex_that_is_not_finite_is_refused_by_name(tmp_path, bad):
-    """Found by the suites (issue 36): one NaN vertex in a PLY failed deep inside with
-    ``cannot convert float NaN to integer``."""
+    """One NaN or infinite vertex in a PLY is refused when the scene loads, naming the
+    vertex, rather than failing deep inside the env."""
     box = _box_room()
     box.vertices[0] = bad
     path = write_mesh(box, tmp_path / "nan.ply")
@@ -207,8 +207,8 @@ def test_scenes_of_one_millimetre_and_ten_kilometres_run(scale):
 
 
 def test_a_room_300_m_wide_gets_a_lattice_of_bounded_memory():
-    """Found by the suites (issue 36): the scanned-space lattice (5 cm, a byte per corner)
-    of the room scaled 100 times asked for 211 GiB at the first step."""
+    """The scanned-space lattice (a byte per corner) of the room scaled 100 times stays
+    within its corner bound (at 5 cm it would need hundreds of GiB)."""
     from naruto_gym.motion.scanned_space import MAX_LATTICE_CORNERS
 
     scene = Scene(room_mesh(100.0).vertices, small_room().faces, small_room().corner_colours)

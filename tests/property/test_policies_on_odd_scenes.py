@@ -93,8 +93,8 @@ def test_an_episode_finishes_or_stops_with_a_clear_error(name, kind):
 
 @pytest.mark.parametrize("name", ["naruto", "frontier"])
 def test_a_map_too_large_for_the_machine_is_refused_before_it_is_allocated(name):
-    """Found by the suites (issue 36): on the room scaled to 300 m, NARUTO's SDF volume and
-    frontier's occupancy map asked for 106 GiB each and failed with a ``MemoryError``."""
+    """On the room scaled to 300 m, NARUTO's SDF volume and frontier's occupancy map would
+    need about 106 GiB each: refused with a ValueError before any allocation."""
     policy = make_policy(name)
     env = NarutoReconEnv(_scene("large"), action_mode=policy.preferred_action_mode, **CHEAP)
     with pytest.raises(ValueError, match="too large for this voxel size"):
