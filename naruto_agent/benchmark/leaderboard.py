@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from naruto_agent.benchmark.records import STATUS_OK, load_records
-from naruto_agent.benchmark.suite import read_manifest, suite_module
+from naruto_agent.benchmark.suite import entry_group, ordered_groups, read_manifest, suite_module
 from naruto_agent.benchmark.suite_report import (
     EFFICIENCY_KEYS,
     QUALITY_KEYS,
@@ -72,18 +72,20 @@ def _runs_section(manifest: dict[str, Any]) -> list[str]:
 def _partial_note(manifest: dict[str, Any]) -> str | None:
     """A warning when the run is shorter than the suite: fewer test scenes or a cut budget."""
     suite = suite_module()
-    by_class: dict[str, list[dict[str, Any]]] = {}
+    by_group: dict[str, list[dict[str, Any]]] = {}
     for entry in manifest.get("scenes", {}).values():
-        by_class.setdefault(entry["size_class"], []).append(entry)
+        by_group.setdefault(entry_group(entry), []).append(entry)
     partial = []
-    for size_class, entries in by_class.items():
+    for group in ordered_groups(by_group):
+        entries = by_group[group]
+        size_class = entries[0]["size_class"]
         if size_class not in suite.SIZE_CLASSES:
             continue
         budgets = sorted({entry["budget"] for entry in entries})
         full = suite.budget(size_class)
         listed = len(suite.test_seeds(size_class))
         if budgets != [full] or (manifest.get("split") == "test" and len(entries) < listed):
-            partial.append(f"{size_class}: {len(entries)} of {listed} test scenes, "
+            partial.append(f"{group}: {len(entries)} of {listed} test scenes, "
                            f"{'/'.join(map(str, budgets))} of {full} steps")
     if not partial:
         return None
@@ -92,13 +94,15 @@ def _partial_note(manifest: dict[str, Any]) -> str | None:
 
 
 def _scenes_section(manifest: dict[str, Any], records: list[dict[str, Any]]) -> list[str]:
-    by_class: dict[str, list[tuple[str, dict[str, Any]]]] = {}
+    by_group: dict[str, list[tuple[str, dict[str, Any]]]] = {}
     for label, entry in sorted(manifest.get("scenes", {}).items()):
-        by_class.setdefault(entry["size_class"], []).append((label, entry))
+        by_group.setdefault(entry_group(entry), []).append((label, entry))
     episodes = Counter(record["scene"] for record in records if record.get("status") == STATUS_OK)
     lines = ["## Scenes", "", "| Class | Scenes | Budget (steps) | Variant | Episodes |",
              "|---|---|---|---|---|"]
-    for size_class, entries in by_class.items():
+    for group in ordered_groups(by_group):
+        entries = by_group[group]
+        size_class = entries[0][1]["size_class"]
         budgets = sorted({entry["budget"] for _, entry in entries})
         variants = sorted({entry["variant"] for _, entry in entries})
         count = sum(episodes.get(label, 0) for label, _ in entries)
@@ -167,9 +171,7 @@ def leaderboard_markdown(
         "the command at its end.",
         "",
     ]
-    for size_class in [name for name in ("small", "apartment", "house") if name in summary] + [
-        name for name in summary if name not in ("small", "apartment", "house")
-    ]:
+    for size_class in ordered_groups(summary):
         lines += [
             f"## {size_class}",
             "",

@@ -211,12 +211,35 @@ def read_manifest(out_dir: str | Path) -> dict[str, Any] | None:
     return read_record(Path(out_dir) / MANIFEST_FILE)
 
 
-def size_class_of(record: dict[str, Any], manifest: dict[str, Any] | None) -> str:
-    """A record's size class from the manifest (``"all"`` outside a suite run)."""
+GROUP_ORDER = ("small", "apartment", "house", "all", "other")
+"""How tables and plots order the groups: the size classes from small to house."""
+
+
+def entry_group(entry: dict[str, Any]) -> str:
+    """The group of a manifest entry: its size class, with ``" (open)"`` for the open variant
+    (the variants are a second axis, never averaged together)."""
+    variant = entry.get("variant", "closed")
+    return str(entry["size_class"]) + ("" if variant == "closed" else f" ({variant})")
+
+
+def group_of(record: dict[str, Any], manifest: dict[str, Any] | None) -> str:
+    """A record's group from the manifest (see :func:`entry_group`; ``"all"`` outside a suite
+    run, ``"other"`` for a scene the manifest does not list)."""
     if not manifest:
         return "all"
     entry = manifest.get("scenes", {}).get(record.get("scene"))
-    return str(entry["size_class"]) if entry else "other"
+    return entry_group(entry) if entry else "other"
+
+
+def ordered_groups(names: Any) -> list[str]:
+    """Group names by size class (:data:`GROUP_ORDER`), each class's closed variant first."""
+    rank = {name: index for index, name in enumerate(GROUP_ORDER)}
+
+    def key(name: str) -> tuple[int, str]:
+        size_class = name.split(" (", 1)[0]
+        return rank.get(size_class, len(rank)), name
+
+    return sorted(names, key=key)
 
 
 def manifest_json(manifest: dict[str, Any]) -> str:

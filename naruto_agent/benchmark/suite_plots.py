@@ -16,13 +16,12 @@ import numpy as np  # noqa: E402
 from naruto_agent.benchmark.efficiency import completion_points, cumulative_path  # noqa: E402
 from naruto_agent.benchmark.records import STATUS_OK  # noqa: E402
 from naruto_agent.benchmark.statistics import bootstrap_ci, excludes_zero  # noqa: E402
-from naruto_agent.benchmark.suite import size_class_of  # noqa: E402
+from naruto_agent.benchmark.suite import group_of, ordered_groups  # noqa: E402
 
 _COLOURS = plt.get_cmap("tab10")
 GRID_POINTS = 41
 BAND_RESAMPLES = 1_000
 """Resamples of the bands (a pointwise interval at every grid point; the tables use more)."""
-CLASS_ORDER = ("small", "apartment", "house", "all", "other")
 
 
 def episode_curves(record: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -56,11 +55,10 @@ def plot_class_curves(
     grouped: dict[str, dict[str, list[dict[str, Any]]]] = defaultdict(lambda: defaultdict(list))
     for record in records:
         if record.get("status") == STATUS_OK and record.get("completion_curve"):
-            grouped[size_class_of(record, manifest)][record["policy"]].append(record)
+            grouped[group_of(record, manifest)][record["policy"]].append(record)
     if not grouped:
         return None
-    rank = {name: index for index, name in enumerate(CLASS_ORDER)}
-    classes = sorted(grouped, key=lambda name: (rank.get(name, len(rank)), name))
+    classes = ordered_groups(grouped)
     policies = sorted({policy for by_policy in grouped.values() for policy in by_policy})
     colours = {policy: _COLOURS(index % 10) for index, policy in enumerate(policies)}
     figure, axes = plt.subplots(2, len(classes), figsize=(5 * len(classes), 7.5), squeeze=False)
@@ -109,8 +107,7 @@ def plot_paired(
     classes = [name for name in paired if any(e["metric"] == metric for e in paired[name])]
     if not classes:
         return None
-    rank = {name: index for index, name in enumerate(CLASS_ORDER)}
-    classes.sort(key=lambda name: (rank.get(name, len(rank)), name))
+    classes = ordered_groups(classes)
     rows = max(sum(e["metric"] == metric for e in paired[name]) for name in classes)
     figure, axes = plt.subplots(
         1, len(classes), figsize=(5 * len(classes), 1.0 + 0.45 * rows), squeeze=False

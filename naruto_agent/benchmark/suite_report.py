@@ -25,7 +25,7 @@ from naruto_agent.benchmark.statistics import (
     excludes_zero,
     paired_comparison,
 )
-from naruto_agent.benchmark.suite import read_manifest, size_class_of
+from naruto_agent.benchmark.suite import group_of, ordered_groups, read_manifest
 
 STATISTICS_JSON = "statistics.json"
 STATISTICS_MD = "statistics.md"
@@ -56,7 +56,6 @@ QUALITY_KEYS: tuple[str, ...] = (
 PAIRED_METRICS: tuple[str, ...] = (
     "observable_completion_ratio_pct", "completion_ratio_pct", "auc_steps", "auc_path")
 """The values compared pair by pair (the others depend on whether a level was reached)."""
-CLASS_ORDER = ("small", "apartment", "house", "all", "other")
 
 
 def episode_values(record: dict[str, Any]) -> dict[str, float | None]:
@@ -76,11 +75,6 @@ def _number(value: Any) -> float | None:
     return None if value is None else float(value)
 
 
-def _ordered(names: Any) -> list[str]:
-    rank = {name: index for index, name in enumerate(CLASS_ORDER)}
-    return sorted(names, key=lambda name: (rank.get(name, len(rank)), name))
-
-
 def grouped_values(
     records: list[dict[str, Any]], manifest: dict[str, Any] | None, by_scene: bool = False
 ) -> dict[str, dict[str, list[tuple[str, int, dict[str, Any]]]]]:
@@ -92,7 +86,7 @@ def grouped_values(
     for record in records:
         if record.get("status") != STATUS_OK:
             continue
-        group = record["scene"] if by_scene else size_class_of(record, manifest)
+        group = record["scene"] if by_scene else group_of(record, manifest)
         groups[group][record["policy"]].append(
             (record["scene"], int(record["seed"]), episode_values(record))
         )
@@ -227,7 +221,7 @@ def statistics_markdown(
         "Mean [95 % bootstrap interval over scenes and seeds]; steps and metres to a level are "
         "averaged over the episodes that reached it (reached / episodes). Rows by AUC steps.\n"
     ]
-    for size_class in _ordered(summary):
+    for size_class in ordered_groups(summary):
         parts.append(f"## {size_class}\n\n{class_table(summary[size_class])}")
         entries = paired.get(size_class) or []
         if entries:

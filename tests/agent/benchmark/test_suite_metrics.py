@@ -13,6 +13,7 @@ from naruto_agent.benchmark.efficiency import (
     first_reach,
 )
 from naruto_agent.benchmark.statistics import bootstrap_ci, excludes_zero, paired_comparison
+from naruto_agent.benchmark.suite import ordered_groups
 from naruto_agent.benchmark.suite_report import class_summary, paired_summary, statistics_markdown
 
 
@@ -162,3 +163,22 @@ def test_the_curve_is_the_observable_surfaces_where_the_record_has_it():
              for point in curve]
     np.testing.assert_allclose(completion_points({"completion_curve": whole})[1],
                                [0.0, 40.0, 48.0])
+
+
+def test_the_open_variant_is_its_own_group_and_follows_its_closed_class():
+    positions = [[float(t), 0.0, 0.0] for t in range(11)]
+    records = [
+        _record([(5, 90.0), (10, 95.0)], positions, 10, "h0", "p"),
+        _record([(5, 20.0), (10, 30.0)], positions, 10, "h0-open", "p"),
+        _record([(5, 50.0), (10, 60.0)], positions, 10, "s0", "p"),
+    ]
+    manifest = {"scenes": {
+        "h0": {"size_class": "house", "variant": "closed"},
+        "h0-open": {"size_class": "house", "variant": "open"},
+        "s0": {"size_class": "small", "variant": "closed"},
+    }}
+    summary = class_summary(records, manifest, resamples=50)
+    assert ordered_groups(summary) == ["small", "house", "house (open)"]
+    closed = summary["house"]["p"]["completion_ratio_pct"]["mean"]
+    opened = summary["house (open)"]["p"]["completion_ratio_pct"]["mean"]
+    assert (closed, opened) == (95.0, 30.0)
