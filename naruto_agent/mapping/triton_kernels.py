@@ -50,7 +50,7 @@ def _row(x, y, z, dense, mask, offset):
 
 
 @triton.jit
-def _corners(unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels):
+def _cell(unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels):
     """Per-axis products of the lower and upper cell corners (x0, x1, y0, y1, z0, z1) with
     the level's row multipliers, and the upper corners' trilinear weights (wx1, wy1, wz1)."""
     ux = tl.load(unit_ptr + offs * 3 + 0, mask=valid, other=0.0)
@@ -76,6 +76,33 @@ def _corners(unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels):
 
 
 @triton.jit
+def _corners(unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels, num_dense,
+             table_size):
+    """The eight corner rows of each point's cell on ``level`` (r000 ... r111, bits x y z)
+    and their trilinear weights in the same order."""
+    x0, x1, y0, y1, z0, z1, wx1, wy1, wz1 = _cell(
+        unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels
+    )
+    dense = level < num_dense
+    mask = table_size - 1
+    offset = level.to(tl.int64) * table_size
+    wx0 = 1.0 - wx1
+    wy0 = 1.0 - wy1
+    wz0 = 1.0 - wz1
+    w00 = wx0 * wy0
+    w01 = wx0 * wy1
+    w10 = wx1 * wy0
+    w11 = wx1 * wy1
+    return (
+        _row(x0, y0, z0, dense, mask, offset), _row(x0, y0, z1, dense, mask, offset),
+        _row(x0, y1, z0, dense, mask, offset), _row(x0, y1, z1, dense, mask, offset),
+        _row(x1, y0, z0, dense, mask, offset), _row(x1, y0, z1, dense, mask, offset),
+        _row(x1, y1, z0, dense, mask, offset), _row(x1, y1, z1, dense, mask, offset),
+        w00 * wz0, w00 * wz1, w01 * wz0, w01 * wz1, w10 * wz0, w10 * wz1, w11 * wz0, w11 * wz1,
+    )
+
+
+@triton.jit
 def hash_forward(
     unit_ptr,
     table_ptr,
@@ -95,38 +122,21 @@ def hash_forward(
     level = tl.program_id(1)
     offs = tl.program_id(0).to(tl.int64) * BLOCK + tl.arange(0, BLOCK)
     valid = offs < count
-    x0, x1, y0, y1, z0, z1, wx1, wy1, wz1 = _corners(
-        unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels
+    (r000, r001, r010, r011, r100, r101, r110, r111,
+     w000, w001, w010, w011, w100, w101, w110, w111) = _corners(
+        unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels, num_dense, table_size
     )
-    dense = level < num_dense
-    mask = table_size - 1
-    offset = level.to(tl.int64) * table_size
-    wx0 = 1.0 - wx1
-    wy0 = 1.0 - wy1
-    wz0 = 1.0 - wz1
-    r000 = _row(x0, y0, z0, dense, mask, offset)
-    r001 = _row(x0, y0, z1, dense, mask, offset)
-    r010 = _row(x0, y1, z0, dense, mask, offset)
-    r011 = _row(x0, y1, z1, dense, mask, offset)
-    r100 = _row(x1, y0, z0, dense, mask, offset)
-    r101 = _row(x1, y0, z1, dense, mask, offset)
-    r110 = _row(x1, y1, z0, dense, mask, offset)
-    r111 = _row(x1, y1, z1, dense, mask, offset)
-    w00 = wx0 * wy0
-    w01 = wx0 * wy1
-    w10 = wx1 * wy0
-    w11 = wx1 * wy1
     for f in tl.static_range(FEATURES):
         base = table_ptr + f * table_cols
         value = (
-            w00 * wz0 * tl.load(base + r000, mask=valid, other=0.0)
-            + w00 * wz1 * tl.load(base + r001, mask=valid, other=0.0)
-            + w01 * wz0 * tl.load(base + r010, mask=valid, other=0.0)
-            + w01 * wz1 * tl.load(base + r011, mask=valid, other=0.0)
-            + w10 * wz0 * tl.load(base + r100, mask=valid, other=0.0)
-            + w10 * wz1 * tl.load(base + r101, mask=valid, other=0.0)
-            + w11 * wz0 * tl.load(base + r110, mask=valid, other=0.0)
-            + w11 * wz1 * tl.load(base + r111, mask=valid, other=0.0)
+            w000 * tl.load(base + r000, mask=valid, other=0.0)
+            + w001 * tl.load(base + r001, mask=valid, other=0.0)
+            + w010 * tl.load(base + r010, mask=valid, other=0.0)
+            + w011 * tl.load(base + r011, mask=valid, other=0.0)
+            + w100 * tl.load(base + r100, mask=valid, other=0.0)
+            + w101 * tl.load(base + r101, mask=valid, other=0.0)
+            + w110 * tl.load(base + r110, mask=valid, other=0.0)
+            + w111 * tl.load(base + r111, mask=valid, other=0.0)
         )
         column = out_column + level * FEATURES + f
         tl.store(out_ptr + offs * out_stride + column, value, mask=valid)
@@ -152,31 +162,22 @@ def hash_backward(
     level = tl.program_id(1)
     offs = tl.program_id(0).to(tl.int64) * BLOCK + tl.arange(0, BLOCK)
     valid = offs < count
-    x0, x1, y0, y1, z0, z1, wx1, wy1, wz1 = _corners(
-        unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels
+    (r000, r001, r010, r011, r100, r101, r110, r111,
+     w000, w001, w010, w011, w100, w101, w110, w111) = _corners(
+        unit_ptr, scales_ptr, mult_ptr, offs, valid, level, num_levels, num_dense, table_size
     )
-    dense = level < num_dense
-    mask = table_size - 1
-    offset = level.to(tl.int64) * table_size
-    wx0 = 1.0 - wx1
-    wy0 = 1.0 - wy1
-    wz0 = 1.0 - wz1
-    w00 = wx0 * wy0
-    w01 = wx0 * wy1
-    w10 = wx1 * wy0
-    w11 = wx1 * wy1
     for f in tl.static_range(FEATURES):
         column = grad_column + level * FEATURES + f
         g = tl.load(grad_ptr + offs * grad_stride + column, mask=valid, other=0.0)
         base = grad_table_ptr + f * table_cols
-        tl.atomic_add(base + _row(x0, y0, z0, dense, mask, offset), w00 * wz0 * g, mask=valid)
-        tl.atomic_add(base + _row(x0, y0, z1, dense, mask, offset), w00 * wz1 * g, mask=valid)
-        tl.atomic_add(base + _row(x0, y1, z0, dense, mask, offset), w01 * wz0 * g, mask=valid)
-        tl.atomic_add(base + _row(x0, y1, z1, dense, mask, offset), w01 * wz1 * g, mask=valid)
-        tl.atomic_add(base + _row(x1, y0, z0, dense, mask, offset), w10 * wz0 * g, mask=valid)
-        tl.atomic_add(base + _row(x1, y0, z1, dense, mask, offset), w10 * wz1 * g, mask=valid)
-        tl.atomic_add(base + _row(x1, y1, z0, dense, mask, offset), w11 * wz0 * g, mask=valid)
-        tl.atomic_add(base + _row(x1, y1, z1, dense, mask, offset), w11 * wz1 * g, mask=valid)
+        tl.atomic_add(base + r000, w000 * g, mask=valid)
+        tl.atomic_add(base + r001, w001 * g, mask=valid)
+        tl.atomic_add(base + r010, w010 * g, mask=valid)
+        tl.atomic_add(base + r011, w011 * g, mask=valid)
+        tl.atomic_add(base + r100, w100 * g, mask=valid)
+        tl.atomic_add(base + r101, w101 * g, mask=valid)
+        tl.atomic_add(base + r110, w110 * g, mask=valid)
+        tl.atomic_add(base + r111, w111 * g, mask=valid)
 
 
 @triton.jit
