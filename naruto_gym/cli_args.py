@@ -46,6 +46,7 @@ def dataclass_parser(
     )
     hints = get_type_hints(cls)
     docs = field_docs(cls)
+    names = {item.name for item in dataclasses.fields(cls)}
     for item in dataclasses.fields(cls):
         flag = "--" + item.name.replace("_", "-")
         kind = hints[item.name]
@@ -60,11 +61,28 @@ def dataclass_parser(
             )
         elif get_origin(kind) in (list, tuple):
             element = get_args(kind)[0]
-            parser.add_argument(flag, nargs="*", type=element, default=default, help=help_text)
+            # A list flag also answers to its singular ("--policy" for "--policies"), as users
+            # type it; otherwise argparse would read "--policy" as a prefix of another flag.
+            singular = _singular(item.name)
+            flags = [flag] if singular in names or singular == item.name else [
+                flag, "--" + singular.replace("_", "-")]
+            parser.add_argument(*flags, dest=item.name, nargs="*", type=element,
+                                default=default, help=help_text)
         else:
             element = next((a for a in get_args(kind) if a is not type(None)), kind)
             parser.add_argument(flag, type=element, default=default, help=help_text)
     return parser
+
+
+def _singular(name: str) -> str:
+    """``policies`` -> ``policy``, ``classes`` -> ``class``, ``seeds`` -> ``seed``."""
+    if name.endswith("ies"):
+        return name[:-3] + "y"
+    if name.endswith(("sses", "shes", "ches", "xes")):
+        return name[:-2]
+    if name.endswith("s") and not name.endswith("ss"):
+        return name[:-1]
+    return name
 
 
 def parse_dataclass_args(

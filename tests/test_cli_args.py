@@ -136,3 +136,22 @@ def test_train_ppo_default_budget_is_the_documented_one():
     docs = BENCHMARKS.parent / "docs"
     assert "every 250-step episode" in (docs / "benchmarks" / "ppo.md").read_text()
     assert "--episode-steps 250" in (docs / "rl.md").read_text()
+
+
+@dataclass
+class PluralArgs:
+    policies: list[str] = field(default_factory=lambda: ["passive"])
+    policy_kwargs: str = "{}"
+    classes: list[str] = field(default_factory=list)
+    seeds: list[int] = field(default_factory=lambda: [0])
+    seed: int = 7
+
+
+def test_a_list_flag_answers_to_its_singular():
+    args = parse_dataclass_args(PluralArgs, ["--policy", "mine", "--class", "small"])
+    # Without the alias argparse would take "--policy" as short for "--policy-kwargs".
+    assert args.policies == ["mine"] and args.policy_kwargs == "{}"
+    assert args.classes == ["small"]
+    # A singular that is another field keeps that field's meaning.
+    args = parse_dataclass_args(PluralArgs, ["--seed", "3", "--seeds", "1", "2"])
+    assert args.seed == 3 and args.seeds == [1, 2]
