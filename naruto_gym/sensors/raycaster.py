@@ -26,6 +26,7 @@ from typing import Literal
 import numpy as np
 
 from naruto_gym.geometry.sweep_kernels import first_blocked_sample, sweep_step_count
+from naruto_gym.utils.fork_safety import enter_native_code
 from naruto_gym.utils.threads import default_thread_count
 
 RayCasterBackend = Literal["open3d", "embreex"]
@@ -97,6 +98,7 @@ class RayCaster:
         Building lazily keeps Embree's worker threads out of a parent process that forks
         (gymnasium's async vector env creates one env in the parent before forking).
         """
+        enter_native_code()
         if self._scene is None or self._built_in_pid != os.getpid():
             self._build()
         return self._scene
@@ -192,6 +194,7 @@ class RayCaster:
     def _open3d_scene(self):
         if self.backend == "open3d":
             return self.native_scene
+        enter_native_code()
         if self._distance_scene is None or self._distance_pid != os.getpid():
             import open3d as o3d
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pickle
+import subprocess
+import sys
 import warnings
 
 import gymnasium as gym
@@ -91,16 +93,42 @@ def test_pickle_round_trip(env_id):
         np.testing.assert_array_equal(a[key], b[key])
 
 
-def test_async_vector_env_does_not_hang():
-    envs = gym.make_vec(
-        "NarutoRecon-v0", num_envs=4, vectorization_mode="async", **SMALL
-    )
-    observations, infos = envs.reset(seed=0)
-    assert observations["rgb"].shape[0] == 4
-    for _ in range(3):
-        observations, rewards, terminated, truncated, infos = envs.step(envs.action_space.sample())
-    assert rewards.shape == (4,)
+ASYNC_FORK_SCRIPT = """
+import gymnasium as gym
+import naruto_gym
+envs = gym.make_vec("NarutoRecon-v0", num_envs=4, vectorization_mode="async",
+                    vector_kwargs={"context": "fork"}, image_scale=0.1, coverage_samples=2000)
+observations, infos = envs.reset(seed=0)
+assert observations["rgb"].shape[0] == 4
+for _ in range(3):
+    observations, rewards, terminated, truncated, infos = envs.step(envs.action_space.sample())
+assert rewards.shape == (4,)
+envs.close()
+print("stepped")
+"""
+
+
+def test_async_vector_env_with_fork_in_a_fresh_process():
+    # The parent only constructs envs (nothing native) before forking: the children are safe.
+    result = subprocess.run([sys.executable, "-c", ASYNC_FORK_SCRIPT], capture_output=True,
+                            text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "stepped" in result.stdout
+
+
+def test_fork_after_ray_casting_is_refused_instead_of_hanging():
+    # This test process has cast rays (earlier tests, and the reset below): a forked worker
+    # could hang in Open3D's thread pool, so it refuses with what to do.
+    env = gym.make("NarutoRecon-v0", **SMALL)
+    env.reset(seed=0)
+    envs = gym.make_vec("NarutoRecon-v0", num_envs=2, vectorization_mode="async",
+                        vector_kwargs={"context": "fork"}, **SMALL)
+    with pytest.raises(RuntimeError, match="spawn"):
+        envs.reset(seed=0)
     envs.close()
+    # The process's own env still works.
+    env.step(env.action_space.sample())
+    env.close()
 
 
 def test_async_vector_env_with_spawn_context():
