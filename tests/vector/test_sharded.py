@@ -15,6 +15,7 @@ import pytest
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.vector import NarutoReconVectorEnv
 from naruto_gym.vector.sharded import WorkerError
+from tests.process_checks import alive
 
 TINY = {
     "action_mode": "discrete",
@@ -30,15 +31,6 @@ def shared_memory_entries() -> set[str]:
     if not os.path.isdir("/dev/shm"):
         return set()
     return {name for name in os.listdir("/dev/shm") if not name.startswith("sem.")}
-
-
-def alive(pid: int) -> bool:
-    """Whether process ``pid`` runs (a zombie, not yet reaped, counts as gone)."""
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().split(") ")[-1][0] != "Z"
-    except FileNotFoundError:
-        return False
 
 
 def assert_gone(pids: list[int], shm_before: set[str]) -> None:

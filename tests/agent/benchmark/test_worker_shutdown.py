@@ -7,6 +7,8 @@ import subprocess
 import sys
 import time
 
+from tests.process_checks import alive
+
 WORKER = (
     "import os, time\n"
     "from naruto_agent.benchmark.executors import stop_with_parent\n"
@@ -24,24 +26,16 @@ RUN = (
 )
 
 
-def running(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().split(") ")[-1][0] != "Z"
-    except FileNotFoundError:
-        return False
-
-
 def test_a_worker_stops_when_its_run_is_killed():
     run = subprocess.Popen([sys.executable, "-c", RUN], stdout=subprocess.PIPE, text=True)
     try:
         worker_pid = int(run.stdout.readline())
-        assert running(worker_pid)
+        assert alive(worker_pid)
         run.kill()
         run.wait()
         deadline = time.monotonic() + 15
-        while running(worker_pid) and time.monotonic() < deadline:
+        while alive(worker_pid) and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert not running(worker_pid)
+        assert not alive(worker_pid)
     finally:
         run.kill()
