@@ -69,15 +69,20 @@ def _runs_section(manifest: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _scenes_by_group(manifest: dict[str, Any]) -> list[tuple[str, list[tuple[str, dict]]]]:
+    """The manifest's (scene label, entry) pairs by group, groups in table order."""
+    by_group: dict[str, list[tuple[str, dict[str, Any]]]] = {}
+    for label, entry in sorted(manifest.get("scenes", {}).items()):
+        by_group.setdefault(entry_group(entry), []).append((label, entry))
+    return [(group, by_group[group]) for group in ordered_groups(by_group)]
+
+
 def _partial_note(manifest: dict[str, Any]) -> str | None:
     """A warning when the run is shorter than the suite: fewer test scenes or a cut budget."""
     suite = suite_module()
-    by_group: dict[str, list[dict[str, Any]]] = {}
-    for entry in manifest.get("scenes", {}).values():
-        by_group.setdefault(entry_group(entry), []).append(entry)
     partial = []
-    for group in ordered_groups(by_group):
-        entries = by_group[group]
+    for group, labelled in _scenes_by_group(manifest):
+        entries = [entry for _, entry in labelled]
         size_class = entries[0]["size_class"]
         if size_class not in suite.SIZE_CLASSES:
             continue
@@ -94,14 +99,10 @@ def _partial_note(manifest: dict[str, Any]) -> str | None:
 
 
 def _scenes_section(manifest: dict[str, Any], records: list[dict[str, Any]]) -> list[str]:
-    by_group: dict[str, list[tuple[str, dict[str, Any]]]] = {}
-    for label, entry in sorted(manifest.get("scenes", {}).items()):
-        by_group.setdefault(entry_group(entry), []).append((label, entry))
     episodes = Counter(record["scene"] for record in records if record.get("status") == STATUS_OK)
     lines = ["## Scenes", "", "| Class | Scenes | Budget (steps) | Variant | Episodes |",
              "|---|---|---|---|---|"]
-    for group in ordered_groups(by_group):
-        entries = by_group[group]
+    for _, entries in _scenes_by_group(manifest):
         size_class = entries[0][1]["size_class"]
         budgets = sorted({entry["budget"] for _, entry in entries})
         variants = sorted({entry["variant"] for _, entry in entries})

@@ -160,11 +160,13 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         env_kwargs = {"pinhole_backend": "auto", **env_kwargs}
         self._reconstruct = bool(env_kwargs.pop("reconstruct", False))
         env_kwargs.pop("render_mode", None)
+        accepted = (
+            {item.name for item in dataclasses.fields(EnvSettings)}
+            | set(inspect.signature(NarutoReconVectorEnv.__init__).parameters)
+            | {"reconstruct"}
+        ) - {"self", "env_kwargs"}
         check_keyword_names(
-            env_kwargs, {f.name for f in dataclasses.fields(EnvSettings)} | set(
-                inspect.signature(NarutoReconVectorEnv.__init__).parameters) - {
-                "self", "env_kwargs"} | {"reconstruct"},
-            "NarutoReconVectorEnv",
+            env_kwargs, accepted, "NarutoReconVectorEnv",
             "The episode length is max_episode_steps (step_budget is the single env's).")
         self.settings = EnvSettings(**env_kwargs)
         # Compiled loops (ray filling, shading, coverage) split agents between this many
