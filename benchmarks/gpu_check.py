@@ -60,6 +60,8 @@ class Args:
     """timed mapping iterations per variant"""
     reference_episode: bool = True
     """also run the episode with the PyTorch reference path (backend torch)"""
+    reference_steps: int = 0
+    """step budget of the reference path's episode (0: ``steps``)"""
     out_dir: str = os.environ.get("OUT") or str(REPO_ROOT / "benchmarks" / "results" / "gpu_check")
     """where the JSON records and logs go"""
     tests_limit_s: int = 150
@@ -75,7 +77,9 @@ def run_part(name: str, command: list[str], limit_s: int, out_dir: Path) -> dict
     log = out_dir / f"{name}.log"
     print(f"\n=== {name}: {' '.join(command)} (limit {limit_s} s)", flush=True)
     start = time.perf_counter()
-    env = {**os.environ, "PYTHONPATH": str(REPO_ROOT)}
+    # The repository first, then whatever the caller's PYTHONPATH holds (carried packages).
+    paths = [str(REPO_ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
     env.pop("TRITON_INTERPRET", None)  # the compiled kernels, not the interpreter
     with log.open("w") as handle:
         # Its own process group, so that a part out of time is stopped with its children.
@@ -120,13 +124,14 @@ def environment() -> dict:
 
 
 def episode_command(args: Args, backend: str, out_dir: Path) -> list[str]:
+    steps = args.reference_steps if backend == "torch" and args.reference_steps else args.steps
     return [
         sys.executable, "benchmarks/naruto_episode.py",
         "--scene", str(Path(args.scene_dir) / "mesh.ply"),
         "--mapper", "neural", "--device", "cuda", "--backend", backend,
-        "--image-scale", "1.0", "--steps", str(args.steps),
+        "--image-scale", "1.0", "--steps", str(steps),
         "--env-kwargs", '{"pinhole_backend": "raster"}',
-        "--target-snapshots", "0", "--checkpoint-every", "0",
+        "--target-snapshots", "0", "--checkpoint-every", "100",
         "--output-dir", str(out_dir), "--tag", f"gpu_check_{backend}",
     ]  # fmt: skip
 
@@ -148,7 +153,8 @@ def summary(out_dir: Path, args: Args) -> list[str]:
     if records:
         names = sorted({n for r in records.values() for n in r.get("phases_ms_per_step", {})})
         lines.append("")
-        lines.append(f"| phase (ms per step, {args.steps} steps) | " + " | ".join(records) + " |")
+        steps = " / ".join(str(r.get("steps_run")) for r in records.values())
+        lines.append(f"| phase (ms per step, {steps} steps) | " + " | ".join(records) + " |")
         lines.append("|---|" + "---|" * len(records))
         for name in names:
             values = [f"{r['phases_ms_per_step'].get(name, 0.0):.1f}" for r in records.values()]

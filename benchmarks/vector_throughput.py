@@ -112,6 +112,9 @@ class Args:
     hd_scene: str = ""
     """scene of the 680 x 1200 single-env rows (default: the Replica sample beside the
     repository, else the default room)"""
+    parts: list[str] = field(default_factory=lambda: ["table", "scaling"])
+    """which parts to run: table (every row above the scaling table, the goals included)
+    and scaling (the scaling table)"""
     quick: bool = False
     """a trial of every part in under 2 minutes: short timings, few rows, 1 and 2 CPUs"""
     pinned_point: str = ""
@@ -320,8 +323,6 @@ def scaling_table(args: Args) -> dict[str, Any]:
 
 
 def main(args: Args) -> dict[str, Any]:
-    from tqdm.auto import tqdm
-
     if args.pinned_point:
         print("POINT " + json.dumps(scaling_point(json.loads(args.pinned_point))))
         return {}
@@ -331,8 +332,34 @@ def main(args: Args) -> dict[str, Any]:
         args.scaling_workers = []
         args.output = args.output.replace(".json", "_quick.json")
 
+    unknown = set(args.parts) - {"table", "scaling"}
+    if unknown:
+        raise SystemExit(f"unknown parts {sorted(unknown)}; choose from table, scaling")
     results: dict[str, Any] = {"args": asdict(args), "load_start": load(), "cpus": os.cpu_count()}
     print(f"load average at start: {results['load_start']}")
+    if "table" in args.parts:
+        table(args, results)
+    if args.scaling_cores and "scaling" in args.parts:
+        results["scaling"] = scaling_table(args)
+        points = results["scaling"]["points"]
+        print("scaling:", json.dumps([
+            {key: point.get(key) for key in ("cores", "batched_default_steps_per_s",
+                                             "efficiency_vs_2_cores",
+                                             "ratio_default_vs_best_async")}
+            for point in points], indent=1))
+    results["load_end"] = load()
+    print(f"load average at end: {results['load_end']}")
+    path = Path(args.output)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(results, indent=1))
+    print(f"wrote {path}")
+    return results
+
+
+def table(args: Args, results: dict[str, Any]) -> None:
+    """Every row above the scaling table, and the goals, into ``results``."""
+    from tqdm.auto import tqdm
+
     for suffix, extra in (("", {}), ("_auto_frames", {"pinhole_backend": "auto"})):
         row = results[f"single_env{suffix}"] = time_single(args.seconds, args.episode_steps,
                                                            **extra)
@@ -433,21 +460,6 @@ def main(args: Args) -> dict[str, Any]:
             / results["bare_cast_64_envs"][64]["mrays_per_s"],
         }
         print("goals:", json.dumps(results["goals"], indent=1))
-    if args.scaling_cores:
-        results["scaling"] = scaling_table(args)
-        points = results["scaling"]["points"]
-        print("scaling:", json.dumps([
-            {key: point.get(key) for key in ("cores", "batched_default_steps_per_s",
-                                             "efficiency_vs_2_cores",
-                                             "ratio_default_vs_best_async")}
-            for point in points], indent=1))
-    results["load_end"] = load()
-    print(f"load average at end: {results['load_end']}")
-    path = Path(args.output)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(results, indent=1))
-    print(f"wrote {path}")
-    return results
 
 
 if __name__ == "__main__":

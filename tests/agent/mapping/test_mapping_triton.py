@@ -43,6 +43,10 @@ from naruto_agent.mapping.rendering import (  # noqa: E402
 from .conftest import orbit_poses  # noqa: E402
 
 DEVICE = torch.device("cuda" if torch.cuda.is_available() else "cpu")
+# Feature values: the interpreter repeats the reference's float32 arithmetic; on a GPU the
+# compiled kernel fuses multiply-adds and sums the eight corners in its own order, which
+# moves values by a few 1e-6 (up to 6.8e-6 seen on an H200 for features of order 1).
+VALUE_ATOL = 1e-5 if DEVICE.type == "cuda" else 2e-6
 
 # (levels, log2 table size, base resolution, finest resolution, features per level):
 # dense and hashed levels mixed, all dense, all hashed, one and four features per level.
@@ -100,7 +104,7 @@ def test_field_inputs_match_the_reference_values_and_table_gradient(layout, coun
     fast = triton_kernels.field_inputs(grid, points, 16, ONE_BLOB_CUTOFF)
     reference = torch.cat([blob(points.clamp(0.0, 1.0)), grid(points)], dim=1)
     assert fast.shape == reference.shape == (count, 48 + grid.output_dim)
-    torch.testing.assert_close(fast, reference, rtol=1e-5, atol=2e-6)
+    torch.testing.assert_close(fast, reference, rtol=1e-5, atol=VALUE_ATOL)
 
     upstream = torch.randn(reference.shape, generator=torch.Generator().manual_seed(3))
     upstream = upstream.to(DEVICE)
@@ -117,7 +121,7 @@ def test_hash_grid_features_match_the_encoding(layout) -> None:
     points = edge_points(300, grid.resolutions[-1]).to(DEVICE)
     fast = triton_kernels.hash_grid_features(grid, points)
     reference = grid(points)
-    torch.testing.assert_close(fast, reference, rtol=1e-5, atol=2e-6)
+    torch.testing.assert_close(fast, reference, rtol=1e-5, atol=VALUE_ATOL)
     (fast.square().sum()).backward()
     fast_grad = grid.table.grad.clone()
     grid.table.grad = None
@@ -273,7 +277,9 @@ def test_the_kernels_compile_for_cuda_gpus_without_one() -> None:
     env["TRITON_DEFAULT_FP_FUSION"] = "1"
     result = subprocess.run(
         [sys.executable, "-c", _COMPILE_FOR_GPUS],
-        env={**env, "PYTHONPATH": str(Path(__file__).resolve().parents[3])},
+        env={**env, "PYTHONPATH": os.pathsep.join(
+            filter(None, [str(Path(__file__).resolve().parents[3]), env.get("PYTHONPATH")])
+        )},
         capture_output=True,
         text=True,
         timeout=600,
