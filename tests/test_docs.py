@@ -39,9 +39,21 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     pytest.importorskip("mkdocstrings", reason="needs the docs extra: pip install -e '.[docs]'")
     out = tmp_path_factory.mktemp("site")
     result = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(ROOT / "mkdocs.yml"),
-         "-d", str(out)],
-        cwd=ROOT, capture_output=True, text=True, timeout=600,
+        [
+            sys.executable,
+            "-m",
+            "mkdocs",
+            "build",
+            "--strict",
+            "-f",
+            str(ROOT / "mkdocs.yml"),
+            "-d",
+            str(out),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
         env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
     )
     if result.returncode != 0:
@@ -80,3 +92,26 @@ def test_readme_is_short() -> None:
         f"README.md has {len(lines)} lines; keep it at most {README_MAX_LINES} and move detail "
         "to docs/"
     )
+
+
+def _nav_titles(items: list, section: str = "") -> list[tuple[str, str]]:
+    """(section, title) of every titled page of an mkdocs ``nav`` list."""
+    titles = []
+    for item in items:
+        if not isinstance(item, dict):
+            continue
+        for title, value in item.items():
+            if isinstance(value, list):
+                titles += _nav_titles(value, section or title)
+            else:
+                titles.append((section, title))
+    return titles
+
+
+def test_no_page_title_twice_in_the_navigation() -> None:
+    """Outside the API reference (which mirrors the packages' names), a title names one page."""
+    yaml = pytest.importorskip("yaml")
+    nav = yaml.safe_load((ROOT / "mkdocs.yml").read_text(encoding="utf-8"))["nav"]
+    titles = [title for section, title in _nav_titles(nav) if section != "API reference"]
+    repeated = sorted({title for title in titles if titles.count(title) > 1})
+    assert not repeated, f"navigation titles used for two pages in mkdocs.yml: {repeated}"
