@@ -115,3 +115,17 @@ def test_no_page_title_twice_in_the_navigation() -> None:
     titles = [title for section, title in _nav_titles(nav) if section != "API reference"]
     repeated = sorted({title for title in titles if titles.count(title) > 1})
     assert not repeated, f"navigation titles used for two pages in mkdocs.yml: {repeated}"
+
+
+def test_the_leaderboard_page_has_the_generators_add_your_policy_section() -> None:
+    """docs/benchmarks/leaderboard.md is generated; its 'Add your policy' section is the one
+    naruto_agent.benchmark.leaderboard writes now (a clone-runnable command, no local paths)."""
+    from naruto_agent.benchmark.leaderboard import ADD_YOUR_POLICY, _add_your_policy
+
+    page = (ROOT / "docs" / "benchmarks" / "leaderboard.md").read_text(encoding="utf-8")
+    assert "\n".join(_add_your_policy()) in page, (
+        "regenerate docs/benchmarks/leaderboard.md (python -m naruto_agent.benchmark.leaderboard)"
+    )
+    assert "/work" not in ADD_YOUR_POLICY and "model_path" not in ADD_YOUR_POLICY
+    policy_file = ADD_YOUR_POLICY.split("--policies ")[1].split(":")[0]
+    assert (ROOT / policy_file).is_file(), f"{policy_file} is not in the repository"

@@ -253,3 +253,15 @@ def test_a_shell_block_runs_in_a_copy_with_this_checkouts_tools(tmp_path: Path) 
     launcher = (tmp_path / "run" / "bin" / "naruto-benchmark.py").read_text(encoding="utf-8")
     assert "if __name__ == '__main__':" in launcher  # spawned workers re-import it
     assert repr(str(REPO_ROOT)) in launcher  # this checkout, whatever PYTHONPATH a block sets
+
+
+def test_the_policies_page_example_is_the_one_in_examples() -> None:
+    """docs/policies.md's example policy is shipped as examples/my_policies.py (the file the
+    leaderboard's 'Add your policy' command runs from a clone): the two stay the same."""
+    written = [b for b in PAGES["docs/policies.md"] if b.write == "my_policies.py"]
+    assert len(written) == 1, "docs/policies.md should save one block as my_policies.py"
+    shipped = (REPO_ROOT / "examples" / "my_policies.py").read_text(encoding="utf-8")
+    assert written[0].code == shipped, (
+        "docs/policies.md's my_policies.py block and examples/my_policies.py differ: copy the "
+        "page's block into the file"
+    )
