@@ -3,7 +3,7 @@
 Times accuracy / completion / ratio / F-score of a 200k-sample pair beside a bare
 ``scipy.spatial.cKDTree`` build + query of the same points in the same run.
 
-Goal (evaluation issue): the metrics of a 200,000 vs 200,000 sample pair in under 2 s on the
+Goal: the metrics of a 200,000 vs 200,000 sample pair in under 2 s on the
 2-core CI machine. Also times surface sampling, the whole mesh-to-mesh call and culling of a
 reconstruction by a trajectory, which an episode's scoring pays too.
 

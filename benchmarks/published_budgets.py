@@ -9,10 +9,9 @@ per scene: every policy's mean +- std over seeds (coverage, completion ratio of 
 the observable surface, accuracy, completion, MAD of the reference TSDF map, the policy's own
 map where it has one, path, collisions, failed episodes, time per step by phase), the
 published references beside them, which policy has the best completion ratio, and the
-coverage curves at ten checkpoints with the check of the issue "The NARUTO agent that wins"
-(NARUTO at least as high as frontier at every checkpoint after step 500, in the mean over
-seeds and per seed). It runs
-no episode; the commands that make the records are on its docs page.
+coverage curves at ten checkpoints with the check that NARUTO is at least as high as frontier
+at every checkpoint after step 500, in the mean over seeds and per seed. It runs no episode;
+the commands that make the records are on its docs page.
 
 Example::
 
@@ -82,23 +81,12 @@ class Args:
     """harness output folders (one scene each)"""
     neural_episodes: list[str] = field(
         default_factory=lambda: [
-            str(RESULTS / "naruto_neural_office0"
-                / "naruto_episode_office0_neural_2000steps_mad.json"),
-            str(RESULTS / "naruto_neural_office0"
-                / "naruto_episode_office0_neural_2000steps_no_active_sampling.json"),
-            str(RESULTS / "naruto_neural_office0"
-                / "naruto_episode_office0_neural_2000steps_final_agent.json"),
+            str(RESULTS / "naruto_neural_office0" / "naruto_episode_office0_neural_2000steps.json"),
         ]
     )
     """naruto_episode.py records of the neural agent on the Replica sample (labelled by
     their ``--tag``)"""
-    neural_replays: list[str] = field(
-        default_factory=lambda: [
-            str(RESULTS / "naruto_neural_office0" / "reference_map_replayed_raster_sim.json"),
-            str(RESULTS / "naruto_neural_office0"
-                / "reference_map_replayed_no_active_sampling.json"),
-        ]
-    )
+    neural_replays: list[str] = field(default_factory=list)
     """replica_passive.py --trajectory replays of those episodes' poses, in the same order:
     the MAD of their reference maps (episodes recorded before MAD was scored)"""
     out: str = str(RESULTS / "published_budgets.md")

@@ -4,8 +4,8 @@ The pinhole RGB-D frame by ray casting and by rasterizing, the panorama and a wh
 side by side with a bare Open3D ``RaycastingScene.cast_rays`` of the same rays in the same run.
 
 Goals:
-* env issue: a ray-cast RGB-D frame costs at most 1.25x the bare depth cast;
-* rasterizer issue: the 680 x 1200 RGB-D frame with ``pinhole_backend="raster"`` at least 6x
+* a ray-cast RGB-D frame costs at most 1.25x the bare depth cast;
+* the 680 x 1200 RGB-D frame with ``pinhole_backend="raster"`` at least 6x
   faster than the bare cast of the same rays, on the Replica sample and on the apartment.
 
 Every frame time is the median over ``repeats`` rounds of ``poses`` poses per scene. A second

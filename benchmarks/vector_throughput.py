@@ -2,7 +2,7 @@
 
 Steps/s of the batched ``NarutoReconVectorEnv`` against Gymnasium's vector envs.
 
-Settings (issue "RL researchers' path"): a 64 x 64 pinhole camera
+Settings: a 64 x 64 pinhole camera
 (``PinholeCamera(64, 64, 32, 32, 31.5, 31.5)``), the observation panorama off, discrete random
 actions, the default room. Goals: at least 2,000 steps/s with 64 envs on 2 cores, at least 5x
 the ``AsyncVectorEnv`` of the same settings in the same run, and the single env at least 800
@@ -31,7 +31,7 @@ Reported, all in one run and process (load average printed beside every figure):
   resets' scene generation is in the figure, beside the same number of agents sharing one
   generated room (``procedural:room:3``).
 
-* the scaling table (issue "Use the whole machine"): the batched env with 256 envs, 64 x 64,
+* the scaling table: the batched env with 256 envs, 64 x 64,
   panorama off, on 1, 2, 4, 8 and 16 CPUs (up to what the machine has, and all of them),
   each point timed in a fresh process pinned to that many CPUs (``sched_setaffinity``; its
   worker processes inherit the mask), with its default workers and threads and with the

@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
-# Sets up, then runs the NARUTO agent on the default scene (about 3 minutes on 2 cores);
-# outputs land in outputs/demo. Flags pass through: --policy, --scene, --steps, --seed, --out.
+# Sets up what the demo needs (the system library Open3D loads, the CPU torch wheel, the
+# package with its viewer extra: no test tools), then runs the NARUTO agent on the default
+# scene (one to two minutes on 2 cores); outputs land in outputs/demo. Flags pass through
+# (naruto-demo --help lists them). torch comes from PyTorch's CPU wheel index,
+# https://download.pytorch.org/whl/cpu (TORCH_INDEX_URL overrides it: scripts/setup.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh
+bash scripts/setup.sh viewer
 "${PYTHON:-python3}" -m naruto_agent.demo "$@"

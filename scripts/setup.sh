@@ -1,21 +1,57 @@
 #!/usr/bin/env bash
-# Installs what naruto-gym needs on a fresh machine: the system library Open3D loads, the CPU
-# torch wheel, then the package with its test extras. Safe to run again.
+# Installs what naruto-gym needs on a fresh Debian/Ubuntu machine: the system library Open3D
+# loads, the CPU torch wheel, then the package with the extras named as the argument
+# (default: test). Safe to run again.
+#
+#   bash scripts/setup.sh            # the package with its test extra (what CI runs)
+#   bash scripts/setup.sh viewer     # the package with the demo's viewer extra only
+#
+# With the test extra it also installs what the 3D page's headless-browser test drives:
+# Debian's chromium (apt-get) and playwright (PyPI); the test starts /usr/bin/chromium
+# through playwright, so `playwright install` (a download of its own browsers) is not needed.
+#
+# torch comes from TORCH_INDEX_URL, by default PyTorch's CPU wheel index, the same as
+#   pip install torch --index-url https://download.pytorch.org/whl/cpu
+# (PyPI's Linux wheel brings several GB of CUDA libraries). A machine whose pip already
+# serves the CPU wheel can set TORCH_INDEX_URL= (empty: pip's configured index).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON="${PYTHON:-python3}"
+EXTRAS="${1:-test}"
+TORCH_VERSION="2.13.0"
+TORCH_INDEX_URL="${TORCH_INDEX_URL-https://download.pytorch.org/whl/cpu}"
+PIP=("$PYTHON" -m pip install --quiet --disable-pip-version-check)
 
-if ! ldconfig -p 2>/dev/null | grep -q "libusb-1.0.so.0"; then
+# apt_install PACKAGE...: install system packages, as root or through sudo.
+apt_install() {
     if [ "$(id -u)" -eq 0 ]; then
-        apt-get update -qq && apt-get install -y -qq libusb-1.0-0 >/dev/null
+        apt-get update -qq && apt-get install -y -qq "$@" >/dev/null
     elif command -v sudo >/dev/null; then
-        sudo apt-get update -qq && sudo apt-get install -y -qq libusb-1.0-0 >/dev/null
+        sudo apt-get update -qq && sudo apt-get install -y -qq "$@" >/dev/null
     else
-        echo "Open3D needs libusb-1.0-0: install it with your system's package manager" >&2
+        echo "install $* with your system's package manager, then run this again" >&2
         exit 1
     fi
+}
+
+if ! ldconfig -p 2>/dev/null | grep -q "libusb-1.0.so.0"; then
+    apt_install libusb-1.0-0  # Open3D loads it
 fi
 
-# torch first, pinned, so that the package's torch range never pulls a multi-GB CUDA build.
-"$PYTHON" -m pip install --quiet --disable-pip-version-check "torch==2.13.0"
-"$PYTHON" -m pip install --quiet --disable-pip-version-check -e ".[test]"
+# torch first, pinned, so that the package's torch range never pulls a CUDA build.
+if ! "$PYTHON" -c "import torch, sys; sys.exit(torch.__version__.split('+')[0] != '$TORCH_VERSION')" \
+        2>/dev/null; then
+    index=()
+    if [ -n "$TORCH_INDEX_URL" ]; then
+        index=(--index-url "$TORCH_INDEX_URL")
+    fi
+    "${PIP[@]}" "torch==$TORCH_VERSION" "${index[@]}"
+fi
+"${PIP[@]}" -e ".[$EXTRAS]"
+
+if [[ ",$EXTRAS," == *",test,"* ]]; then
+    if [ ! -x /usr/bin/chromium ]; then
+        apt_install chromium
+    fi
+    "${PIP[@]}" playwright
+fi

@@ -39,9 +39,21 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     pytest.importorskip("mkdocstrings", reason="needs the docs extra: pip install -e '.[docs]'")
     out = tmp_path_factory.mktemp("site")
     result = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(ROOT / "mkdocs.yml"),
-         "-d", str(out)],
-        cwd=ROOT, capture_output=True, text=True, timeout=600,
+        [
+            sys.executable,
+            "-m",
+            "mkdocs",
+            "build",
+            "--strict",
+            "-f",
+            str(ROOT / "mkdocs.yml"),
+            "-d",
+            str(out),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
         env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
     )
     if result.returncode != 0:
@@ -80,3 +92,40 @@ def test_readme_is_short() -> None:
         f"README.md has {len(lines)} lines; keep it at most {README_MAX_LINES} and move detail "
         "to docs/"
     )
+
+
+def _nav_titles(items: list, section: str = "") -> list[tuple[str, str]]:
+    """(section, title) of every titled page of an mkdocs ``nav`` list."""
+    titles = []
+    for item in items:
+        if not isinstance(item, dict):
+            continue
+        for title, value in item.items():
+            if isinstance(value, list):
+                titles += _nav_titles(value, section or title)
+            else:
+                titles.append((section, title))
+    return titles
+
+
+def test_no_page_title_twice_in_the_navigation() -> None:
+    """Outside the API reference (which mirrors the packages' names), a title names one page."""
+    yaml = pytest.importorskip("yaml")
+    nav = yaml.safe_load((ROOT / "mkdocs.yml").read_text(encoding="utf-8"))["nav"]
+    titles = [title for section, title in _nav_titles(nav) if section != "API reference"]
+    repeated = sorted({title for title in titles if titles.count(title) > 1})
+    assert not repeated, f"navigation titles used for two pages in mkdocs.yml: {repeated}"
+
+
+def test_the_leaderboard_page_has_the_generators_add_your_policy_section() -> None:
+    """docs/benchmarks/leaderboard.md is generated; its 'Add your policy' section is the one
+    naruto_agent.benchmark.leaderboard writes now (a clone-runnable command, no local paths)."""
+    from naruto_agent.benchmark.leaderboard import ADD_YOUR_POLICY, _add_your_policy
+
+    page = (ROOT / "docs" / "benchmarks" / "leaderboard.md").read_text(encoding="utf-8")
+    assert "\n".join(_add_your_policy()) in page, (
+        "regenerate docs/benchmarks/leaderboard.md (python -m naruto_agent.benchmark.leaderboard)"
+    )
+    assert "/work" not in ADD_YOUR_POLICY and "model_path" not in ADD_YOUR_POLICY
+    policy_file = ADD_YOUR_POLICY.split("--policies ")[1].split(":")[0]
+    assert (ROOT / policy_file).is_file(), f"{policy_file} is not in the repository"

@@ -42,6 +42,19 @@ naruto-benchmark --suite test --size-class small --suite-limit 1 --policies rand
 python -m naruto_agent.benchmark.leaderboard suite_check --img-dir img > leaderboard.md
 grep -q "## small" leaderboard.md
 -->"""
+#: The one command that runs a policy on this page's scenes from a clone of the repository:
+#: the example policy of docs/policies.md, shipped as examples/my_policies.py.
+ADD_YOUR_POLICY = (
+    "naruto-benchmark --suite test --policies examples/my_policies.py:TurnerPolicy --seeds 0 \\\n"
+    "    --eval-points 4 --out-dir runs/my_suite"
+)
+ADD_YOUR_POLICY_TWIN = """<!-- docs-test: twin add-policy bash slow
+naruto-benchmark --suite test --size-class small --suite-limit 1 \\
+    --policies examples/my_policies.py:TurnerPolicy --seeds 0 --steps 3 --workers 0 \\
+    --image-scale 0.1 --eval-points 1 --eval-samples 2000 --checkpoint-samples 2000 \\
+    --eval-samples-per-m2 0 --no-plots --no-progress --out-dir runs/my_suite
+grep -q "| TurnerPolicy |" runs/my_suite/statistics.md
+-->"""
 CURVES_PNG = "leaderboard_curves.png"
 PAIRED_PNG = "leaderboard_paired.png"
 
@@ -55,6 +68,33 @@ def _machine_line(machine: dict[str, Any]) -> str:
         + (f", load {machine['load_average'][0]:.1f} at the start"
            if machine.get("load_average") else "")
     )
+
+
+def _add_your_policy() -> list[str]:
+    """The page's 'Add your policy' section: one command that runs from a clone."""
+    return [
+        "## Add your policy",
+        "",
+        "One command runs a policy on the scenes below with their budgets, the same seed, "
+        "camera and scoring, from a clone of the repository. Here it runs the example of the "
+        "[policies page](../policies.md#adding-a-policy), shipped as "
+        "`examples/my_policies.py`; name yours the same way, by file "
+        "(`path/to/file.py:ClassName`) or module (`package.module:ClassName`):",
+        "",
+        "<!-- docs-test: skip (hours: 24 houses; covered by: add-policy) -->",
+        "```bash",
+        ADD_YOUR_POLICY,
+        "```",
+        ADD_YOUR_POLICY_TWIN,
+        "",
+        "It writes `runs/my_suite/statistics.md`, whose tables have this page's columns and "
+        "intervals, so your rows compare with the ones below (`--size-class small` runs one "
+        "class, `--suite-limit 1` one house per class, `--variant open` the open scans). "
+        "Where you hold the folder of the runs below, run into it instead (`--out-dir`): the "
+        "episodes already there are kept, only yours run, and the command at the end of this "
+        "page then puts your policy on it.",
+        "",
+    ]
 
 
 def _runs_section(manifest: dict[str, Any]) -> list[str]:
@@ -164,13 +204,7 @@ def leaderboard_markdown(
         "what each policy does.",
         "",
         *([note, ""] if (note := _partial_note(manifest)) else []),
-        "## Add your policy",
-        "",
-        "Run the command below with your policy added to `--policies` "
-        "(`package.module:ClassName` or `path/to/file.py:ClassName`) into the same folder: the "
-        "episodes already there are kept, only yours run. Then generate this page again with "
-        "the command at its end.",
-        "",
+        *_add_your_policy(),
     ]
     for size_class in ordered_groups(summary):
         lines += [

@@ -16,7 +16,7 @@ from naruto_agent.mapping import NeuralMapperConfig, TsdfMapperConfig
 from naruto_agent.naruto.goal_search import GoalSearchConfig
 from naruto_agent.naruto.recovery import RecoveryConfig
 from naruto_agent.planning import PlannerConfig
-from naruto_agent.policies.config import pop_guard_settings, rename_settings
+from naruto_agent.policies.config import pop_guard_settings, refuse_renamed_settings
 
 #: The mappers the agent can build (``NarutoPolicy(mapper=...)``).
 MAPPERS = ("tsdf", "neural")
@@ -132,9 +132,9 @@ def build_config(config: NarutoConfig | None = None, **settings: Any) -> NarutoC
 
     Top-level fields are given by name (``goal_attempts=1``); a section takes a dict of its
     fields (``goal_search={"top_k": 1}``, ``planner={"time_limit_s": 1.0}``) or an instance.
-    The fields of the ``guard`` section are also given by name (``max_held_moves=5``), and
-    its former names still work with a ``DeprecationWarning``
-    (:data:`~naruto_agent.policies.config.RENAMED_SETTINGS`), as for every policy.
+    The fields of the ``guard`` section are also given by name (``max_held_moves=5``); their
+    old names (:data:`~naruto_agent.policies.config.RENAMED_SETTINGS`) are refused with a
+    ``TypeError`` naming the new one, as for every policy.
     JSON-able, so benchmark specs can carry them.
 
     Args:
@@ -146,8 +146,10 @@ def build_config(config: NarutoConfig | None = None, **settings: Any) -> NarutoC
 
     Raises:
         ValueError: for an unknown setting or section field, or an invalid value.
+        TypeError: for an old name of a guard setting (the message names the new one).
     """
-    settings = rename_settings(settings)
+    refuse_renamed_settings(settings)
+    settings = dict(settings)
     config = config or NarutoConfig()
     known = {f.name for f in fields(NarutoConfig)}
     guard_updates = pop_guard_settings(settings, known)

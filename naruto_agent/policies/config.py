@@ -10,7 +10,6 @@ or as ``guard={...}``.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, TypeVar
@@ -19,7 +18,8 @@ from naruto_agent.guards.scan_guard import ScanGuardConfig
 
 ConfigT = TypeVar("ConfigT")
 
-#: Keywords renamed when the policies came to share one guard: old name -> new name.
+#: Keywords renamed when the policies came to share one guard: old name -> new name. The old
+#: names are refused with an error that names the new one (no aliases before 1.0).
 RENAMED_SETTINGS: dict[str, str] = {
     "panorama_move_check": "panorama_check",  # FrontierPolicy
     "check_moves_on_panorama": "panorama_check",  # NarutoConfig's name of the same switch
@@ -215,14 +215,14 @@ def build_config(
 
     Fields of ``config_type`` are given by name; so are the fields of its ``guard`` section
     (:class:`~naruto_agent.guards.ScanGuardConfig`), which may also come whole as
-    ``guard=`` (a dict of its fields or a ``ScanGuardConfig``). The names of
-    :data:`RENAMED_SETTINGS` still work, with a ``DeprecationWarning``. The result is a new
+    ``guard=`` (a dict of its fields or a ``ScanGuardConfig``). The result is a new
     object: the policy owns it.
 
     Raises:
-        TypeError: a keyword that names no setting (as a constructor would).
+        TypeError: a keyword that names no setting (as a constructor would), or an old name
+            of :data:`RENAMED_SETTINGS` (the message names the new one).
     """
-    settings = rename_settings(settings)
+    refuse_renamed_settings(settings)
     base = config if config is not None else config_type()
     own = {item.name for item in fields(config_type)}  # type: ignore[arg-type]
     has_guard = "guard" in own
@@ -238,23 +238,16 @@ def build_config(
     return replace(base, **settings)  # type: ignore[type-var]
 
 
-def rename_settings(settings: Mapping[str, Any]) -> dict[str, Any]:
-    """``settings`` with the former names of :data:`RENAMED_SETTINGS` replaced by the new
-    ones, each with a ``DeprecationWarning`` (shown where the policy was built).
+def refuse_renamed_settings(settings: Mapping[str, Any]) -> None:
+    """Refuse the old names of :data:`RENAMED_SETTINGS` among ``settings``.
 
     Raises:
-        TypeError: a former name and its new name are both given.
+        TypeError: an old name was given; the message names the setting to use instead.
     """
-    settings = dict(settings)
     for old, new in RENAMED_SETTINGS.items():
-        if old not in settings:
-            continue
-        if new in settings:
-            raise TypeError(f"give {new!r} only ({old!r} is its former name)")
-        warnings.warn(f"the policy setting {old!r} is now called {new!r}", DeprecationWarning,
-                      stacklevel=4)
-        settings[new] = settings.pop(old)
-    return settings
+        if old in settings:
+            raise TypeError(f"the policy setting {old!r} is now called {new!r}: pass "
+                            f"{new}={settings[old]!r} instead")
 
 
 def pop_guard_settings(settings: dict[str, Any], own: Collection[str]) -> dict[str, Any]:

@@ -56,7 +56,7 @@ def test_overrides_reach_fields_and_sections_and_leave_the_base_alone() -> None:
 
 def test_the_guard_section_takes_the_names_every_policy_takes() -> None:
     """The guard's fields are given by name or as a section, as for frontier and random; the
-    agent's former name of the panorama switch still works, with a DeprecationWarning."""
+    agent's old name of the panorama switch is refused with an error naming the new one."""
     config = build_config(max_held_moves=5, open_sky_share=None, edge_probe_m=0.2,
                           panorama_margin_m=0.02)
     assert config.guard == ScanGuardConfig(max_held_moves=5, open_sky_share=None,
@@ -65,9 +65,9 @@ def test_the_guard_section_takes_the_names_every_policy_takes() -> None:
     config = build_config(guard={"max_held_moves": 1}, panorama_edge_probe=False)
     assert config.guard.max_held_moves == 1 and not config.guard.panorama_edge_probe
     assert build_config(guard=ScanGuardConfig(max_held_moves=2)).guard.max_held_moves == 2
-    with pytest.warns(DeprecationWarning, match="'check_moves_on_panorama' is now called"):
-        config = build_config(check_moves_on_panorama=False)
-    assert not config.guard.panorama_check
+    with pytest.raises(TypeError, match="'check_moves_on_panorama' is now called 'panorama_ch"):
+        build_config(check_moves_on_panorama=False)
+    assert not build_config(panorama_check=False).guard.panorama_check
     with pytest.raises(ValueError, match="unknown guard settings"):
         build_config(guard={"max_held_steps": 1})
     with pytest.raises(ValueError, match="unknown NARUTO settings"):

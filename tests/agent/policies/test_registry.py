@@ -127,15 +127,14 @@ def test_unknown_and_invalid_settings_are_refused():
         FrontierPolicy(guard=3)
 
 
-def test_former_names_still_work_with_a_deprecation_warning():
-    with pytest.warns(DeprecationWarning, match="'panorama_move_check' is now called"):
-        policy = FrontierPolicy(panorama_move_check=False)
-    assert not policy.config.guard.panorama_check
-    with pytest.warns(DeprecationWarning, match="'max_held_steps' is now called"):
-        policy = RandomPolicy(max_held_steps=2)
-    assert policy.config.guard.max_held_moves == 2
-    with pytest.raises(TypeError, match="give 'max_held_moves' only"):
+def test_old_setting_names_are_refused_with_the_new_name():
+    with pytest.raises(TypeError, match="'panorama_move_check' is now called 'panorama_check'"):
+        FrontierPolicy(panorama_move_check=False)
+    with pytest.raises(TypeError, match="pass max_held_moves=2 instead"):
+        RandomPolicy(max_held_steps=2)
+    with pytest.raises(TypeError, match="'max_held_steps' is now called"):
         RandomPolicy(max_held_steps=2, max_held_moves=3)
+    assert RandomPolicy(max_held_moves=2).config.guard.max_held_moves == 2
 
 
 def test_naruto_stays_lazy_until_looked_up_and_then_registers_itself(registry):
