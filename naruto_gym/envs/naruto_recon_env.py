@@ -106,6 +106,10 @@ class NarutoReconEnv(gym.Env):
     * ``up_axis``: the up axis of a mesh file (``"z"``, ``"y"``, ``"-y"``, ``"x"``, ``"-x"``,
       ``"-z"``), rotated to +z; ``"auto"`` reads it from a recognised dataset layout (ScanNet
       ``*_vh_clean_2.ply``, Replica ``mesh.ply`` beside ``textures/``) and raises otherwise.
+    * ``mesh_units``: the length unit of a mesh file, ``"m"`` (default), ``"cm"`` or ``"mm"``;
+      it is rescaled to metres. A file whose size says it is not in these units (a room in
+      millimetres read as metres: thousands of metres across with coarse triangles) raises
+      ``ValueError`` naming the likely unit (see :mod:`naruto_gym.scenes.units`).
     * ``action_mode``: ``"pose"``, ``"delta"`` or ``"discrete"``.
     * ``camera``: ``PinholeCamera`` intrinsics (default 680 x 1200, fx = fy = 600).
     * ``image_scale``: resolution factor applied to ``camera`` (0.25 gives 170 x 300).
@@ -170,6 +174,7 @@ class NarutoReconEnv(gym.Env):
         self,
         scene: str | Path | Scene | None = None,
         up_axis: str = "z",
+        mesh_units: str = "m",
         action_mode: str = "pose",
         camera: PinholeCamera | None = None,
         image_scale: float = 1.0,
@@ -194,6 +199,7 @@ class NarutoReconEnv(gym.Env):
     ) -> None:
         settings = EnvSettings(
             up_axis=up_axis,
+            mesh_units=mesh_units,
             action_mode=action_mode,
             camera=camera,
             image_scale=image_scale,
@@ -335,9 +341,7 @@ class NarutoReconEnv(gym.Env):
         gain = self.coverage.update(self._pose, self._depth)
         return self._observation(), self._info(gain, False, "")
 
-    def step(
-        self, action: Any
-    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if self._rgb is None:
             raise RuntimeError("call reset() before step()")
         target = self._target_pose(self._validated_action(action))

@@ -28,6 +28,7 @@ class EnvSettings:
     """
 
     up_axis: str = "z"
+    mesh_units: str = "m"
     action_mode: str = "pose"
     camera: PinholeCamera | None = None
     image_scale: float = 1.0

@@ -17,6 +17,7 @@ import numpy as np
 from naruto_gym.motion.actions import ACTION_MODES
 from naruto_gym.motion.collision import ESCAPE_RULES
 from naruto_gym.scenes.mesh_scene import UP_AXES
+from naruto_gym.scenes.units import MESH_UNITS
 from naruto_gym.sensors.pinhole import PINHOLE_BACKENDS, PinholeCamera
 from naruto_gym.sensors.raycaster import RAYCASTER_BACKENDS
 
@@ -90,9 +91,7 @@ def check_panorama_shape(value: Any) -> tuple[int, int] | None:
     try:
         height, width = value
     except (TypeError, ValueError):
-        raise ValueError(
-            f"panorama_shape must be None or (height, width), got {value!r}"
-        ) from None
+        raise ValueError(f"panorama_shape must be None or (height, width), got {value!r}") from None
     for side, name in ((height, "height"), (width, "width")):
         check_integer(f"panorama_shape {name}", side, low=1, high=MAX_PANORAMA_SIDE)
     return int(height), int(width)
@@ -119,6 +118,7 @@ def check_settings(settings: Any) -> None:
         ValueError: the first field that is of the wrong type or out of range, by name.
     """
     check_choice("up_axis", settings.up_axis, UP_AXES)
+    check_choice("mesh_units", settings.mesh_units, tuple(MESH_UNITS))
     check_choice("action_mode", settings.action_mode, ACTION_MODES)
     if settings.camera is not None and not isinstance(settings.camera, PinholeCamera):
         raise ValueError(
@@ -127,9 +127,7 @@ def check_settings(settings: Any) -> None:
         )
     check_number("image_scale", settings.image_scale, low=0.0)
     camera = settings.camera or PinholeCamera()
-    scaled = camera.width * float(settings.image_scale), camera.height * float(
-        settings.image_scale
-    )
+    scaled = camera.width * float(settings.image_scale), camera.height * float(settings.image_scale)
     if max(scaled) > MAX_IMAGE_SIDE:
         raise ValueError(
             f"image_scale={settings.image_scale!r} makes a {scaled[0]:.0f} x {scaled[1]:.0f} "
@@ -142,16 +140,21 @@ def check_settings(settings: Any) -> None:
     check_number("max_translation_m", settings.max_translation_m, low=0.0, high=MAX_LENGTH_M)
     check_number("max_rotation_deg", settings.max_rotation_deg, low=0.0, high=180.0)
     if settings.escape_no_hit_threshold is not None:
-        check_number("escape_no_hit_threshold", settings.escape_no_hit_threshold, low=0.0,
-                     high=1.0, low_open=False)
+        check_number(
+            "escape_no_hit_threshold",
+            settings.escape_no_hit_threshold,
+            low=0.0,
+            high=1.0,
+            low_open=False,
+        )
     check_choice("escape_rule", settings.escape_rule, ESCAPE_RULES)
     check_number("collision_penalty", settings.collision_penalty, low=-1e12, high=1e12)
-    check_integer("coverage_samples", settings.coverage_samples, low=1,
-                  high=MAX_COVERAGE_SAMPLES)
+    check_integer("coverage_samples", settings.coverage_samples, low=1, high=MAX_COVERAGE_SAMPLES)
     check_number("coverage_range_m", settings.coverage_range_m, low=0.0, high=MAX_LENGTH_M)
     check_bool("observable_only", settings.observable_only)
-    check_number("start_clearance_m", settings.start_clearance_m, low=0.0, high=MAX_LENGTH_M,
-                 low_open=False)
+    check_number(
+        "start_clearance_m", settings.start_clearance_m, low=0.0, high=MAX_LENGTH_M, low_open=False
+    )
     check_choice("raycaster_backend", settings.raycaster_backend, RAYCASTER_BACKENDS)
     check_choice("pinhole_backend", settings.pinhole_backend, PINHOLE_BACKENDS)
 

@@ -23,6 +23,7 @@ FAST = {**CHEAP, "observable_only": False}
 #: In-range values of each keyword, drawn beside the odd ones (small where the cost grows).
 VALID: dict[str, st.SearchStrategy] = {
     "up_axis": st.sampled_from(["z", "y", "-y", "x", "-x", "-z"]),
+    "mesh_units": st.sampled_from(["m", "cm", "mm"]),
     "action_mode": st.sampled_from(["pose", "delta", "discrete"]),
     "image_scale": st.floats(0.01, 0.08),
     "max_depth_m": st.floats(0.01, 1e6),
@@ -64,7 +65,7 @@ def _reset_and_step(env: gym.Env) -> None:
 
 
 @pytest.mark.parametrize("keyword", sorted(VALID))
-@settings(max_examples=8)  # per keyword: 20 keywords
+@settings(max_examples=8)  # per keyword: 21 keywords
 @given(data=st.data())
 def test_every_keyword_is_used_or_refused_by_name(keyword, data):
     value = data.draw(st.one_of(odd_value, VALID[keyword]), label=keyword)
