@@ -66,8 +66,8 @@ def test_the_rescaled_room_loads_in_metres(tmp_path, scale, unit):
 def test_the_batched_env_rescales_and_refuses_alike(tmp_path):
     path = _write(tmp_path, _room(ROOM_M, 1000.0), "room_mm")
     with pytest.raises(ValueError, match="mesh_units='mm'"):
-        NarutoReconVectorEnv(2, scene=path, workers=1, **CHEAP)
-    env = NarutoReconVectorEnv(2, scene=path, workers=1, mesh_units="mm", **CHEAP)
+        NarutoReconVectorEnv(2, scene=path, **CHEAP)
+    env = NarutoReconVectorEnv(2, scene=path, mesh_units="mm", **CHEAP)
     try:
         env.reset(seed=0)
         assert np.sort(env.scene_runtimes[0].scene.extents)[1] == pytest.approx(4.0)
