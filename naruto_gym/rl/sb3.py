@@ -25,6 +25,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.vector import make_vector_env
 from naruto_gym.vector.infos import agent_info
+from naruto_gym.wrappers.learning import for_learning
 
 
 class Sb3VecEnv(VecEnv):
@@ -119,8 +120,6 @@ def make_sb3_vec_env(
             renders frames ``size`` pixels high (the default camera scaled), so nothing is
             drawn only to be thrown away by the resize.
     """
-    from naruto_gym.wrappers import for_learning
-
     env_kwargs.setdefault("action_mode", "discrete")
     env_kwargs.setdefault("panorama_shape", None)
     if "camera" not in env_kwargs and "image_scale" not in env_kwargs:

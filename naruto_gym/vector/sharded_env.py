@@ -34,9 +34,10 @@ class ShardedVectorEnv(BatchedEnvBase):
     (such as a reset pose outside the scene) is raised in the caller and leaves the env usable
     (see :mod:`naruto_gym.vector.sharded`).
 
+    ``num_envs``, ``scene``, ``max_episode_steps``, ``autoreset_mode``, ``scene_cache_size``
+    and ``render_mode`` are ``NarutoReconVectorEnv``'s.
+
     Args:
-        num_envs, scene, max_episode_steps, autoreset_mode, scene_cache_size, render_mode:
-            as ``NarutoReconVectorEnv`` takes them.
         workers: the processes (None: chosen from the CPUs and ``num_envs``,
             :func:`~naruto_gym.vector.sharded.default_workers`); at most ``num_envs``.
         **env_kwargs: every other keyword of ``NarutoReconVectorEnv`` (``threads`` are the
