@@ -11,6 +11,7 @@ argument or an action is checked in one place.
 from __future__ import annotations
 
 import dataclasses
+from functools import cached_property
 from typing import Any
 
 import gymnasium as gym
@@ -19,10 +20,11 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from naruto_gym.envs.settings import EnvSettings
+from naruto_gym.envs.settings import BATCHED_PINHOLE_BACKEND, EnvSettings
 from naruto_gym.envs.validation import check_keyword_names, check_vector_keywords
 from naruto_gym.geometry.transforms import validate_pose
 from naruto_gym.sensors.panorama import EquirectangularCamera
+from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import resolve_threads
 
 #: The batched envs' own keywords (every other one is ``EnvSettings``').
@@ -37,10 +39,6 @@ VECTOR_KEYWORDS = frozenset(
         "reconstruct",
     }
 )
-#: The pinhole backend of the batched envs when none is given: rasterized frames where they
-#: are cheaper (small frames of meshes of moderate size), as RL wants; see
-#: ``NarutoReconVectorEnv``'s Arguments.
-BATCHED_PINHOLE_BACKEND = "auto"
 
 
 def accepted_keywords() -> frozenset[str]:
@@ -56,10 +54,7 @@ class BatchedEnvBase(gym.vector.VectorEnv):
         num_envs, max_episode_steps, autoreset_mode: as given (checked).
         settings: the agents' :class:`~naruto_gym.envs.settings.EnvSettings`.
         reconstruct: whether each agent fuses a reference map.
-        action_mode: ``settings.action_mode``.
-        camera, panorama_camera: one agent's pinhole camera and observation panorama camera
-            (None when the panorama is off).
-        max_depth_m: the sensor range.
+        thread_count: the CPUs the compiled loops use (``settings.threads`` resolved).
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -109,12 +104,7 @@ class BatchedEnvBase(gym.vector.VectorEnv):
         self.settings = EnvSettings(**env_kwargs)
         # Compiled loops (ray filling, shading, coverage) split agents between this many
         # threads; Open3D's casts use the process's default count.
-        self.threads = resolve_threads(self.settings.threads)
-        self.action_mode: str = self.settings.action_mode
-        self.camera = self.settings.pinhole_camera
-        shape = self.settings.panorama_shape
-        self.panorama_camera = EquirectangularCamera(*shape) if shape is not None else None
-        self.max_depth_m = float(self.settings.max_depth_m)
+        self.thread_count = resolve_threads(self.settings.threads)
         self._discrete_zeros = np.zeros(self.num_envs, np.int64)
         self._continuous_zeros = np.zeros((self.num_envs, 7))
         self._started = False
@@ -129,7 +119,7 @@ class BatchedEnvBase(gym.vector.VectorEnv):
 
     def _check_pose_actions(self, several_scenes: bool) -> None:
         """Pose actions are bounded by one scene's box: refuse them across several scenes."""
-        if self.action_mode == "pose" and several_scenes:
+        if self.settings.action_mode == "pose" and several_scenes:
             raise ValueError(
                 "action_mode='pose' bounds actions by one scene's box; use 'discrete' or "
                 "'delta' with several scenes or a procedural stream"
@@ -184,7 +174,8 @@ class BatchedEnvBase(gym.vector.VectorEnv):
         if not self._started:
             raise RuntimeError("call reset() before step()")
         n = self.num_envs
-        if self.action_mode == "discrete":
+        action_mode = self.settings.action_mode
+        if action_mode == "discrete":
             array = np.asarray(actions)
             if array.shape not in ((n,), (n, 1)) or not np.issubdtype(array.dtype, np.integer):
                 raise ValueError(
@@ -204,18 +195,16 @@ class BatchedEnvBase(gym.vector.VectorEnv):
             raise ValueError(f"actions must be a numeric array, got {actions!r}") from error
         expected = (n, *self.single_action_space.shape)
         if array.shape != expected:
-            raise ValueError(
-                f"{self.action_mode} actions must have shape {expected}, got {array.shape}"
-            )
+            raise ValueError(f"{action_mode} actions must have shape {expected}, got {array.shape}")
         if not np.all(np.isfinite(array)):
             raise ValueError("actions contain NaN or inf")
         low, high = self.single_action_space.low, self.single_action_space.high
         if np.any(array < low - 1e-5) or np.any(array > high + 1e-5):
             raise ValueError(
-                f"{self.action_mode} actions lie outside the action space "
+                f"{action_mode} actions lie outside the action space "
                 f"[{low.tolist()}, {high.tolist()}]"
             )
-        if self.action_mode == "pose" and np.any(np.linalg.norm(array[:, 3:7], axis=1) < 1e-6):
+        if action_mode == "pose" and np.any(np.linalg.norm(array[:, 3:7], axis=1) < 1e-6):
             raise ValueError(
                 "pose action quaternion (x, y, z, w) has zero norm; pass a unit quaternion"
             )
@@ -224,6 +213,19 @@ class BatchedEnvBase(gym.vector.VectorEnv):
         return self._discrete_zeros, padded
 
     # -- views both give ---------------------------------------------------------------------
+    @cached_property
+    def camera(self) -> PinholeCamera:
+        """One agent's pinhole camera (``settings.camera`` at ``settings.image_scale``; made
+        once)."""
+        return self.settings.pinhole_camera
+
+    @cached_property
+    def panorama_camera(self) -> EquirectangularCamera | None:
+        """One agent's observation panorama camera (None when the panorama is off; made
+        once)."""
+        shape = self.settings.panorama_shape
+        return EquirectangularCamera(*shape) if shape is not None else None
+
     @property
     def num_workers(self) -> int:
         """The processes that step the agents (1: this one)."""

@@ -68,7 +68,7 @@ class ShardedVectorEnv(BatchedEnvBase):
             dict(env_kwargs),
             "ShardedVectorEnv",
         )
-        workers = resolve_workers(workers, self.num_envs, self.threads)
+        workers = resolve_workers(workers, self.num_envs, self.thread_count)
         scenes = self._agent_scenes(scene)
         self._check_pose_actions(several_scenes(scenes))
         single_observation = observation_space(self.settings)
@@ -85,7 +85,7 @@ class ShardedVectorEnv(BatchedEnvBase):
             shares,
             single_observation,
             workers,
-            self.threads,
+            self.thread_count,
         )
         self._set_spaces(single_observation, self._agents.single_action_space())
 

@@ -149,7 +149,7 @@ class NarutoReconVectorEnv(BatchedEnvBase):
         self._steps = np.zeros(n, np.int64)
         self._mover = Mover(
             self._pool,
-            self.action_mode,
+            self.settings.action_mode,
             self.settings.max_translation_m,
             self.settings.max_rotation_rad,
             self._poses,
@@ -157,7 +157,7 @@ class NarutoReconVectorEnv(BatchedEnvBase):
             self._steps,
         )
         self._frames = FrameDrawer(
-            n, self.camera, self.panorama_camera, self.max_depth_m, self._poses
+            n, self.camera, self.panorama_camera, self.settings.max_depth_m, self._poses
         )
         self._coverage = BatchCoverage(n)
         self._rngs: list[np.random.Generator | None] = [None] * n
@@ -210,7 +210,7 @@ class NarutoReconVectorEnv(BatchedEnvBase):
             for group in self._pool.groups(others, np.ones(len(others), bool)):
                 members = others[group]
                 self._frames.draw(
-                    self._pool[members[0]], members, np.zeros(len(group), bool), self.threads
+                    self._pool[members[0]], members, np.zeros(len(group), bool), self.thread_count
                 )
         gains = np.zeros(self.num_envs)
         gains[indices] = self._observe(indices, None)
@@ -305,7 +305,7 @@ class NarutoReconVectorEnv(BatchedEnvBase):
         for i, seed in zip(agents, seeds, strict=True):
             if seed is not None or self._rngs[i] is None:
                 self._rngs[i], _ = seeding.np_random(seed)
-        self._pool.draw_scenes(agents, [self._rngs[i] for i in agents], self.threads)
+        self._pool.draw_scenes(agents, [self._rngs[i] for i in agents], self.thread_count)
         for i in agents:
             self._reset_state(int(i), options)
 
@@ -352,7 +352,7 @@ class NarutoReconVectorEnv(BatchedEnvBase):
         parts = (
             1
             if self.reconstruct or not pays
-            else max(1, min(self.threads, n // self._min_agents_per_part))
+            else max(1, min(self.thread_count, n // self._min_agents_per_part))
         )
         if parts == 1:
             moves = self._mover.move(stepping, discrete, continuous)
@@ -386,7 +386,7 @@ class NarutoReconVectorEnv(BatchedEnvBase):
         Returns each agent's coverage gain. ``part``: the share of the step this runs as
         (its compiled loops then stay in the calling thread); ``frames_start``: called once,
         as the first frames are drawn."""
-        threads = self.threads if part is None else 1
+        threads = self.thread_count if part is None else 1
         agents = np.asarray(agents, np.int64)
         gains = np.zeros(len(agents))
         if len(agents) == 0:

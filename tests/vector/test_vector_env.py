@@ -77,7 +77,7 @@ def run_both(
     )
     assert isinstance(vector, ShardedVectorEnv if workers > 1 else NarutoReconVectorEnv)
     if split:  # each step in two shares, one per thread, however few the agents and frames
-        vector.threads, vector._min_agents_per_part, vector._split_steps = 2, 1, True
+        vector.thread_count, vector._min_agents_per_part, vector._split_steps = 2, 1, True
     sync = gym.vector.SyncVectorEnv(
         [lambda: gym.make("NarutoRecon-v0", max_episode_steps=budget, **settings)] * num_envs,
         autoreset_mode=autoreset,
