@@ -1,18 +1,15 @@
 """Checks of the keyword arguments the envs take, each with an error that says what to pass.
 
 ``EnvSettings`` (the keywords ``NarutoReconEnv`` and ``NarutoReconVectorEnv`` share) and the
-vector env's own keywords are checked here, before anything is built, so that a wrong type,
-a NaN or a value out of range fails at construction with one ``ValueError`` naming the
-keyword, rather than deep inside a renderer or a Gymnasium space.
+vector env's own keywords are checked here, with the helpers of :mod:`naruto_gym.utils.checks`,
+before anything is built, so that a wrong type, a NaN or a value out of range fails at
+construction with one ``ValueError`` naming the keyword, rather than deep inside a renderer or
+a Gymnasium space.
 """
 
 from __future__ import annotations
 
-import math
-from numbers import Integral, Real
 from typing import Any
-
-import numpy as np
 
 from naruto_gym.motion.actions import ACTION_MODES
 from naruto_gym.motion.collision import ESCAPE_RULES
@@ -20,6 +17,13 @@ from naruto_gym.scenes.mesh_scene import UP_AXES
 from naruto_gym.scenes.units import MESH_UNITS
 from naruto_gym.sensors.pinhole import PINHOLE_BACKENDS, PinholeCamera
 from naruto_gym.sensors.raycaster import RAYCASTER_BACKENDS
+from naruto_gym.utils.checks import (
+    check_bool,
+    check_choice,
+    check_integer,
+    check_number,
+    is_integer,
+)
 
 #: The most pixels along either side of the pinhole image (``camera`` times ``image_scale``).
 MAX_IMAGE_SIDE = 16_384
@@ -30,58 +34,6 @@ MAX_PANORAMA_SIDE = 8_192
 MAX_LENGTH_M = 1e6
 #: The most coverage samples (each costs a projection per step).
 MAX_COVERAGE_SAMPLES = 10_000_000
-
-
-def _is_real(value: Any) -> bool:
-    return isinstance(value, Real) and not isinstance(value, (bool, np.bool_))
-
-
-def _is_integer(value: Any) -> bool:
-    return isinstance(value, Integral) and not isinstance(value, (bool, np.bool_))
-
-
-def check_number(
-    name: str,
-    value: Any,
-    *,
-    low: float | None = None,
-    high: float | None = None,
-    low_open: bool = True,
-) -> float:
-    """``value`` as a float, or a ``ValueError`` naming ``name``: it must be a finite real
-    number (not a bool), above ``low`` (or at least it, ``low_open=False``) and at most
-    ``high``."""
-    if not _is_real(value) or not math.isfinite(float(value)):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    number = float(value)
-    if low is not None and (number <= low if low_open else number < low):
-        relation = "greater than" if low_open else "at least"
-        raise ValueError(f"{name} must be {relation} {low:g}, got {value!r}")
-    if high is not None and number > high:
-        raise ValueError(f"{name} must be at most {high:g}, got {value!r}")
-    return number
-
-
-def check_integer(name: str, value: Any, *, low: int = 1, high: int | None = None) -> int:
-    """``value`` as an int, or a ``ValueError``: an integer (not a bool) in [low, high]."""
-    if not _is_integer(value) or value < low or (high is not None and value > high):
-        upper = f" and at most {high:,}" if high is not None else ""
-        raise ValueError(f"{name} must be an integer of at least {low}{upper}, got {value!r}")
-    return int(value)
-
-
-def check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
-    """``value`` when it is one of the strings ``choices``, else a ``ValueError``."""
-    if not isinstance(value, str) or value not in choices:
-        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
-    return value
-
-
-def check_bool(name: str, value: Any) -> bool:
-    """``value`` when it is a bool (Python's or NumPy's), else a ``ValueError``."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"{name} must be True or False, got {value!r}")
-    return bool(value)
 
 
 def check_panorama_shape(value: Any) -> tuple[int, int] | None:
@@ -164,7 +116,7 @@ def check_seed(seed: Any) -> int | None:
     integers of any width are converted), else a ``ValueError`` saying what to pass."""
     if seed is None:
         return None
-    if not _is_integer(seed) or seed < 0:
+    if not is_integer(seed) or seed < 0:
         raise ValueError(f"seed must be None or a non-negative integer, got {seed!r}")
     return int(seed)
 
