@@ -6,8 +6,11 @@ from __future__ import annotations
 
 import pytest
 
+from naruto_agent.guards.scan_guard import ScanGuardConfig
 from naruto_agent.mapping.config import NeuralMapperConfig
 from naruto_agent.naruto.config import NarutoConfig
+from naruto_agent.naruto.goal_search import GoalSearchConfig
+from naruto_agent.naruto.recovery import RecoveryConfig
 from naruto_agent.policies.config import FrontierConfig, PassiveConfig, RandomConfig
 
 CASES = [
@@ -27,13 +30,21 @@ CASES = [
     (NeuralMapperConfig, "active_top_rays", 5000),
     (NeuralMapperConfig, "active_score", "loudest"),
     (NeuralMapperConfig, "learning_rate", "fast"),
+    (GoalSearchConfig, "GoalSearchConfig.top_k", 0),
+    (GoalSearchConfig, "GoalSearchConfig.min_range_m", 99.0),
+    (GoalSearchConfig, "GoalSearchConfig.explore_first_share", 1.5),
+    (RecoveryConfig, "RecoveryConfig.window", 1),
+    (RecoveryConfig, "RecoveryConfig.retreat_m", 0.0),
+    (ScanGuardConfig, "max_held_moves", -1),
+    (ScanGuardConfig, "open_sky_share", 0.0),
 ]
 
 
 @pytest.mark.parametrize(("config", "name", "value"), CASES)
 def test_a_bad_setting_is_refused_by_name(config, name, value):
-    with pytest.raises(ValueError, match=rf"^{name} must be"):
-        config(**{name: value})
+    field = name.rpartition(".")[2]
+    with pytest.raises(ValueError, match=rf"^{name}( \(or None\))? must be"):
+        config(**{field: value})
 
 
 def test_relations_between_settings_name_both():
@@ -46,7 +57,17 @@ def test_relations_between_settings_name_both():
 
 
 @pytest.mark.parametrize(
-    "config", [FrontierConfig, RandomConfig, PassiveConfig, NarutoConfig, NeuralMapperConfig]
+    "config",
+    [
+        FrontierConfig,
+        RandomConfig,
+        PassiveConfig,
+        NarutoConfig,
+        NeuralMapperConfig,
+        GoalSearchConfig,
+        RecoveryConfig,
+        ScanGuardConfig,
+    ],
 )
 def test_the_defaults_pass(config):
     config()
