@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 import naruto_gym  # noqa: F401
 from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
 from naruto_gym.sensors.pinhole import PinholeCamera
-from naruto_gym.vector.vector_env import NarutoReconVectorEnv
+from naruto_gym.vector import NarutoReconVectorEnv, make_vector_env
 from tests.property.scenes import CHEAP, small_room
 from tests.property.strategies import any_float, any_integer, odd_value
 
@@ -156,7 +156,7 @@ def _check_vector_keyword(keyword: str, value) -> None:
         return
     settings = {**FAST, "num_envs": 2, keyword: value}
     try:
-        env = NarutoReconVectorEnv(scene=small_room(), **settings)
+        env = make_vector_env(scene=small_room(), **settings)
     except ValueError as error:
         assert keyword in str(error) or (keyword == "autoreset_mode"), str(error)
         return
