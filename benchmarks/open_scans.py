@@ -319,7 +319,7 @@ def recorded_moves(scene: str, moves: int, seed: int = 0) -> np.ndarray:
         action = int(rng.integers(0, 6)) if rng.random() < 0.8 else int(rng.integers(6, 10))
         if action < 6:  # a move: the position the action asks for, before any check
             target = discrete_target_from_action(
-                env.pose, action, env.max_translation_m, env.max_rotation_rad
+                env.pose, action, env.settings.max_translation_m, env.settings.max_rotation_rad
             )
             pairs.append((env.pose[:3, 3].copy(), target[:3, 3]))
         env.step(action)

@@ -113,7 +113,7 @@ def memory_run(args: Args) -> dict[str, Any]:
     started = time.perf_counter()
     for step in tqdm(range(1, args.steps + 1), desc="steps, new scene every reset"):
         env.step(rng.integers(0, 10, 1))
-        names.add(env.scene_envs[0].scene.name)
+        names.add(env.scene_runtimes[0].scene.name)
         if step % args.sample_every == 0:
             steps.append(step)
             memory.append(resident_mib())

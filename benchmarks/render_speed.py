@@ -126,7 +126,7 @@ def bench_scene(scene: str, args: Args) -> dict:
     poses = scene_poses(scene, args.poses)
     env = gym.make("NarutoRecon-v0", scene=scene).unwrapped
     env.reset(seed=0)
-    raster = RgbdRenderer(env.scene, env.camera, env.max_depth_m, env.raycaster, "raster")
+    raster = RgbdRenderer(env.scene, env.camera, env.settings.max_depth_m, env.raycaster, "raster")
     embree = RayCaster(env.scene.vertices, env.scene.faces, "embreex")
     bare = BareCast(env.scene, env.camera, poses)
     reference = env.renderer

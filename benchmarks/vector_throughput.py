@@ -63,7 +63,7 @@ from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.sensors.kernels import fill_world_rays
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import default_thread_count
-from naruto_gym.vector import NarutoReconVectorEnv
+from naruto_gym.vector import NarutoReconVectorEnv, make_vector_env
 from naruto_gym.vector.sharded import default_workers
 
 # The Replica sample (research-only, beside the repository) for the full-resolution rows.
@@ -184,7 +184,7 @@ def bare_cast_rate(count: int, size: int, seconds: float) -> dict[str, float]:
     for i, pose in enumerate(vector.poses.astype(np.float32)):
         fill_world_rays(camera.ray_directions, np.ascontiguousarray(pose[:3, :3]),
                         np.ascontiguousarray(pose[:3, 3]), rays[i * pixels:(i + 1) * pixels])
-    raycaster = vector.scene_envs[0].raycaster
+    raycaster = vector.scene_runtimes[0].raycaster
     raycaster.cast_packed(rays)
     calls, started = 0, time.perf_counter()
     while time.perf_counter() - started < seconds:
@@ -245,7 +245,7 @@ def scaling_point(spec: dict[str, Any]) -> dict[str, Any]:
     for workers in [None, *spec["workers"]]:
         if workers == point["default_workers"]:
             continue  # the default row times it
-        env = NarutoReconVectorEnv(n, workers=workers, max_episode_steps=spec["episode_steps"],
+        env = make_vector_env(n, workers=workers, max_episode_steps=spec["episode_steps"],
                                    **env_kwargs(64, False))
         point["batched"]["default" if workers is None else str(workers)] = time_vector(
             env, spec["seconds"])

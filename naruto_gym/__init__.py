@@ -9,7 +9,9 @@
   quarter-resolution camera, a cheap start for RL.
 
 Each id also has a vector entry point: ``gymnasium.make_vec(id, num_envs=64,
-vectorization_mode="vector_entry_point")`` gives the batched ``NarutoReconVectorEnv``.
+vectorization_mode="vector_entry_point")`` gives the batched env of
+:func:`naruto_gym.vector.make_vector_env` (``NarutoReconVectorEnv`` in this process, or
+``ShardedVectorEnv`` over ``workers`` processes).
 """
 
 from gymnasium.envs.registration import register
@@ -20,7 +22,7 @@ __all__ = ["NarutoReconEnv"]
 __version__ = "0.2.0"
 
 ENTRY_POINT = "naruto_gym.envs.naruto_recon_env:NarutoReconEnv"
-VECTOR_ENTRY_POINT = "naruto_gym.vector.vector_env:NarutoReconVectorEnv"
+VECTOR_ENTRY_POINT = "naruto_gym.vector:make_vector_env"
 
 # Variants are keyword presets of one class (budget: the published Replica / MP3D frames).
 PRESETS: dict[str, tuple[int, dict]] = {
@@ -34,7 +36,7 @@ for _env_id, (_budget, _kwargs) in PRESETS.items():
         entry_point=ENTRY_POINT,
         max_episode_steps=_budget,
         kwargs=_kwargs,
-        # The batched NarutoReconVectorEnv: gymnasium.make_vec(id, num_envs,
+        # The batched env (make_vector_env): gymnasium.make_vec(id, num_envs,
         # vectorization_mode="vector_entry_point"). No additional_wrappers (Gymnasium refuses
         # them with a vector entry point): the env adds the final reconstruction metrics itself.
         vector_entry_point=VECTOR_ENTRY_POINT,

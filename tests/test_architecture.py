@@ -24,16 +24,26 @@ LAYERS: dict[str, tuple[str, ...]] = {
     "naruto_agent.planning": ("naruto_gym", "naruto_agent.mapping"),
     "naruto_agent.guards": ("naruto_gym", "naruto_agent.mapping"),
     "naruto_agent.policies": (
-        "naruto_gym", "naruto_agent.mapping", "naruto_agent.planning", "naruto_agent.guards",
+        "naruto_gym",
+        "naruto_agent.mapping",
+        "naruto_agent.planning",
+        "naruto_agent.guards",
     ),
     "naruto_agent.naruto": (
-        "naruto_gym", "naruto_agent.mapping", "naruto_agent.planning", "naruto_agent.guards",
+        "naruto_gym",
+        "naruto_agent.mapping",
+        "naruto_agent.planning",
+        "naruto_agent.guards",
         "naruto_agent.policies",
     ),
     # Draws what policies show (Policy.view_layers); no policy imports it.
     "naruto_agent.recording": (
-        "naruto_gym", "naruto_agent.mapping", "naruto_agent.planning", "naruto_agent.guards",
-        "naruto_agent.policies", "naruto_agent.naruto",
+        "naruto_gym",
+        "naruto_agent.mapping",
+        "naruto_agent.planning",
+        "naruto_agent.guards",
+        "naruto_agent.policies",
+        "naruto_agent.naruto",
     ),
 }
 
@@ -127,7 +137,7 @@ def test_no_import_cycles() -> None:
         stack.append(node)
         for target in sorted(graph[node]):
             if state.get(target) == 1:
-                cycles.append(stack[stack.index(target):] + [target])
+                cycles.append(stack[stack.index(target) :] + [target])
             elif target not in state:
                 visit(target)
         stack.pop()
@@ -203,3 +213,21 @@ def test_no_stack_walks() -> None:
         if "_getframe" in path.read_text()
     ]
     assert not users, f"pass what these need as arguments instead: {users}"
+
+
+def test_the_wrappers_package_imports_its_modules_at_the_top() -> None:
+    """``naruto_gym.wrappers`` (metrics, observation, learning, vector) imports the package's
+    modules at the top of each file, never inside a function: its dependencies are in sight
+    and run one way (observation <- vector <- learning)."""
+    hidden = []
+    for name, path in MODULES.items():
+        if not name.startswith("naruto_gym.wrappers"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                for inner in ast.walk(node):
+                    if isinstance(inner, ast.ImportFrom) and (inner.module or "").startswith(
+                        "naruto_gym"
+                    ):
+                        hidden.append(f"{name}:{inner.lineno} imports {inner.module}")
+    assert not hidden, "imports inside functions:\n" + "\n".join(hidden)

@@ -35,6 +35,15 @@ def test_torch_has_no_upper_bound() -> None:
     assert torch and "<" not in torch[0], torch
 
 
+def test_the_embreex_backend_has_an_extra_of_its_name() -> None:
+    """One name: the extra that installs the embreex ray caster is ``embreex``, as the install
+    hint of the ray caster says."""
+    extras = PYPROJECT["project"]["optional-dependencies"]
+    assert "embree" not in extras and extras["embreex"] == ["embreex>=2.17"]
+    source = (ROOT / "naruto_gym" / "sensors" / "raycaster.py").read_text()
+    assert "naruto-gym[embreex]" in source and "naruto-gym[embree]" not in source
+
+
 @pytest.fixture(scope="module")
 def built(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An sdist of this checkout and a wheel built from that sdist (in a temporary folder, so

@@ -37,6 +37,7 @@ from naruto_agent.guards.panorama_clearance import (
 )
 from naruto_agent.mapping.occupancy import OccupancyGrid
 from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.utils.checks import check_integer, check_number
 
 #: Holds this close together (metres) count as held at one spot.
 SAME_SPOT_M = 1e-3
@@ -95,14 +96,14 @@ class ScanGuardConfig:
     open_sky_share: float | None = 0.05
 
     def __post_init__(self) -> None:
-        if self.panorama_margin_m < 0 or self.edge_probe_m < 0 or self.max_held_moves < 0:
-            raise ValueError("panorama_margin_m, edge_probe_m and max_held_moves must be >= 0")
-        if self.scan_edge_margin_m is not None and self.scan_edge_margin_m < 0:
-            raise ValueError(f"scan_edge_margin_m must be >= 0 or None, got "
-                             f"{self.scan_edge_margin_m}")
-        if self.open_sky_share is not None and not 0 < self.open_sky_share <= 1:
-            raise ValueError(f"open_sky_share must be in (0, 1] or None, got "
-                             f"{self.open_sky_share}")
+        for name in ("panorama_margin_m", "edge_probe_m"):
+            check_number(name, getattr(self, name), low=0.0, low_open=False)
+        check_integer("max_held_moves", self.max_held_moves, low=0)
+        if self.scan_edge_margin_m is not None:
+            check_number("scan_edge_margin_m (or None)", self.scan_edge_margin_m, low=0.0,
+                         low_open=False)
+        if self.open_sky_share is not None:
+            check_number("open_sky_share (or None)", self.open_sky_share, low=0.0, high=1.0)
 
 
 class HeldMoves:

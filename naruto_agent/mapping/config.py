@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, fields
 from typing import Any, Literal
 
 from naruto_agent.mapping.backends import BACKENDS
+from naruto_gym.utils.checks import check_choice, check_integer, check_number
 
 #: Active-sampling scores (see ``NeuralMapperConfig.active_score``).
 ACTIVE_SCORES = ("rendered", "surface", "grid")
@@ -170,27 +171,15 @@ class NeuralMapperConfig:
             "observed_rays_per_frame",
         )
         for name in positive:
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
-        if not 0.0 < self.keyframe_pixel_fraction <= 1.0:
-            raise ValueError(
-                f"keyframe_pixel_fraction must be in (0, 1], got {self.keyframe_pixel_fraction}"
-            )
-        if not 0.0 <= self.near_m < self.far_m:
-            raise ValueError(f"need 0 <= near_m < far_m, got {self.near_m}, {self.far_m}")
-        if self.current_frame_rays < 0 or self.first_frame_iterations < 0:
-            raise ValueError("current_frame_rays and first_frame_iterations must be >= 0")
-        if not 0 <= self.active_top_rays <= self.rays_per_iteration:
-            raise ValueError(
-                f"active_top_rays must be in 0..rays_per_iteration ({self.rays_per_iteration}), "
-                f"got {self.active_top_rays}"
-            )
-        if self.active_score not in ACTIVE_SCORES:
-            raise ValueError(
-                f"active_score must be one of {ACTIVE_SCORES}, got {self.active_score!r}"
-            )
-        if self.backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+            check_number(name, getattr(self, name), low=0.0)
+        check_number("keyframe_pixel_fraction", self.keyframe_pixel_fraction, low=0.0, high=1.0)
+        check_number("near_m", self.near_m, low=0.0, low_open=False)
+        check_number("far_m", self.far_m, low=self.near_m)
+        check_integer("current_frame_rays", self.current_frame_rays, low=0)
+        check_integer("first_frame_iterations", self.first_frame_iterations, low=0)
+        check_integer("active_top_rays", self.active_top_rays, low=0, high=self.rays_per_iteration)
+        check_choice("active_score", self.active_score, tuple(ACTIVE_SCORES))
+        check_choice("backend", self.backend, tuple(BACKENDS))
         if self.cull_behind_depth_m is not None and self.cull_behind_depth_m < self.truncation_m:
             raise ValueError(
                 "cull_behind_depth_m must be at least truncation_m (samples inside the "

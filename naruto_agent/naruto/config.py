@@ -17,6 +17,7 @@ from naruto_agent.naruto.goal_search import GoalSearchConfig
 from naruto_agent.naruto.recovery import RecoveryConfig
 from naruto_agent.planning import PlannerConfig
 from naruto_agent.policies.config import pop_guard_settings, refuse_renamed_settings
+from naruto_gym.utils.checks import check_integer, check_number
 
 #: The mappers the agent can build (``NarutoPolicy(mapper=...)``).
 MAPPERS = ("tsdf", "neural")
@@ -98,21 +99,19 @@ class NarutoConfig:
     """settings of the neural mapper (``mapper="neural"``)"""
 
     def __post_init__(self) -> None:
-        if not self.planner_voxel_m > 0:
-            raise ValueError(f"planner_voxel_m must be positive, got {self.planner_voxel_m}")
-        if (self.view_every_mapping_steps < 1 or self.goal_attempts < 1
-                or self.panorama_every < 1):
-            raise ValueError("view_every_mapping_steps, goal_attempts and panorama_every must "
-                             "be at least 1")
-        if not 0 < self.max_rotation_step_deg <= 180:
-            raise ValueError(f"max_rotation_step_deg must be in (0, 180], got "
-                             f"{self.max_rotation_step_deg}")
-        if (self.escape_radius_m < 0 or self.arrival_tolerance_m < 0
-                or self.unresolved_visit_looks < 0 or self.scan_top_margin_m < 0
-                or self.shortcut_margin_m < 0 or self.margin_climb_m < 0):
-            raise ValueError("escape_radius_m, arrival_tolerance_m, unresolved_visit_looks, "
-                             "scan_top_margin_m, shortcut_margin_m and margin_climb_m must "
-                             "be >= 0")
+        check_number("planner_voxel_m", self.planner_voxel_m, low=0.0)
+        for name in ("view_every_mapping_steps", "goal_attempts", "panorama_every"):
+            check_integer(name, getattr(self, name), low=1)
+        check_number("max_rotation_step_deg", self.max_rotation_step_deg, low=0.0, high=180.0)
+        for name in (
+            "unresolved_visit_looks",
+            "escape_radius_m",
+            "arrival_tolerance_m",
+            "scan_top_margin_m",
+            "shortcut_margin_m",
+            "margin_climb_m",
+        ):
+            check_number(name, getattr(self, name), low=0.0, low_open=False)
         if self.guard.panorama_top_check or self.guard.release_held_until_moved:
             raise ValueError("the agent reads an open scan's top from its own map "
                              "(sector_support_after_escape) and counts held moves per spot: "

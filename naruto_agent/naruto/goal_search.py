@@ -41,6 +41,7 @@ import numpy as np
 
 from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_agent.planning.rrt import PlannerConfig, reachable_voxels
+from naruto_gym.utils.checks import check_integer, check_number
 
 # Comparisons of float32 volumes against float64 thresholds: a TSDF stores its truncation
 # (8 cm) as float32(0.08) < 0.08, which must still count as "at least 8 cm".
@@ -114,27 +115,30 @@ class GoalSearchConfig:
 
     def __post_init__(self) -> None:
         for name in ("goal_spacing_xy_m", "goal_spacing_z_m", "max_range_m"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"GoalSearchConfig.{name} must be positive, got "
-                                 f"{getattr(self, name)}")
-        for name in ("top_uncertain", "target_subset", "visibility_samples", "num_views",
-                     "top_k", "batch_goals"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"GoalSearchConfig.{name} must be at least 1, got "
-                                 f"{getattr(self, name)}")
-        if not 0.0 <= self.min_range_m < self.max_range_m:
-            raise ValueError(
-                f"need 0 <= min_range_m < max_range_m, got {self.min_range_m}, {self.max_range_m}"
+            check_number(f"GoalSearchConfig.{name}", getattr(self, name), low=0.0)
+        for name in (
+            "top_uncertain",
+            "target_subset",
+            "visibility_samples",
+            "num_views",
+            "top_k",
+            "batch_goals",
+        ):
+            check_integer(f"GoalSearchConfig.{name}", getattr(self, name), low=1)
+        for name in ("min_range_m", "visibility_stop_m"):  # in [0, max_range_m)
+            check_number(
+                f"GoalSearchConfig.{name}", getattr(self, name), low=0.0, low_open=False,
+                high=self.max_range_m, high_open=True,
             )
-        if self.distance_discount_m is not None and not self.distance_discount_m > 0:
-            raise ValueError(f"GoalSearchConfig.distance_discount_m must be positive or None, "
-                             f"got {self.distance_discount_m}")
-        if self.explore_first_share is not None and not 0 < self.explore_first_share <= 1:
-            raise ValueError(f"GoalSearchConfig.explore_first_share must be in (0, 1] or None, "
-                             f"got {self.explore_first_share}")
-        if not 0.0 <= self.visibility_stop_m < self.max_range_m:
-            raise ValueError(f"visibility_stop_m must be in [0, max_range_m), got "
-                             f"{self.visibility_stop_m}")
+        if self.distance_discount_m is not None:
+            check_number(
+                "GoalSearchConfig.distance_discount_m (or None)", self.distance_discount_m, low=0.0
+            )
+        if self.explore_first_share is not None:
+            check_number(
+                "GoalSearchConfig.explore_first_share (or None)", self.explore_first_share,
+                low=0.0, high=1.0,
+            )
 
 
 @dataclass

@@ -27,6 +27,7 @@ from enum import Enum
 import numpy as np
 
 from naruto_agent.mapping.sdf_volume import SdfVolume
+from naruto_gym.utils.checks import check_integer, check_number
 
 
 @dataclass(frozen=True)
@@ -70,15 +71,13 @@ class RecoveryConfig:
     retreat_m: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.window < 2 or self.max_failed_plans < 1 or self.look_around_views < 1:
-            raise ValueError("window must be >= 2, max_failed_plans and look_around_views >= 1")
+        check_integer("RecoveryConfig.window", self.window, low=2)
+        for name in ("max_failed_plans", "look_around_views"):
+            check_integer(f"RecoveryConfig.{name}", getattr(self, name), low=1)
         for name in ("min_motion_m", "failed_goal_radius_m", "wander_max_m", "retreat_m"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"RecoveryConfig.{name} must be positive")
-        if min(self.min_observed_gain, self.blocked_radius_m, self.escape_blocked_radius_m) < 0:
-            raise ValueError(
-                "min_observed_gain, blocked_radius_m and escape_blocked_radius_m must be >= 0"
-            )
+            check_number(f"RecoveryConfig.{name}", getattr(self, name), low=0.0)
+        for name in ("min_observed_gain", "blocked_radius_m", "escape_blocked_radius_m"):
+            check_number(f"RecoveryConfig.{name}", getattr(self, name), low=0.0, low_open=False)
 
 
 class RecoveryKind(str, Enum):

@@ -69,7 +69,7 @@ class EnvContext:
                 env's spec when there is one.
         """
         base = env.unwrapped
-        for name in ("bounds", "camera", "action_mode"):
+        for name in ("bounds", "camera", "settings"):
             if not hasattr(base, name):
                 raise ValueError(
                     f"EnvContext.from_env needs a NarutoReconEnv-like env with `{name}`; got "
@@ -77,15 +77,16 @@ class EnvContext:
                 )
         if step_budget is None and env.spec is not None:
             step_budget = env.spec.max_episode_steps
+        settings = base.settings
         return cls(
-            action_mode=base.action_mode,
+            action_mode=settings.action_mode,
             action_space=base.action_space,
             bounds=np.array(base.bounds, dtype=np.float64),
             camera=base.camera,
-            max_translation_m=float(base.max_translation_m),
-            max_rotation_rad=float(base.max_rotation_rad),
-            agent_radius_m=float(base.agent_radius_m),
-            max_depth_m=float(base.max_depth_m),
+            max_translation_m=float(settings.max_translation_m),
+            max_rotation_rad=float(settings.max_rotation_rad),
+            agent_radius_m=float(settings.agent_radius_m),
+            max_depth_m=float(settings.max_depth_m),
             step_budget=step_budget,
         )
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any, TypeVar
 
 from naruto_agent.guards.scan_guard import ScanGuardConfig
+from naruto_gym.utils.checks import check_integer, check_number
 
 ConfigT = TypeVar("ConfigT")
 
@@ -112,8 +113,9 @@ class FrontierConfig:
     guard: ScanGuardConfig = field(default_factory=_frontier_guard)
 
     def __post_init__(self) -> None:
-        if self.look_around_headings < 1 or not self.look_pitches_deg:
-            raise ValueError("need at least one look-around heading and one pitch")
+        check_integer("look_around_headings", self.look_around_headings, low=1)
+        if not self.look_pitches_deg:
+            raise ValueError("look_pitches_deg needs at least one pitch")
 
 
 @dataclass
@@ -151,7 +153,8 @@ class RandomConfig:
     guard: ScanGuardConfig = field(default_factory=_random_guard)
 
     def __post_init__(self) -> None:
-        if not 1 <= self.min_run_steps <= self.max_run_steps:
+        check_integer("min_run_steps", self.min_run_steps, low=1)
+        if self.min_run_steps > self.max_run_steps:
             raise ValueError(
                 f"need 1 <= min_run_steps <= max_run_steps, got {self.min_run_steps}, "
                 f"{self.max_run_steps}"
@@ -200,12 +203,15 @@ class PassiveConfig:
     loop_min_gain: float = 0.02
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.scan_height_fraction < 1.0:
+        check_number(
+            "scan_height_fraction", self.scan_height_fraction, low=0.0, high=1.0, high_open=True
+        )
+        check_number("front_clearance_m", self.front_clearance_m, low=0.0)
+        if self.wall_distance_m >= self.lost_wall_m:
             raise ValueError(
-                f"scan_height_fraction must lie in (0, 1), got {self.scan_height_fraction}"
+                f"wall_distance_m must be less than lost_wall_m, got {self.wall_distance_m} "
+                f"and {self.lost_wall_m}"
             )
-        if self.front_clearance_m <= 0.0 or self.wall_distance_m >= self.lost_wall_m:
-            raise ValueError("need 0 < front_clearance_m and wall_distance_m < lost_wall_m")
 
 
 def build_config(

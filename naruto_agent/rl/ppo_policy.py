@@ -23,7 +23,7 @@ from gymnasium import spaces
 
 from naruto_agent.policies.adapters import SB3Policy
 from naruto_agent.policies.base import Info, Observation
-from naruto_gym.rl.observations import DepthFormat, LearningObservation
+from naruto_gym.wrappers.observation import DepthFormat, LearningObservation
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ import numpy as np
 
 from naruto_gym.coverage import CoverageTracker
 from naruto_gym.envs.scene_runtime import SceneRuntime
-from naruto_gym.envs.settings import EnvSettings
+from naruto_gym.envs.settings import PINHOLE_BACKEND, EnvSettings
 from naruto_gym.envs.validation import check_env_keywords, check_reset_options, check_seed
 from naruto_gym.evaluation.scoring import EpisodeReconstruction
 from naruto_gym.geometry.transforms import make_pose, validate_pose
@@ -20,11 +20,13 @@ from naruto_gym.motion.actions import (
     limit_pose_step,
     pose_target_from_action,
 )
+from naruto_gym.motion.collision import CollisionChecker
 from naruto_gym.observability import ObservableSurface
 from naruto_gym.rendering.topdown import TopDownMap, compose_frame
 from naruto_gym.scenes.mesh_scene import Scene
-from naruto_gym.sensors.panorama import no_hit_share, render_panorama
-from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.sensors.panorama import EquirectangularCamera, no_hit_share, render_panorama
+from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
+from naruto_gym.sensors.raycaster import RayCaster
 
 
 class NarutoReconEnv(gym.Env):
@@ -106,6 +108,10 @@ class NarutoReconEnv(gym.Env):
     * ``up_axis``: the up axis of a mesh file (``"z"``, ``"y"``, ``"-y"``, ``"x"``, ``"-x"``,
       ``"-z"``), rotated to +z; ``"auto"`` reads it from a recognised dataset layout (ScanNet
       ``*_vh_clean_2.ply``, Replica ``mesh.ply`` beside ``textures/``) and raises otherwise.
+    * ``mesh_units``: the length unit of a mesh file, ``"m"`` (default), ``"cm"`` or ``"mm"``;
+      it is rescaled to metres. A file whose size says it is not in these units (a room in
+      millimetres read as metres: thousands of metres across with coarse triangles) raises
+      ``ValueError`` naming the likely unit (see :mod:`naruto_gym.scenes.units`).
     * ``action_mode``: ``"pose"``, ``"delta"`` or ``"discrete"``.
     * ``camera``: ``PinholeCamera`` intrinsics (default 680 x 1200, fx = fy = 600).
     * ``image_scale``: resolution factor applied to ``camera`` (0.25 gives 170 x 300).
@@ -170,6 +176,7 @@ class NarutoReconEnv(gym.Env):
         self,
         scene: str | Path | Scene | None = None,
         up_axis: str = "z",
+        mesh_units: str = "m",
         action_mode: str = "pose",
         camera: PinholeCamera | None = None,
         image_scale: float = 1.0,
@@ -186,7 +193,7 @@ class NarutoReconEnv(gym.Env):
         observable_only: bool = True,
         start_clearance_m: float = 0.3,
         raycaster_backend: str = "open3d",
-        pinhole_backend: str = "raycast",
+        pinhole_backend: str = PINHOLE_BACKEND,
         threads: int | None = None,
         reconstruct: bool = False,
         step_budget: int | None = None,
@@ -194,6 +201,7 @@ class NarutoReconEnv(gym.Env):
     ) -> None:
         settings = EnvSettings(
             up_axis=up_axis,
+            mesh_units=mesh_units,
             action_mode=action_mode,
             camera=camera,
             image_scale=image_scale,
@@ -217,26 +225,8 @@ class NarutoReconEnv(gym.Env):
         # The native ray-casting scene, the coverage samples and the observable surface are
         # built lazily (first reset), after any fork.
         self.runtime = SceneRuntime.load(scene, settings)
-        self.settings = settings
-        self.scene: Scene = self.runtime.scene
-        self.action_mode = action_mode
         self.render_mode = render_mode
         self.step_budget = None if step_budget is None else int(step_budget)
-        self.camera = self.runtime.camera
-        self.max_depth_m = float(max_depth_m)
-        self.agent_radius_m = float(agent_radius_m)
-        self.max_translation_m = float(max_translation_m)
-        self.max_rotation_rad = settings.max_rotation_rad
-        self.collision_penalty = float(collision_penalty)
-        self.start_clearance_m = float(start_clearance_m)
-        self.coverage_samples = int(coverage_samples)
-        self.coverage_range_m = float(coverage_range_m)
-        self.observable_only = bool(observable_only)
-        self.bounds = self.runtime.bounds
-        self.raycaster = self.runtime.raycaster
-        self.renderer = self.runtime.renderer
-        self.panorama_camera = self.runtime.panorama_camera
-        self.collision = self.runtime.collision
         self._intrinsics = self.camera.as_dict()
         self.reconstruction: EpisodeReconstruction | None = (
             EpisodeReconstruction(self.camera) if reconstruct else None
@@ -252,6 +242,48 @@ class NarutoReconEnv(gym.Env):
         self._panorama: np.ndarray | None = None
         self._path_length_m = 0.0
         self._step_count = 0
+
+    # -- what the env is made of (each owned by its settings or its scene's runtime) ------
+    @property
+    def settings(self) -> EnvSettings:
+        """The env's settings: every keyword but ``scene``, ``reconstruct``, ``step_budget``
+        and ``render_mode`` (``env.settings.max_translation_m``, ...)."""
+        return self.runtime.settings
+
+    @property
+    def scene(self) -> Scene:
+        """The scene explored."""
+        return self.runtime.scene
+
+    @property
+    def camera(self) -> PinholeCamera:
+        """The pinhole camera (``settings.camera`` at ``settings.image_scale``)."""
+        return self.runtime.camera
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) the scene's axis-aligned box."""
+        return self.runtime.bounds
+
+    @property
+    def raycaster(self) -> RayCaster:
+        """The scene's ray caster."""
+        return self.runtime.raycaster
+
+    @property
+    def renderer(self) -> RgbdRenderer:
+        """The pinhole RGB-D renderer."""
+        return self.runtime.renderer
+
+    @property
+    def panorama_camera(self) -> EquirectangularCamera | None:
+        """The observation panorama's camera (None when ``panorama_shape`` is None)."""
+        return self.runtime.panorama_camera
+
+    @property
+    def collision(self) -> CollisionChecker:
+        """The collision checker, with the settings' escape rule."""
+        return self.runtime.collision
 
     # -- public helpers ------------------------------------------------------------------
     @property
@@ -335,13 +367,14 @@ class NarutoReconEnv(gym.Env):
         gain = self.coverage.update(self._pose, self._depth)
         return self._observation(), self._info(gain, False, "")
 
-    def step(
-        self, action: Any
-    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+    def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if self._rgb is None:
             raise RuntimeError("call reset() before step()")
         target = self._target_pose(self._validated_action(action))
-        limited = limit_pose_step(self._pose, target, self.max_translation_m, self.max_rotation_rad)
+        settings = self.settings
+        limited = limit_pose_step(
+            self._pose, target, settings.max_translation_m, settings.max_rotation_rad
+        )
         move = self.collision.move(self._pose[:3, 3], limited[:3, 3])
         self._path_length_m += float(np.linalg.norm(move.position - self._pose[:3, 3]))
         self._pose = make_pose(limited[:3, :3], move.position)
@@ -350,7 +383,7 @@ class NarutoReconEnv(gym.Env):
         self._step_count += 1
         self._observe()
         gain = self.coverage.update(self._pose, self._depth)
-        reward = 100.0 * gain - (self.collision_penalty if move.collided else 0.0)
+        reward = 100.0 * gain - (settings.collision_penalty if move.collided else 0.0)
         info = self._info(gain, move.collided, move.reason)
         truncated = self.step_budget is not None and self._step_count >= self.step_budget
         if truncated and self.reconstruction is not None:
@@ -363,11 +396,12 @@ class NarutoReconEnv(gym.Env):
         if self._rgb is None:
             raise RuntimeError("call reset() before render()")
         top_down = self.top_down_map.draw(self.trajectory, self._pose)
-        return compose_frame(top_down, self._rgb, self._depth, self.max_depth_m)
+        return compose_frame(top_down, self._rgb, self._depth, self.settings.max_depth_m)
 
     # -- internals -----------------------------------------------------------------------
     def _validated_action(self, action: Any) -> Any:
-        if self.action_mode == "discrete":
+        action_mode = self.settings.action_mode
+        if action_mode == "discrete":
             if (
                 isinstance(action, (int, np.integer))
                 and not isinstance(action, (bool, np.bool_))
@@ -395,29 +429,28 @@ class NarutoReconEnv(gym.Env):
             raise ValueError(f"action must be a numeric array, got {action!r}") from error
         expected = self.action_space.shape
         if array.shape != expected:
-            raise ValueError(
-                f"{self.action_mode} action must have shape {expected}, got {array.shape}"
-            )
+            raise ValueError(f"{action_mode} action must have shape {expected}, got {array.shape}")
         if not np.all(np.isfinite(array)):
             raise ValueError(f"action contains NaN or inf: {array.tolist()}")
         tolerance = 1e-5
         low, high = self.action_space.low, self.action_space.high
         if np.any(array < low - tolerance) or np.any(array > high + tolerance):
             raise ValueError(
-                f"{self.action_mode} action {np.round(array, 4).tolist()} is outside the action "
+                f"{action_mode} action {np.round(array, 4).tolist()} is outside the action "
                 f"space [{low.tolist()}, {high.tolist()}]"
             )
         return array
 
     def _target_pose(self, action: Any) -> np.ndarray:
-        if self.action_mode == "pose":
+        settings = self.settings
+        if settings.action_mode == "pose":
             return pose_target_from_action(action)
-        if self.action_mode == "delta":
+        if settings.action_mode == "delta":
             return delta_target_from_action(
-                self._pose, action, self.max_translation_m, self.max_rotation_rad
+                self._pose, action, settings.max_translation_m, settings.max_rotation_rad
             )
         return discrete_target_from_action(
-            self._pose, action, self.max_translation_m, self.max_rotation_rad
+            self._pose, action, settings.max_translation_m, settings.max_rotation_rad
         )
 
     def _observe(self) -> None:

@@ -38,8 +38,9 @@ def observation_space(settings: EnvSettings) -> spaces.Dict:
     camera = settings.pinhole_camera
     observation_spaces: dict[str, spaces.Space] = {
         "rgb": spaces.Box(0, 255, (camera.height, camera.width, 3), np.uint8),
-        "depth": spaces.Box(0.0, float(settings.max_depth_m), (camera.height, camera.width),
-                            np.float32),
+        "depth": spaces.Box(
+            0.0, float(settings.max_depth_m), (camera.height, camera.width), np.float32
+        ),
         "pose": spaces.Box(-np.inf, np.inf, (4, 4), np.float32),
     }
     if settings.panorama_shape is not None:
@@ -85,8 +86,12 @@ class SceneRuntime:
         self.bounds = scene.bounds
         self.raycaster = RayCaster(scene.vertices, scene.faces, settings.raycaster_backend)
         self.renderer = RgbdRenderer(
-            scene, self.camera, float(settings.max_depth_m), self.raycaster,
-            backend=settings.pinhole_backend, threads=settings.threads,
+            scene,
+            self.camera,
+            float(settings.max_depth_m),
+            self.raycaster,
+            backend=settings.pinhole_backend,
+            threads=settings.threads,
         )
         if auto_max_triangles_per_pixel is not None:
             self.renderer.auto_max_triangles_per_pixel = auto_max_triangles_per_pixel
@@ -112,10 +117,13 @@ class SceneRuntime:
         auto_max_triangles_per_pixel: float | None = None,
     ) -> SceneRuntime:
         """The runtime of a scene given as ``NarutoReconEnv`` takes it: a catalogue name, a
-        mesh path (read with ``settings.up_axis``), a ``Scene``, or None for the default."""
+        mesh path (read with ``settings.up_axis`` and ``settings.mesh_units``), a ``Scene``,
+        or None for the default."""
         from naruto_gym.scenes.catalogue import DEFAULT_SCENE, resolve_scene
 
-        resolved = resolve_scene(scene if scene is not None else DEFAULT_SCENE, settings.up_axis)
+        resolved = resolve_scene(
+            scene if scene is not None else DEFAULT_SCENE, settings.up_axis, settings.mesh_units
+        )
         return cls(resolved, settings, auto_max_triangles_per_pixel)
 
     # -- built on first use ------------------------------------------------------------------
@@ -236,7 +244,12 @@ class SceneRuntime:
         """
         kwargs.setdefault("observable_mask", self.observable_surface.mask)
         metrics = evaluate_reconstruction(
-            mesh, self.scene, poses=poses, camera=self.camera, cull=cull,
-            renderer=self.renderer, **kwargs,
+            mesh,
+            self.scene,
+            poses=poses,
+            camera=self.camera,
+            cull=cull,
+            renderer=self.renderer,
+            **kwargs,
         )
         return metrics.as_dict()

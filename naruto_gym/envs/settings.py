@@ -15,6 +15,16 @@ from naruto_gym.envs.validation import check_settings
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import resolve_threads
 
+#: How one env makes its pinhole frames by default: the reference ray cast, so that a default
+#: ``NarutoReconEnv`` gives the frames every published figure and the behaviour fingerprint
+#: were made with.
+PINHOLE_BACKEND = "raycast"
+#: How the batched env makes them by default: ``"auto"``, the rasterizer where it is cheaper
+#: (the same frames up to exact edge ties), as RL wants throughput. The two defaults stay
+#: apart because either one changed would change fixed-seed frames (edge ties), and with them
+#: the episodes and figures measured with it.
+BATCHED_PINHOLE_BACKEND = "auto"
+
 
 @dataclass(frozen=True)
 class EnvSettings:
@@ -28,6 +38,7 @@ class EnvSettings:
     """
 
     up_axis: str = "z"
+    mesh_units: str = "m"
     action_mode: str = "pose"
     camera: PinholeCamera | None = None
     image_scale: float = 1.0
@@ -44,7 +55,7 @@ class EnvSettings:
     observable_only: bool = True
     start_clearance_m: float = 0.3
     raycaster_backend: str = "open3d"
-    pinhole_backend: str = "raycast"
+    pinhole_backend: str = PINHOLE_BACKEND
     threads: int | None = None
 
     def __post_init__(self) -> None:

@@ -1,24 +1,29 @@
 """Checks of the keyword arguments the envs take, each with an error that says what to pass.
 
 ``EnvSettings`` (the keywords ``NarutoReconEnv`` and ``NarutoReconVectorEnv`` share) and the
-vector env's own keywords are checked here, before anything is built, so that a wrong type,
-a NaN or a value out of range fails at construction with one ``ValueError`` naming the
-keyword, rather than deep inside a renderer or a Gymnasium space.
+vector env's own keywords are checked here, with the helpers of :mod:`naruto_gym.utils.checks`,
+before anything is built, so that a wrong type, a NaN or a value out of range fails at
+construction with one ``ValueError`` naming the keyword, rather than deep inside a renderer or
+a Gymnasium space.
 """
 
 from __future__ import annotations
 
-import math
-from numbers import Integral, Real
 from typing import Any
-
-import numpy as np
 
 from naruto_gym.motion.actions import ACTION_MODES
 from naruto_gym.motion.collision import ESCAPE_RULES
 from naruto_gym.scenes.mesh_scene import UP_AXES
+from naruto_gym.scenes.units import MESH_UNITS
 from naruto_gym.sensors.pinhole import PINHOLE_BACKENDS, PinholeCamera
 from naruto_gym.sensors.raycaster import RAYCASTER_BACKENDS
+from naruto_gym.utils.checks import (
+    check_bool,
+    check_choice,
+    check_integer,
+    check_number,
+    is_integer,
+)
 
 #: The most pixels along either side of the pinhole image (``camera`` times ``image_scale``).
 MAX_IMAGE_SIDE = 16_384
@@ -31,58 +36,6 @@ MAX_LENGTH_M = 1e6
 MAX_COVERAGE_SAMPLES = 10_000_000
 
 
-def _is_real(value: Any) -> bool:
-    return isinstance(value, Real) and not isinstance(value, (bool, np.bool_))
-
-
-def _is_integer(value: Any) -> bool:
-    return isinstance(value, Integral) and not isinstance(value, (bool, np.bool_))
-
-
-def check_number(
-    name: str,
-    value: Any,
-    *,
-    low: float | None = None,
-    high: float | None = None,
-    low_open: bool = True,
-) -> float:
-    """``value`` as a float, or a ``ValueError`` naming ``name``: it must be a finite real
-    number (not a bool), above ``low`` (or at least it, ``low_open=False``) and at most
-    ``high``."""
-    if not _is_real(value) or not math.isfinite(float(value)):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    number = float(value)
-    if low is not None and (number <= low if low_open else number < low):
-        relation = "greater than" if low_open else "at least"
-        raise ValueError(f"{name} must be {relation} {low:g}, got {value!r}")
-    if high is not None and number > high:
-        raise ValueError(f"{name} must be at most {high:g}, got {value!r}")
-    return number
-
-
-def check_integer(name: str, value: Any, *, low: int = 1, high: int | None = None) -> int:
-    """``value`` as an int, or a ``ValueError``: an integer (not a bool) in [low, high]."""
-    if not _is_integer(value) or value < low or (high is not None and value > high):
-        upper = f" and at most {high:,}" if high is not None else ""
-        raise ValueError(f"{name} must be an integer of at least {low}{upper}, got {value!r}")
-    return int(value)
-
-
-def check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
-    """``value`` when it is one of the strings ``choices``, else a ``ValueError``."""
-    if not isinstance(value, str) or value not in choices:
-        raise ValueError(f"{name} must be one of {choices}, got {value!r}")
-    return value
-
-
-def check_bool(name: str, value: Any) -> bool:
-    """``value`` when it is a bool (Python's or NumPy's), else a ``ValueError``."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValueError(f"{name} must be True or False, got {value!r}")
-    return bool(value)
-
-
 def check_panorama_shape(value: Any) -> tuple[int, int] | None:
     """``panorama_shape``: None, or two positive integers (height, width)."""
     if value is None:
@@ -90,9 +43,7 @@ def check_panorama_shape(value: Any) -> tuple[int, int] | None:
     try:
         height, width = value
     except (TypeError, ValueError):
-        raise ValueError(
-            f"panorama_shape must be None or (height, width), got {value!r}"
-        ) from None
+        raise ValueError(f"panorama_shape must be None or (height, width), got {value!r}") from None
     for side, name in ((height, "height"), (width, "width")):
         check_integer(f"panorama_shape {name}", side, low=1, high=MAX_PANORAMA_SIDE)
     return int(height), int(width)
@@ -119,6 +70,7 @@ def check_settings(settings: Any) -> None:
         ValueError: the first field that is of the wrong type or out of range, by name.
     """
     check_choice("up_axis", settings.up_axis, UP_AXES)
+    check_choice("mesh_units", settings.mesh_units, tuple(MESH_UNITS))
     check_choice("action_mode", settings.action_mode, ACTION_MODES)
     if settings.camera is not None and not isinstance(settings.camera, PinholeCamera):
         raise ValueError(
@@ -127,9 +79,7 @@ def check_settings(settings: Any) -> None:
         )
     check_number("image_scale", settings.image_scale, low=0.0)
     camera = settings.camera or PinholeCamera()
-    scaled = camera.width * float(settings.image_scale), camera.height * float(
-        settings.image_scale
-    )
+    scaled = camera.width * float(settings.image_scale), camera.height * float(settings.image_scale)
     if max(scaled) > MAX_IMAGE_SIDE:
         raise ValueError(
             f"image_scale={settings.image_scale!r} makes a {scaled[0]:.0f} x {scaled[1]:.0f} "
@@ -142,16 +92,21 @@ def check_settings(settings: Any) -> None:
     check_number("max_translation_m", settings.max_translation_m, low=0.0, high=MAX_LENGTH_M)
     check_number("max_rotation_deg", settings.max_rotation_deg, low=0.0, high=180.0)
     if settings.escape_no_hit_threshold is not None:
-        check_number("escape_no_hit_threshold", settings.escape_no_hit_threshold, low=0.0,
-                     high=1.0, low_open=False)
+        check_number(
+            "escape_no_hit_threshold",
+            settings.escape_no_hit_threshold,
+            low=0.0,
+            high=1.0,
+            low_open=False,
+        )
     check_choice("escape_rule", settings.escape_rule, ESCAPE_RULES)
     check_number("collision_penalty", settings.collision_penalty, low=-1e12, high=1e12)
-    check_integer("coverage_samples", settings.coverage_samples, low=1,
-                  high=MAX_COVERAGE_SAMPLES)
+    check_integer("coverage_samples", settings.coverage_samples, low=1, high=MAX_COVERAGE_SAMPLES)
     check_number("coverage_range_m", settings.coverage_range_m, low=0.0, high=MAX_LENGTH_M)
     check_bool("observable_only", settings.observable_only)
-    check_number("start_clearance_m", settings.start_clearance_m, low=0.0, high=MAX_LENGTH_M,
-                 low_open=False)
+    check_number(
+        "start_clearance_m", settings.start_clearance_m, low=0.0, high=MAX_LENGTH_M, low_open=False
+    )
     check_choice("raycaster_backend", settings.raycaster_backend, RAYCASTER_BACKENDS)
     check_choice("pinhole_backend", settings.pinhole_backend, PINHOLE_BACKENDS)
 
@@ -161,7 +116,7 @@ def check_seed(seed: Any) -> int | None:
     integers of any width are converted), else a ``ValueError`` saying what to pass."""
     if seed is None:
         return None
-    if not _is_integer(seed) or seed < 0:
+    if not is_integer(seed) or seed < 0:
         raise ValueError(f"seed must be None or a non-negative integer, got {seed!r}")
     return int(seed)
 

@@ -1,3 +1,4 @@
-"""Reinforcement-learning helpers: observation transforms for learning, their vector-env
-wrappers, and the Stable-Baselines3 adapter and features extractor (``naruto_gym.rl.sb3``,
-needs ``stable-baselines3``)."""
+"""Reinforcement-learning adapters: the Stable-Baselines3 ``VecEnv`` and features extractor
+(``naruto_gym.rl.sb3``, needs ``stable-baselines3``) and the RLlib env creator
+(``naruto_gym.rl.rllib_env``). The observations they hand out are shaped by
+:mod:`naruto_gym.wrappers`."""

@@ -4,7 +4,7 @@ RLlib's new API stack gives every env runner (``SingleAgentEnvRunner``) a Gymnas
 env. It registers the creator passed to ``ray.tune.registry.register_env`` twice: as the
 entry point (called with the ``env_config``) and as the vector entry point (called with the
 ``env_config`` plus ``num_envs``). With ``gym_env_vectorize_mode="vector_entry_point"`` it
-calls the latter, and :func:`make_rllib_env` answers with the batched ``NarutoReconVectorEnv``
+calls the latter, and :func:`make_rllib_env` answers with the batched env
 (``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``): one process steps all
 of a runner's agents together. Called without ``num_envs`` (RLlib's ``"sync"`` or ``"async"``
 modes) it gives one env with the same observations.
@@ -27,6 +27,8 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+
+from naruto_gym.wrappers.learning import for_learning
 
 __all__ = ["LEARNING_KEYS", "make_rllib_env"]
 
@@ -53,14 +55,15 @@ def make_rllib_env(config: Mapping[str, Any]) -> gym.Env | gym.vector.VectorEnv:
     Returns:
         A ``gym.Env`` without ``num_envs``, else a ``gym.vector.VectorEnv`` of the batched env.
     """
-    from naruto_gym.wrappers import for_learning
-
     if not isinstance(config, Mapping):
         raise TypeError(f"config must be a mapping (RLlib's env_config), got {type(config)}")
     options = dict(config)
     env_id = options.pop("env_id", "NarutoRecon-v0")
-    learning = {"size": options.pop("size", 64), "depth": options.pop("depth", "float"),
-                "top_down_map": options.pop("top_down_map", False)}
+    learning = {
+        "size": options.pop("size", 64),
+        "depth": options.pop("depth", "float"),
+        "top_down_map": options.pop("top_down_map", False),
+    }
     flatten = bool(options.pop("flatten", True))
     num_envs = options.pop("num_envs", None)
     if num_envs is None:
@@ -71,8 +74,9 @@ def make_rllib_env(config: Mapping[str, Any]) -> gym.Env | gym.vector.VectorEnv:
         return gym.wrappers.FlattenObservation(
             gym.wrappers.TransformObservation(env, _as_float, space)
         )
-    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point",
-                        **options)
+    envs = gym.make_vec(
+        env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **options
+    )
     envs = for_learning(envs, **learning)
     if not flatten:
         return envs
@@ -83,12 +87,16 @@ def make_rllib_env(config: Mapping[str, Any]) -> gym.Env | gym.vector.VectorEnv:
 
 
 def _as_float(observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    return {key: value.astype(np.float32) / (255.0 if value.dtype == np.uint8 else 1.0)
-            for key, value in observation.items()}
+    return {
+        key: value.astype(np.float32) / (255.0 if value.dtype == np.uint8 else 1.0)
+        for key, value in observation.items()
+    }
 
 
 def _float_space(space: gym.spaces.Dict) -> gym.spaces.Dict:
-    return gym.spaces.Dict({
-        key: gym.spaces.Box(-np.inf, np.inf, box.shape, np.float32)
-        for key, box in space.spaces.items()
-    })
+    return gym.spaces.Dict(
+        {
+            key: gym.spaces.Box(-np.inf, np.inf, box.shape, np.float32)
+            for key, box in space.spaces.items()
+        }
+    )

@@ -23,8 +23,9 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 
 from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.vector import make_vector_env
 from naruto_gym.vector.infos import agent_info
-from naruto_gym.vector.vector_env import NarutoReconVectorEnv
+from naruto_gym.wrappers.learning import for_learning
 
 
 class Sb3VecEnv(VecEnv):
@@ -85,8 +86,9 @@ class Sb3VecEnv(VecEnv):
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
         setattr(self.env.unwrapped, attr_name, value)
 
-    def env_method(self, method_name: str, *method_args: Any, indices: Any = None,
-                   **method_kwargs: Any) -> list[Any]:
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any
+    ) -> list[Any]:
         result = getattr(self.env.unwrapped, method_name)(*method_args, **method_kwargs)
         return [result for _ in self._get_indices(indices)]
 
@@ -98,11 +100,14 @@ class Sb3VecEnv(VecEnv):
 
 
 def make_sb3_vec_env(
-    num_envs: int, size: int = 64, top_down_map: bool = False, depth: str = "uint8",
+    num_envs: int,
+    size: int = 64,
+    top_down_map: bool = False,
+    depth: str = "uint8",
     **env_kwargs: Any,
 ) -> Sb3VecEnv:
-    """A ``NarutoReconVectorEnv`` (discrete actions unless ``action_mode`` says otherwise,
-    ``SAME_STEP`` autoreset) with the learning observations of
+    """A batched env of :func:`~naruto_gym.vector.make_vector_env` (discrete actions unless
+    ``action_mode`` says otherwise, ``SAME_STEP`` autoreset) with the learning observations of
     :func:`naruto_gym.wrappers.for_learning`, as an SB3 ``VecEnv``.
 
     Args:
@@ -110,19 +115,17 @@ def make_sb3_vec_env(
         size: square frame side.
         top_down_map: add the egocentric top-down map.
         depth: ``"uint8"`` or ``"float"``.
-        **env_kwargs: ``NarutoReconVectorEnv`` keywords (``scene``, ``max_episode_steps``,
-            ``camera``, ...). Without ``camera`` or ``image_scale`` the env renders frames
-            ``size`` pixels high (the default camera scaled), so nothing is drawn only to be
-            thrown away by the resize.
+        **env_kwargs: ``make_vector_env`` keywords (``scene``, ``max_episode_steps``,
+            ``camera``, ``workers``, ...). Without ``camera`` or ``image_scale`` the env
+            renders frames ``size`` pixels high (the default camera scaled), so nothing is
+            drawn only to be thrown away by the resize.
     """
-    from naruto_gym.wrappers import for_learning
-
     env_kwargs.setdefault("action_mode", "discrete")
     env_kwargs.setdefault("panorama_shape", None)
     if "camera" not in env_kwargs and "image_scale" not in env_kwargs:
         # Render about the size handed out (the frame's height), not the full camera.
         env_kwargs["image_scale"] = min(1.0, size / PinholeCamera().height)
-    env = NarutoReconVectorEnv(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs)
+    env = make_vector_env(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_kwargs)
     return Sb3VecEnv(for_learning(env, size=size, depth=depth, top_down_map=top_down_map))
 
 
@@ -173,8 +176,7 @@ class NarutoFeaturesExtractor(BaseFeaturesExtractor):
             pose_size = int(np.prod(observation_space.spaces["pose"].shape))
             self.pose = torch.nn.Sequential(torch.nn.Linear(pose_size, 64), torch.nn.ReLU())
             width_out += 64
-        self.head = torch.nn.Sequential(torch.nn.Linear(width_out, features_dim),
-                                        torch.nn.ReLU())
+        self.head = torch.nn.Sequential(torch.nn.Linear(width_out, features_dim), torch.nn.ReLU())
         self._spaces = observation_space.spaces
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -193,13 +195,20 @@ def _cnn(channels: int, small: bool = False) -> torch.nn.Sequential:
     """Nature-DQN-sized CNN for frames of 64 pixels and more, a two-layer one below."""
     if small:
         return torch.nn.Sequential(
-            torch.nn.Conv2d(channels, 16, 4, 2), torch.nn.ReLU(),
-            torch.nn.Conv2d(16, 32, 3, 2), torch.nn.ReLU(), torch.nn.Flatten(),
+            torch.nn.Conv2d(channels, 16, 4, 2),
+            torch.nn.ReLU(),
+            torch.nn.Conv2d(16, 32, 3, 2),
+            torch.nn.ReLU(),
+            torch.nn.Flatten(),
         )
     return torch.nn.Sequential(
-        torch.nn.Conv2d(channels, 32, 8, 4), torch.nn.ReLU(),
-        torch.nn.Conv2d(32, 64, 4, 2), torch.nn.ReLU(),
-        torch.nn.Conv2d(64, 64, 3, 1), torch.nn.ReLU(), torch.nn.Flatten(),
+        torch.nn.Conv2d(channels, 32, 8, 4),
+        torch.nn.ReLU(),
+        torch.nn.Conv2d(32, 64, 4, 2),
+        torch.nn.ReLU(),
+        torch.nn.Conv2d(64, 64, 3, 1),
+        torch.nn.ReLU(),
+        torch.nn.Flatten(),
     )
 
 

@@ -47,6 +47,7 @@ from naruto_gym.scenes.procedural import (
 from naruto_gym.scenes.scene_cache import CACHE_DIR_ENV as CACHE_DIR_ENV
 from naruto_gym.scenes.scene_cache import PLY_COMMENT, cache_dir
 from naruto_gym.scenes.stream import parse_procedural_name
+from naruto_gym.scenes.units import check_mesh_units
 
 DEFAULT_SCENE = "replica_like_room"
 """The catalogue scene an env uses when given no ``scene``."""
@@ -303,7 +304,10 @@ def catalogue_open_scan(name: str, seed: int = 0) -> Scene:
         )
     names = parse_openings(openings)
     return open_scan_variant(
-        entry.layout(), names, seed=seed, scene=load_catalogue_scene(base),
+        entry.layout(),
+        names,
+        seed=seed,
+        scene=load_catalogue_scene(base),
         name=f"{base}:{'+'.join(names) or 'fragments'}",
     )
 
@@ -345,9 +349,11 @@ def check_scene_name(name_or_path: str | os.PathLike | Scene) -> None:
     path = Path(name_or_path).expanduser()
     if path.is_file():
         return
-    if isinstance(name_or_path, os.PathLike) or path.suffix.lower() in _MESH_SUFFIXES or len(
-        path.parts
-    ) > 1:
+    if (
+        isinstance(name_or_path, os.PathLike)
+        or path.suffix.lower() in _MESH_SUFFIXES
+        or len(path.parts) > 1
+    ):
         raise FileNotFoundError(
             f"scene file {str(path)!r} does not exist; pass a mesh path or a catalogue name "
             "(see naruto_gym.scenes.available_scenes())"
@@ -358,7 +364,9 @@ def check_scene_name(name_or_path: str | os.PathLike | Scene) -> None:
     )
 
 
-def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z") -> Scene:
+def resolve_scene(
+    name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z", mesh_units: str = "m"
+) -> Scene:
     """Turn what a user passed as ``scene=`` into a :class:`Scene`.
 
     Args:
@@ -368,11 +376,14 @@ def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z"
             (``"procedural:<kind>:<seed>[:<openings>]"``, see :mod:`naruto_gym.scenes.stream`),
             a path to a mesh file, or a :class:`Scene` (returned unchanged).
         up_axis: the up axis of a mesh *file*; catalogue scenes are always z-up and ignore it.
+        mesh_units: the length unit of a mesh *file* (``"m"``, ``"cm"``, ``"mm"``), rescaled to
+            metres; catalogue and generated scenes are in metres and ignore it.
 
     Raises:
         ValueError: a name that is neither in the catalogue nor an existing file.
         FileNotFoundError: a path (it has a mesh suffix or a folder part) that does not exist.
     """
+    check_mesh_units(mesh_units)
     if isinstance(name_or_path, Scene):
         return name_or_path
     if isinstance(name_or_path, str) and name_or_path in _ENTRIES:
@@ -400,7 +411,7 @@ def resolve_scene(name_or_path: str | os.PathLike | Scene, up_axis: UpAxis = "z"
         or len(path.parts) > 1
     )
     if path.is_file() or looks_like_path:
-        return load_scene(path, up_axis=up_axis)
+        return load_scene(path, up_axis=up_axis, mesh_units=mesh_units)
     raise ValueError(
         f"unknown scene {str(name_or_path)!r}: not a catalogue name ("
         f"{', '.join(available_scenes())}) and not an existing mesh file"

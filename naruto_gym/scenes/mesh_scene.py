@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import re
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Literal
@@ -20,6 +20,7 @@ import numpy as np
 import trimesh
 
 from naruto_gym.geometry.sorted_search import searchsorted_right
+from naruto_gym.scenes.units import check_mesh_units, check_metric_size
 from naruto_gym.sensors.kernels import interpolate_corner_colours
 
 UpAxis = Literal["z", "y", "-y", "x", "-x", "-z", "auto"]
@@ -106,7 +107,11 @@ def check_mesh_area(vertices: np.ndarray, faces: np.ndarray, what: str) -> None:
 
 
 def sample_mesh_surface(
-    vertices: np.ndarray, faces: np.ndarray, count: int, seed: int = 0, what: str = "mesh",
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    count: int,
+    seed: int = 0,
+    what: str = "mesh",
     axes: slice | list[int] = slice(None),
 ) -> np.ndarray:
     """``count`` points drawn uniformly by area on a triangle mesh (seeded, reproducible).
@@ -262,8 +267,10 @@ class Scene:
         barycentric_uv = np.ascontiguousarray(barycentric_uv, dtype=np.float32)
         if out is None:
             rgb = np.empty((len(triangle_ids), 3), dtype=np.uint8)
-        elif out.shape != (len(triangle_ids), 3) or out.dtype != np.uint8 or not (
-            out.flags.c_contiguous
+        elif (
+            out.shape != (len(triangle_ids), 3)
+            or out.dtype != np.uint8
+            or not (out.flags.c_contiguous)
         ):
             raise ValueError(
                 f"out must be a C-contiguous ({len(triangle_ids)}, 3) uint8 array, got "
@@ -412,21 +419,28 @@ def dataset_up_axis(path: str | Path) -> str:
     )
 
 
-def load_scene(path: str | Path, up_axis: UpAxis = "z", name: str | None = None) -> Scene:
-    """Load a triangle mesh file (PLY, OBJ, GLB/glTF, ...) as a z-up :class:`Scene`.
+def load_scene(
+    path: str | Path, up_axis: UpAxis = "z", name: str | None = None, mesh_units: str = "m"
+) -> Scene:
+    """Load a triangle mesh file (PLY, OBJ, GLB/glTF, ...) as a z-up :class:`Scene` in metres.
 
     Args:
-        path: mesh file in metres.
+        path: mesh file.
         up_axis: the axis that points up in the file (``"y"`` for most glTF and SceneNet
             files); it is rotated to +z. Never guessed: ``"auto"`` only reads it from a
             recognised dataset layout (see :func:`dataset_up_axis`) and raises otherwise.
         name: display name, defaults to the file stem.
+        mesh_units: the length unit of the file, ``"m"``, ``"cm"`` or ``"mm"``; the mesh is
+            rescaled to metres.
 
     Raises:
         FileNotFoundError: the file does not exist.
         ValueError: the file cannot be read as a mesh, or holds no triangles, or
-            ``up_axis="auto"`` does not recognise its layout.
+            ``up_axis="auto"`` does not recognise its layout, or its size says it is not in
+            ``mesh_units`` (a room in millimetres read as metres; the message names the
+            likely unit, see :func:`naruto_gym.scenes.units.check_metric_size`).
     """
+    to_metres = check_mesh_units(mesh_units)
     path = Path(path).expanduser()
     if not path.is_file():
         raise FileNotFoundError(
@@ -444,6 +458,9 @@ def load_scene(path: str | Path, up_axis: UpAxis = "z", name: str | None = None)
             "use a PLY, OBJ or GLB/glTF file"
         ) from error
     scene = scene_from_trimesh(geometry, name=name or path.stem, up_axis=up_axis)
+    if to_metres != 1.0:
+        scene = replace(scene, vertices=scene.vertices * to_metres)
+    check_metric_size(scene.vertices, scene.faces, f"mesh file {str(path)!r}", mesh_units)
     if up_axis == "z" and looks_y_up(scene.vertices, scene.faces):
         warnings.warn(
             f"{str(path)!r} looks y-up (its shortest side and most of its flat surface lie "

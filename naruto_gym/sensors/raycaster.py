@@ -6,7 +6,7 @@ Two backends implement :class:`RayCaster`:
   680 x 1200 frame about twice as fast as embreex (docs/benchmarks/rendering.md), so it is
   the default.
 * ``"embreex"``: the embreex binding, kept behind the same interface for comparison
-  (``pip install naruto-gym[embree]``).
+  (``pip install naruto-gym[embreex]``).
 
 Distances returned by :meth:`RayCaster.cast` are in units of the direction vector's length:
 pass unit directions for metres, or camera-frame directions with ``z = 1`` for z-depth.
@@ -119,7 +119,7 @@ class RayCaster:
                 from embreex.mesh_construction import TriangleMesh
             except ImportError as error:  # pragma: no cover - depends on the install
                 raise ImportError(
-                    "backend='embreex' needs the embreex package: pip install 'naruto-gym[embree]'"
+                    "backend='embreex' needs the embreex package: pip install 'naruto-gym[embreex]'"
                 ) from error
             self._scene = rtcs.EmbreeScene()
             TriangleMesh(self._scene, self.vertices[self.faces])

@@ -20,7 +20,7 @@ def widened(array: np.ndarray, columns: int) -> np.ndarray:
     if columns <= array.shape[1]:
         return array
     wider = np.zeros((len(array), columns), array.dtype)
-    wider[:, :array.shape[1]] = array
+    wider[:, : array.shape[1]] = array
     return wider
 
 
@@ -51,12 +51,16 @@ class BatchCoverage:
         self._seen[agent] = False
         sizes = tracker.cell_sizes
         self._unseen_in_cell = widened(self._unseen_in_cell, len(sizes))
-        self._unseen_in_cell[agent, :len(sizes)] = sizes
+        self._unseen_in_cell[agent, : len(sizes)] = sizes
         self._seen_counts[agent] = 0
 
     def update(
-        self, members: np.ndarray, tracker: CoverageTracker, poses: np.ndarray,
-        depth: np.ndarray, threads: int,
+        self,
+        members: np.ndarray,
+        tracker: CoverageTracker,
+        poses: np.ndarray,
+        depth: np.ndarray,
+        threads: int,
     ) -> np.ndarray:
         """Mark what the agents ``members`` (all in ``tracker``'s scene) see in their frames.
 
@@ -74,9 +78,17 @@ class BatchCoverage:
 
         def mark(part: slice) -> None:
             mark_visible_batch(
-                tracker.samples_world, *tracker.cells, self._seen, self._unseen_in_cell,
-                members[part], poses, tracker.intrinsics, depth, tracker.max_range_m,
-                COVERAGE_TOLERANCE_M, added[part],
+                tracker.samples_world,
+                *tracker.cells,
+                self._seen,
+                self._unseen_in_cell,
+                members[part],
+                poses,
+                tracker.intrinsics,
+                depth,
+                tracker.max_range_m,
+                COVERAGE_TOLERANCE_M,
+                added[part],
             )
 
         in_threads(mark, len(members), threads)

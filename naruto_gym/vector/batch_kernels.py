@@ -37,7 +37,7 @@ def fill_pinhole_rays(
             camera_directions,
             np.ascontiguousarray(poses[i, :3, :3]),
             np.ascontiguousarray(poses[i, :3, 3]),
-            rays[start:start + pixels],
+            rays[start : start + pixels],
         )
 
 
@@ -76,9 +76,18 @@ def mark_visible_batch(
     for k in range(agents.shape[0]):
         agent = agents[k]
         added[k] = mark_visible_in_cells(
-            samples_world, order, starts, centres, radii, seen[agent],
-            unseen_in_cell[agent], poses[agent],
-            intrinsics, depth[agent], max_range_m, tolerance_m,
+            samples_world,
+            order,
+            starts,
+            centres,
+            radii,
+            seen[agent],
+            unseen_in_cell[agent],
+            poses[agent],
+            intrinsics,
+            depth[agent],
+            max_range_m,
+            tolerance_m,
         )
 
 
@@ -210,7 +219,11 @@ def sweep_stops(
         begin, end = offsets[i], offsets[i + 1]
         # The distances are float32, and numpy compares them with a float in float32.
         first_blocked = first_blocked_sample(
-            fractions[begin:end], lengths[i], distances[begin:end], walls[i], clearances[i],
+            fractions[begin:end],
+            lengths[i],
+            distances[begin:end],
+            walls[i],
+            clearances[i],
             np.float32(clearances[i]),
         )
         last_free = offsets[i + 1] - 1 if first_blocked == -1 else offsets[i] + first_blocked - 1

@@ -64,8 +64,12 @@ class FrameDrawer:
     """
 
     def __init__(
-        self, num_envs: int, camera: PinholeCamera,
-        panorama_camera: EquirectangularCamera | None, max_depth_m: float, poses: np.ndarray,
+        self,
+        num_envs: int,
+        camera: PinholeCamera,
+        panorama_camera: EquirectangularCamera | None,
+        max_depth_m: float,
+        poses: np.ndarray,
     ) -> None:
         self.camera = camera
         self.panorama_camera = panorama_camera
@@ -76,7 +80,8 @@ class FrameDrawer:
         self.depth = np.zeros((num_envs, height, width), np.float32)
         self.panorama = (
             np.zeros((num_envs, panorama_camera.height, panorama_camera.width), np.float32)
-            if panorama_camera is not None else None
+            if panorama_camera is not None
+            else None
         )
         self.rays_cast = 0
         self._rays_lock = threading.Lock()
@@ -97,8 +102,7 @@ class FrameDrawer:
     def renew(self, keep: np.ndarray | None = None) -> None:
         """New frame buffers (those of the last observations belong to the caller now), with
         the frames of the agents ``keep`` flags copied over."""
-        buffers = [self.rgb, self.depth] + ([self.panorama] if self.panorama is not None
-                                            else [])
+        buffers = [self.rgb, self.depth] + ([self.panorama] if self.panorama is not None else [])
         fresh = [np.empty_like(buffer) for buffer in buffers]
         if keep is not None:
             for old, new in zip(buffers, fresh, strict=True):
@@ -116,8 +120,13 @@ class FrameDrawer:
             self.rays_cast += count
 
     def draw(
-        self, runtime: SceneRuntime, members: np.ndarray, escape: np.ndarray, threads: int,
-        part: int | None = None, frames_start: Callable[[], None] | None = None,
+        self,
+        runtime: SceneRuntime,
+        members: np.ndarray,
+        escape: np.ndarray,
+        threads: int,
+        part: int | None = None,
+        frames_start: Callable[[], None] | None = None,
     ) -> list[int]:
         """Draw agents of one scene (``members``, in increasing order) with one cast that
         carries their pinhole rays, their observation panorama rays and the first escape-check
@@ -151,16 +160,19 @@ class FrameDrawer:
         escape_offset = count * (cast_pixels + panorama_rays)
         rays = np.empty((escape_offset + len(escapers) * first, 6), np.float32)
         if not raster:
+
             def fill(part: slice) -> None:
-                fill_pinhole_rays(camera.ray_directions, poses32[part], rays,
-                                  (part.start or 0) * pixels)
+                fill_pinhole_rays(
+                    camera.ray_directions, poses32[part], rays, (part.start or 0) * pixels
+                )
 
             in_threads(fill, count, threads)
         if panorama is not None:
             fill_panorama_rays(panorama.ray_directions, positions32, rays, count * cast_pixels)
         if len(escapers):
-            fill_panorama_rays(order[:first], np.ascontiguousarray(positions32[escape]), rays,
-                               escape_offset)
+            fill_panorama_rays(
+                order[:first], np.ascontiguousarray(positions32[escape]), rays, escape_offset
+            )
         if frames_start is not None:
             frames_start()
         hits = runtime.raycaster.cast_packed(rays) if len(rays) else None
@@ -173,7 +185,8 @@ class FrameDrawer:
         in_place = raster and int(members[-1]) - int(members[0]) == count - 1
         if raster:
             frames = runtime.renderer.render_hits_many(
-                self.poses[members], worker=part,
+                self.poses[members],
+                worker=part,
                 depth_out=self.depth[rows] if in_place else None,
                 barycentric_faces=runtime.scene.faces_needing_barycentrics,
             )
@@ -186,22 +199,29 @@ class FrameDrawer:
             depth[~(depth <= self.max_depth_m)] = 0.0
             triangle_ids = np.where(depth > 0, hits.triangle_ids[frame], -1).astype(np.int32)
             barycentric_uv = hits.barycentric_uv[frame]
-        rgb = (self.rgb[rows].reshape(-1, 3) if in_place
-               else np.empty((len(triangle_ids), 3), np.uint8))
+        rgb = (
+            self.rgb[rows].reshape(-1, 3)
+            if in_place
+            else np.empty((len(triangle_ids), 3), np.uint8)
+        )
 
         def shade(part: slice) -> None:
             pixels_of = slice((part.start or 0) * pixels, part.stop * pixels)
-            runtime.scene.colour_at(triangle_ids[pixels_of], barycentric_uv[pixels_of],
-                                    out=rgb[pixels_of])
+            runtime.scene.colour_at(
+                triangle_ids[pixels_of], barycentric_uv[pixels_of], out=rgb[pixels_of]
+            )
 
         in_threads(shade, count, threads)
         if not in_place:
             self.depth[members] = depth.reshape(count, camera.height, camera.width)
             self.rgb[members] = rgb.reshape(count, camera.height, camera.width, 3)
         if panorama is not None:
-            distance = hits.distance[count * cast_pixels: escape_offset]
-            self.panorama[members] = np.where(np.isfinite(distance), distance, 0.0).astype(
-                np.float32).reshape(count, panorama.height, panorama.width)
+            distance = hits.distance[count * cast_pixels : escape_offset]
+            self.panorama[members] = (
+                np.where(np.isfinite(distance), distance, 0.0)
+                .astype(np.float32)
+                .reshape(count, panorama.height, panorama.width)
+            )
         if not len(escapers):
             return []
         total = len(order)
@@ -214,8 +234,9 @@ class FrameDrawer:
         rest = order[first:]
         extra = np.empty((int(undecided.sum()) * len(rest), 6), np.float32)
         fill_panorama_rays(rest, np.ascontiguousarray(positions32[escape][undecided]), extra, 0)
-        more = no_hit_counts(runtime.raycaster.cast_packed(extra).distance, 0, len(rest),
-                             int(undecided.sum()))
+        more = no_hit_counts(
+            runtime.raycaster.cast_packed(extra).distance, 0, len(rest), int(undecided.sum())
+        )
         self._count_rays(len(extra))
         shares = (misses[undecided] + more) / total
         return [int(a) for a in escapers[undecided][shares > threshold]]

@@ -115,8 +115,11 @@ def merge_shard_infos(parts: list[tuple[dict[str, Any], int, int]], n: int) -> d
                 continue
             value = np.asarray(value)
             shape = (n, *value.shape[1:])
-            array = (np.full(shape, None, object) if value.dtype == object
-                     else np.zeros(shape, value.dtype))
+            array = (
+                np.full(shape, None, object)
+                if value.dtype == object
+                else np.zeros(shape, value.dtype)
+            )
             for share, start, stop in parts:
                 if key in share:
                     array[start:stop] = share[key]

@@ -95,8 +95,14 @@ class Mover:
     """
 
     def __init__(
-        self, pool: ScenePool, action_mode: str, max_translation_m: float,
-        max_rotation_rad: float, poses: np.ndarray, clearances: np.ndarray, steps: np.ndarray,
+        self,
+        pool: ScenePool,
+        action_mode: str,
+        max_translation_m: float,
+        max_rotation_rad: float,
+        poses: np.ndarray,
+        clearances: np.ndarray,
+        steps: np.ndarray,
     ) -> None:
         self.pool = pool
         self.mode = _MODES[action_mode]
@@ -115,9 +121,13 @@ class Mover:
             return moves
         limited = np.empty((len(agents), 4, 4))
         step_poses_kernel(
-            np.ascontiguousarray(self.poses[agents]), self.mode,
-            np.ascontiguousarray(discrete[agents]), np.ascontiguousarray(continuous[agents]),
-            self.max_translation_m, self.max_rotation_rad, float(MAX_DISCRETE_PITCH_RAD),
+            np.ascontiguousarray(self.poses[agents]),
+            self.mode,
+            np.ascontiguousarray(discrete[agents]),
+            np.ascontiguousarray(continuous[agents]),
+            self.max_translation_m,
+            self.max_rotation_rad,
+            float(MAX_DISCRETE_PITCH_RAD),
             limited,
         )
         moves.starts = self.poses[agents, :3, 3].copy()
@@ -168,8 +178,13 @@ class Mover:
         moves.refuse(k)
 
     def _sweep(
-        self, members: np.ndarray, group: np.ndarray, moves: Moves, targets: np.ndarray,
-        positions: np.ndarray, end_clearances: np.ndarray,
+        self,
+        members: np.ndarray,
+        group: np.ndarray,
+        moves: Moves,
+        targets: np.ndarray,
+        positions: np.ndarray,
+        end_clearances: np.ndarray,
     ) -> None:
         """``CollisionChecker.move``'s box clip and sphere sweep for moving agents of one
         scene (``group`` indexes ``moves``), with one distance query for all their samples
@@ -187,8 +202,12 @@ class Mover:
         # From a start closer than the radius (an exact start pose) the sphere may move on as
         # long as it gets no closer than it already is.
         box, end, clearances, lengths, offsets, fractions, points = plan_sweeps(
-            start, np.ascontiguousarray(targets[group]), checker.box_min, checker.box_max,
-            start_clearances, float(checker.radius_m),
+            start,
+            np.ascontiguousarray(targets[group]),
+            checker.box_min,
+            checker.box_max,
+            start_clearances,
+            float(checker.radius_m),
         )
         # Only samples whose distance could block are queried, and only segments that could
         # reach a surface are cast: the outcome is the full sweep's (sweep_distance_queries).
@@ -198,9 +217,7 @@ class Mover:
         if needed.any():
             distances[needed] = raycaster.unsigned_distance(points[needed])
         walls = np.full(len(group), np.inf)
-        along = (lengths > 0) & ~(
-            start_clearances >= lengths + clearances + PROVABLY_CLEAR_SLACK_M
-        )
+        along = (lengths > 0) & ~(start_clearances >= lengths + clearances + PROVABLY_CLEAR_SLACK_M)
         if along.any():
             directions = (end[along] - start[along]) / lengths[along, None]
             walls[along] = raycaster.cast_distance(start[along], directions)

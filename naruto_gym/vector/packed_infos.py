@@ -66,8 +66,9 @@ class InfoUnpacker:
         if packed[0] is not None:
             self._layouts[worker] = packed[0]
             # The layout but the agent count: the same for every worker in a regular step.
-            self._shapes[worker] = tuple((path, dtype, shape[1:])
-                                         for path, dtype, shape in packed[0])
+            self._shapes[worker] = tuple(
+                (path, dtype, shape[1:]) for path, dtype, shape in packed[0]
+            )
         return self._layouts[worker]
 
     def unpack(self, worker: int, packed: Packed) -> dict[str, Any]:
@@ -85,15 +86,20 @@ class InfoUnpacker:
             _insert(tree, path, array)
         return tree
 
-    def merge(self, packed: Sequence[Packed], bounds: Sequence[tuple[int, int]],
-              n: int) -> dict[str, Any]:
+    def merge(
+        self, packed: Sequence[Packed], bounds: Sequence[tuple[int, int]], n: int
+    ) -> dict[str, Any]:
         """Every worker's message merged over the ``n`` agents (worker ``k`` holds agents
         ``bounds[k]``), as :func:`merge_shard_infos` merges them."""
         layouts = [self._layout(k, message) for k, message in enumerate(packed)]
         if any(shape != self._shapes[0] for shape in self._shapes[1:]):
             return merge_shard_infos(
-                [(self.unpack(k, (None, *message[1:])), *bounds[k])
-                 for k, message in enumerate(packed)], n)
+                [
+                    (self.unpack(k, (None, *message[1:])), *bounds[k])
+                    for k, message in enumerate(packed)
+                ],
+                n,
+            )
         tree: dict[str, Any] = {}
         offsets = [0] * len(packed)
         objects = [iter(message[2]) for message in packed]

@@ -72,8 +72,9 @@ class ScenePool:
 
     def distinct(self) -> list[SceneRuntime]:
         """The runtimes agents are in now, each once, in the order of their first agent."""
-        return list({id(runtime): runtime for runtime in self._runtimes
-                     if runtime is not None}.values())
+        return list(
+            {id(runtime): runtime for runtime in self._runtimes if runtime is not None}.values()
+        )
 
     @property
     def has_streams(self) -> bool:
@@ -116,7 +117,8 @@ class ScenePool:
         """A new runtime of ``scene`` (a name, path or ``Scene``), its coverage samples (and
         observable surface) made at once."""
         runtime = SceneRuntime.load(
-            scene, self.settings,
+            scene,
+            self.settings,
             # Many frames at a time: "auto" rasterizes denser meshes than for one frame.
             auto_max_triangles_per_pixel=AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED,
         )
@@ -142,10 +144,14 @@ class ScenePool:
         keys: list[tuple | None] = []
         for agent, rng in zip(agents, rngs, strict=True):
             stream = self._streams[agent]
-            keys.append(None if stream is None
-                        else (stream.kind, stream.draw_seed(rng), stream.openings))
-        missing = {key: self._streams[agent] for agent, key in zip(agents, keys, strict=True)
-                   if key is not None and key not in self._cache}
+            keys.append(
+                None if stream is None else (stream.kind, stream.draw_seed(rng), stream.openings)
+            )
+        missing = {
+            key: self._streams[agent]
+            for agent, key in zip(agents, keys, strict=True)
+            if key is not None and key not in self._cache
+        }
         built: dict[tuple, SceneRuntime] = {}
         if len(missing) > 1 and threads > 1:
             order = iter(list(missing))  # claimed one key at a time by whichever thread is free
@@ -164,14 +170,15 @@ class ScenePool:
         self._runtimes = [None] * len(self._runtimes)
 
     def _cached(
-        self, key: tuple, spec: ProceduralSceneSpec | str,
+        self,
+        key: tuple,
+        spec: ProceduralSceneSpec | str,
         built: dict[tuple, SceneRuntime] | None = None,
     ) -> SceneRuntime:
         """The cached runtime of scene ``key``, made when missing (taken from ``built`` when
         it was made there already)."""
         return self._cache.get(
-            key, lambda: built.pop(key) if built and key in built
-            else self._build_key(key, spec)
+            key, lambda: built.pop(key) if built and key in built else self._build_key(key, spec)
         )
 
     def _build_key(self, key: tuple, spec: ProceduralSceneSpec | str) -> SceneRuntime:

@@ -47,8 +47,9 @@ def share_bounds(shares: np.ndarray, count: int) -> np.ndarray:
     cumulative = 0.0
     for part in range(1, parts):  # at least one agent per part, from both ends
         cumulative += float(shares[part - 1])
-        bounds[part] = min(max(round(cumulative * count), bounds[part - 1] + 1),
-                           count - (parts - part))
+        bounds[part] = min(
+            max(round(cumulative * count), bounds[part - 1] + 1), count - (parts - part)
+        )
     bounds[parts] = count
     return np.array(bounds, np.int64)
 
@@ -63,8 +64,9 @@ def balanced_shares(shares: np.ndarray, finished: np.ndarray, minimum: float) ->
     if min(times) <= 0.0:
         return shares
     mean = sum(times) / len(times)
-    updated = [float(share) * math.sqrt(mean / time) for share, time in zip(shares, times,
-                                                                               strict=True)]
+    updated = [
+        float(share) * math.sqrt(mean / time) for share, time in zip(shares, times, strict=True)
+    ]
     total = sum(updated)
     updated = [share / total for share in updated]
     low = [False] * len(updated)
@@ -73,8 +75,9 @@ def balanced_shares(shares: np.ndarray, finished: np.ndarray, minimum: float) ->
         low = [pinned or share < minimum for pinned, share in zip(low, updated, strict=True)]
         free = sum(share for pinned, share in zip(low, updated, strict=True) if not pinned)
         scale = (1.0 - minimum * sum(low)) / free if free > 0.0 else 0.0
-        updated = [minimum if pinned else share * scale
-                   for pinned, share in zip(low, updated, strict=True)]
+        updated = [
+            minimum if pinned else share * scale for pinned, share in zip(low, updated, strict=True)
+        ]
     return np.array(updated)
 
 

@@ -61,11 +61,14 @@ def resolve_workers(workers: int | None, num_envs: int, threads: int) -> int:
     if workers is None:
         return default_workers(num_envs, threads)
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
-        raise ValueError(f"workers must be a positive integer (or None for the default), got "
-                         f"{workers!r}")
+        raise ValueError(
+            f"workers must be a positive integer (or None for the default), got {workers!r}"
+        )
     if workers > num_envs:
-        raise ValueError(f"workers={workers} is more than num_envs={num_envs}: each worker "
-                         "process needs at least one agent")
+        raise ValueError(
+            f"workers={workers} is more than num_envs={num_envs}: each worker "
+            "process needs at least one agent"
+        )
     return int(workers)
 
 
@@ -73,8 +76,7 @@ def several_scenes(scenes: Sequence[Any]) -> bool:
     """Whether ``scenes`` (one entry per agent) put the agents in more than one scene: a
     procedural stream, or entries that are not all the same (names compared by value,
     other scenes by identity, as the scene pool shares runtimes)."""
-    if any(is_procedural_name(item) and parse_procedural_name(item).is_stream
-           for item in scenes):
+    if any(is_procedural_name(item) and parse_procedural_name(item).is_stream for item in scenes):
         return True
     return len({item if isinstance(item, str) else id(item) for item in scenes}) > 1
 
@@ -89,8 +91,13 @@ class WorkerError(RuntimeError):
 
 
 def _serve(
-    connection: Any, make_env: Callable[..., Any], kwargs: dict[str, Any], threads: int,
-    buffers: SharedObservations, start: int, stop: int,
+    connection: Any,
+    make_env: Callable[..., Any],
+    kwargs: dict[str, Any],
+    threads: int,
+    buffers: SharedObservations,
+    start: int,
+    stop: int,
 ) -> None:
     """A worker: build the share's env, then answer the caller's commands until ``close``
     (or until the caller's end of the pipe closes)."""
@@ -110,8 +117,9 @@ def _serve(
                 if command == "close":
                     connection.send(("ok", None))
                     return
-                connection.send(("ok", _answer(env, command, payload, buffers, start, stop,
-                                               packer)))
+                connection.send(
+                    ("ok", _answer(env, command, payload, buffers, start, stop, packer))
+                )
             except Exception as error:  # noqa: BLE001 - sent to the caller, raised there
                 connection.send(("error", _failure(error)))
     except Exception as error:  # noqa: BLE001 - the env could not be built
@@ -136,8 +144,15 @@ def _failure(error: Exception) -> tuple[Exception | None, str, str, str]:
     return sendable, type(error).__name__, str(error), traceback.format_exc()
 
 
-def _answer(env: Any, command: str, payload: Any, buffers: SharedObservations, start: int,
-            stop: int, packer: InfoPacker) -> Any:
+def _answer(
+    env: Any,
+    command: str,
+    payload: Any,
+    buffers: SharedObservations,
+    start: int,
+    stop: int,
+    packer: InfoPacker,
+) -> Any:
     if command == "reset":
         seeds, options = payload
         observations, infos = env.reset(seed=seeds, options=options)
@@ -146,8 +161,9 @@ def _answer(env: Any, command: str, payload: Any, buffers: SharedObservations, s
     if command == "step":
         observations, rewards, terminated, truncated, infos = env.step(payload)
         buffers.write(observations, start, stop)
-        return packer.pack({"rewards": rewards, "terminated": terminated,
-                            "truncated": truncated, "infos": infos})
+        return packer.pack(
+            {"rewards": rewards, "terminated": terminated, "truncated": truncated, "infos": infos}
+        )
     if command == "poses":
         return env.poses
     if command == "rays_cast":
@@ -185,8 +201,10 @@ class ShardedAgents:
         start_method: str = "spawn",
     ) -> None:
         if start_method not in ("spawn", "forkserver"):
-            raise ValueError(f"start_method must be 'spawn' or 'forkserver', got "
-                             f"{start_method!r} (Embree may deadlock in a forked child)")
+            raise ValueError(
+                f"start_method must be 'spawn' or 'forkserver', got "
+                f"{start_method!r} (Embree may deadlock in a forked child)"
+            )
         context = multiprocessing.get_context(start_method)
         self.num_envs = int(num_envs)
         self.bounds = [
@@ -201,11 +219,17 @@ class ShardedAgents:
         self.closed = False
         for k, (start, stop) in enumerate(self.bounds):
             share_threads = max(1, threads // workers + (1 if k < threads % workers else 0))
-            kwargs = {**env_kwargs, "num_envs": stop - start, "scene": list(scenes[start:stop]),
-                      "threads": share_threads}
+            kwargs = {
+                **env_kwargs,
+                "num_envs": stop - start,
+                "scene": list(scenes[start:stop]),
+                "threads": share_threads,
+            }
             parent_end, child_end = context.Pipe()
             process = context.Process(
-                target=_serve, name=f"naruto-vector-worker-{k}", daemon=True,
+                target=_serve,
+                name=f"naruto-vector-worker-{k}",
+                daemon=True,
                 args=(child_end, make_env, kwargs, share_threads, self.buffers, start, stop),
             )
             process.start()
@@ -230,8 +254,9 @@ class ShardedAgents:
         return [process.pid for process in self._processes]
 
     # -- commands --------------------------------------------------------------------------
-    def call(self, command: str, payloads: Sequence[Any] | None = None,
-             only: Sequence[int] | None = None) -> list[Any]:
+    def call(
+        self, command: str, payloads: Sequence[Any] | None = None, only: Sequence[int] | None = None
+    ) -> list[Any]:
         """Send ``command`` (with each worker's payload) to the workers (all, or ``only``)
         and return their answers in order; a failure is raised (see :meth:`_raise`)."""
         if self.closed:
@@ -256,8 +281,15 @@ class ShardedAgents:
             try:
                 status, answer = self._connections[k].recv()
             except (EOFError, OSError):
-                status, answer = "error", (None, "EOFError", "the worker process died",
-                                           f"exit code {self._processes[k].exitcode}")
+                status, answer = (
+                    "error",
+                    (
+                        None,
+                        "EOFError",
+                        "the worker process died",
+                        f"exit code {self._processes[k].exitcode}",
+                    ),
+                )
                 died = True
             else:
                 died = False
@@ -274,14 +306,17 @@ class ShardedAgents:
         error, name, message, text = sent
         if died or not isinstance(error, (ValueError, TypeError)):
             self.close()
-        cause = WorkerError(f"worker process {k} of the batched env raised {name}: "
-                            f"{message}\n\nthe worker's traceback:\n{text}")
+        cause = WorkerError(
+            f"worker process {k} of the batched env raised {name}: "
+            f"{message}\n\nthe worker's traceback:\n{text}"
+        )
         if error is None:
             raise cause
         raise error from cause
 
-    def reset(self, seeds: Sequence[int | None], mask: np.ndarray,
-              options: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    def reset(
+        self, seeds: Sequence[int | None], mask: np.ndarray, options: dict[str, Any]
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Reset the agents ``mask`` flags with their ``seeds`` and ``options``."""
         chosen, payloads = [], []
         for k, (start, stop) in enumerate(self.bounds):
@@ -290,16 +325,23 @@ class ShardedAgents:
             share_options = {**options, "reset_mask": mask[start:stop].copy()}
             payloads.append((list(seeds[start:stop]), share_options))
         answers = self.call("reset", payloads, chosen)
-        parts = [(self._unpacker.unpack(k, answer)["infos"], *self.bounds[k])
-                 for k, answer in zip(chosen, answers, strict=True)]
+        parts = [
+            (self._unpacker.unpack(k, answer)["infos"], *self.bounds[k])
+            for k, answer in zip(chosen, answers, strict=True)
+        ]
         return self.buffers.copy(self.threads), merge_shard_infos(parts, self.num_envs)
 
     def step(self, actions: np.ndarray) -> tuple[Any, ...]:
         """Step every agent with its action."""
         answers = self.call("step", [actions[start:stop] for start, stop in self.bounds])
         merged = self._unpacker.merge(answers, self.bounds, self.num_envs)
-        return (self.buffers.copy(self.threads), merged["rewards"], merged["terminated"],
-                merged["truncated"], merged.get("infos", {}))
+        return (
+            self.buffers.copy(self.threads),
+            merged["rewards"],
+            merged["terminated"],
+            merged["truncated"],
+            merged.get("infos", {}),
+        )
 
     def poses(self) -> np.ndarray:
         """(N, 4, 4) every agent's pose."""

@@ -37,8 +37,7 @@ class SharedObservations:
         order = [key for key in _KEY_ORDER if key in observation_space.spaces]
         order += [key for key in observation_space.spaces if key not in order]
         self.layout = {
-            key: ((num_envs, *observation_space[key].shape),
-                  np.dtype(observation_space[key].dtype))
+            key: ((num_envs, *observation_space[key].shape), np.dtype(observation_space[key].dtype))
             for key in order
         }
         self.num_envs = int(num_envs)

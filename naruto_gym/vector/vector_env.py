@@ -15,41 +15,32 @@ Agents that share a scene share its :class:`~naruto_gym.envs.scene_runtime.Scene
 (ray-casting structure, surface samples, free-space sampling; see
 :mod:`naruto_gym.vector.scene_pool`), so 64 agents in one scene cast their rays in a single
 Embree call. This module holds the Gymnasium ``VectorEnv`` API: resets, steps, autoreset and
-infos.
+infos (the parts the sharded front shares live in :mod:`naruto_gym.vector.base`).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import inspect
 from collections.abc import Callable
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode
-from gymnasium.vector.utils import batch_space
 
-from naruto_gym.envs.scene_runtime import SceneRuntime, observation_space
-from naruto_gym.envs.settings import EnvSettings
-from naruto_gym.envs.validation import check_keyword_names, check_vector_keywords
+from naruto_gym.envs.scene_runtime import SceneRuntime
 from naruto_gym.evaluation.scoring import EpisodeReconstruction
-from naruto_gym.geometry.transforms import validate_pose
-from naruto_gym.sensors.panorama import EquirectangularCamera
-from naruto_gym.utils.threads import resolve_threads
+from naruto_gym.vector.base import BatchedEnvBase
 from naruto_gym.vector.batch_coverage import BatchCoverage
 from naruto_gym.vector.frames import FrameDrawer
 from naruto_gym.vector.infos import agent_info, agents_mask, batch_infos, overwrite_agents
 from naruto_gym.vector.moves import Mover, Moves
 from naruto_gym.vector.scene_pool import ScenePool
 from naruto_gym.vector.scheduling import StepShares
-from naruto_gym.vector.sharded import ShardedAgents, resolve_workers, several_scenes
 
-__all__ = ["NarutoReconVectorEnv", "agent_info", "make_vector_env"]
+__all__ = ["NarutoReconVectorEnv", "agent_info"]
 
 
-class NarutoReconVectorEnv(gym.vector.VectorEnv):
+class NarutoReconVectorEnv(BatchedEnvBase):
     """Batched ``NarutoReconEnv``: ``num_envs`` agents in one process.
 
     ## Description
@@ -102,24 +93,22 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
       meshes), else the ray cast: the same frames as the single env's reference ray cast up
       to exact edge ties. Pass ``"raycast"`` for frames equal bit for bit to a default
       ``NarutoReconEnv``'s.
-    * ``workers``: processes the agents are sharded over (None: chosen from the CPUs and
-      ``num_envs``, :func:`~naruto_gym.vector.sharded.default_workers`; one on fewer than 4
-      CPUs). Each worker steps a contiguous share of the agents in its own process with
-      ``threads / workers`` threads and writes the observations into shared memory: the same
-      observations, rewards and infos as one process, where the GIL-bound parts of a step
-      run in parallel too. ``scene_pool`` and ``scene_runtimes`` are only there with one.
-    * ``threads``: CPUs the env's compiled loops use, split between the workers (None: the
-      ``NARUTO_GYM_THREADS`` environment variable, else every CPU the process may run on;
-      see :func:`~naruto_gym.utils.threads.default_thread_count`).
+    * ``threads``: CPUs the env's compiled loops use (None: the ``NARUTO_GYM_THREADS``
+      environment variable, else every CPU the process may run on; see
+      :func:`~naruto_gym.utils.threads.default_thread_count`).
     * every other keyword is ``NarutoReconEnv``'s (``action_mode``, ``camera``,
       ``panorama_shape``, ``reconstruct``, ...). With ``reconstruct=True`` the info of each
       agent's last step (truncated) carries ``"reconstruction"``, as for the single env.
 
+    Its agents step in this process. :func:`~naruto_gym.vector.make_vector_env` (and
+    ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``) takes ``workers``
+    and, for more than one, gives a :class:`~naruto_gym.vector.sharded_env.ShardedVectorEnv`
+    instead, which runs a ``NarutoReconVectorEnv`` for a share of the agents in each worker
+    process: the same observations, rewards and infos.
+
     ## Version History
     * v0: initial release.
     """
-
-    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(
         self,
@@ -129,81 +118,28 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
         scene_cache_size: int = 8,
         render_mode: str | None = None,
-        workers: int | None = None,
         **env_kwargs: Any,
     ) -> None:
-        self._sharded: ShardedAgents | None = None
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or (
-            num_envs < 1
-        ):
-            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        check_vector_keywords(max_episode_steps, scene_cache_size)
-        if render_mode is not None:
+        if "workers" in env_kwargs:
             raise ValueError(
-                "the batched vector env does not render; use "
-                "gymnasium.make_vec(..., vectorization_mode='sync', render_mode='rgb_array')"
+                "NarutoReconVectorEnv steps its agents in this process and takes no workers=; "
+                "for worker processes use naruto_gym.vector.make_vector_env(num_envs, "
+                f"workers={env_kwargs['workers']!r}, ...) or gymnasium.make_vec(..., "
+                "vectorization_mode='vector_entry_point', workers=...)"
             )
-        try:
-            self.autoreset_mode = AutoresetMode(autoreset_mode)
-        except ValueError as error:
-            raise ValueError(
-                f"autoreset_mode must be 'NextStep' or 'SameStep', got {autoreset_mode!r}"
-            ) from error
-        if self.autoreset_mode == AutoresetMode.DISABLED:
-            raise ValueError("autoreset_mode DISABLED is not supported; use NextStep or SameStep")
-        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
-        self.num_envs = int(num_envs)
-        self.max_episode_steps = max_episode_steps
-        self.render_mode = None
-        # Rasterized frames where they are cheaper (small frames of meshes of moderate size),
-        # as RL wants; the single env's default is the reference ray cast.
-        env_kwargs = {"pinhole_backend": "auto", **env_kwargs}
-        self._reconstruct = bool(env_kwargs.pop("reconstruct", False))
-        env_kwargs.pop("render_mode", None)
-        accepted = (
-            {item.name for item in dataclasses.fields(EnvSettings)}
-            | set(inspect.signature(NarutoReconVectorEnv.__init__).parameters)
-            | {"reconstruct"}
-        ) - {"self", "env_kwargs"}
-        check_keyword_names(
-            env_kwargs, accepted, "NarutoReconVectorEnv",
-            "The episode length is max_episode_steps (step_budget is the single env's).")
-        self.settings = EnvSettings(**env_kwargs)
-        # Compiled loops (ray filling, shading, coverage) split agents between this many
-        # threads; Open3D's casts use the process's default count.
-        self._threads = resolve_threads(self.settings.threads)
-        self.num_workers = resolve_workers(workers, self.num_envs, self._threads)
-
-        scenes = scene if isinstance(scene, (list, tuple)) else [scene] * self.num_envs
-        if len(scenes) != self.num_envs:
-            raise ValueError(f"scene list has {len(scenes)} entries for num_envs={num_envs}")
-        self._discrete_zeros = np.zeros(self.num_envs, np.int64)
-        self._continuous_zeros = np.zeros((self.num_envs, 7))
-        self._started = False
-        if self.num_workers > 1:
-            self._start_workers(scenes, {
-                **env_kwargs, "max_episode_steps": max_episode_steps,
-                "autoreset_mode": self.autoreset_mode, "scene_cache_size": scene_cache_size,
-                "reconstruct": self._reconstruct, "workers": 1,
-            })
-            return
-        self._pool = ScenePool(scenes, self.settings, scene_cache_size)
+        super().__init__(
+            num_envs,
+            max_episode_steps,
+            autoreset_mode,
+            scene_cache_size,
+            render_mode,
+            env_kwargs,
+            "NarutoReconVectorEnv",
+        )
+        self._pool = ScenePool(self._agent_scenes(scene), self.settings, scene_cache_size)
         template = self._pool.template()
-        self.action_mode: str = self.settings.action_mode
-        if self.action_mode == "pose" and (
-            self._pool.has_streams or len(self._pool.distinct()) > 1
-        ):
-            raise ValueError(
-                "action_mode='pose' bounds actions by one scene's box; use 'discrete' or "
-                "'delta' with several scenes or a procedural stream"
-            )
-        self.camera = template.camera
-        self.panorama_camera = template.panorama_camera
-        self.max_depth_m = float(self.settings.max_depth_m)
-        self.single_observation_space = template.observation_space()
-        self.single_action_space = template.action_space()
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._check_pose_actions(self._pool.has_streams or len(self._pool.distinct()) > 1)
+        self._set_spaces(template.observation_space(), template.action_space())
 
         n = self.num_envs
         self._poses = np.tile(np.eye(4), (n, 1, 1))
@@ -212,11 +148,16 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self._clearances = np.full(n, np.nan, np.float32)
         self._steps = np.zeros(n, np.int64)
         self._mover = Mover(
-            self._pool, self.action_mode, self.settings.max_translation_m,
-            self.settings.max_rotation_rad, self._poses, self._clearances, self._steps,
+            self._pool,
+            self.settings.action_mode,
+            self.settings.max_translation_m,
+            self.settings.max_rotation_rad,
+            self._poses,
+            self._clearances,
+            self._steps,
         )
         self._frames = FrameDrawer(
-            n, self.camera, self.panorama_camera, self.max_depth_m, self._poses
+            n, self.camera, self.panorama_camera, self.settings.max_depth_m, self._poses
         )
         self._coverage = BatchCoverage(n)
         self._rngs: list[np.random.Generator | None] = [None] * n
@@ -231,106 +172,35 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             key: np.full(n, value, type(value)) for key, value in self.camera.as_dict().items()
         }
 
-    def _start_workers(self, scenes: list[Any], kwargs: dict[str, Any]) -> None:
-        """Shard the agents over ``num_workers`` processes (:mod:`naruto_gym.vector.sharded`),
-        each stepping its share as an in-process batched env built with ``kwargs``."""
-        self.action_mode = self.settings.action_mode
-        if self.action_mode == "pose" and several_scenes(scenes):
-            raise ValueError(
-                "action_mode='pose' bounds actions by one scene's box; use 'discrete' or "
-                "'delta' with several scenes or a procedural stream"
-            )
-        self.single_observation_space = observation_space(self.settings)
-        self._sharded = ShardedAgents(
-            NarutoReconVectorEnv, self.num_envs, scenes, kwargs, self.single_observation_space,
-            self.num_workers, self._threads,
-        )
-        self.camera = self.settings.pinhole_camera
-        shape = self.settings.panorama_shape
-        self.panorama_camera = EquirectangularCamera(*shape) if shape is not None else None
-        self.max_depth_m = float(self.settings.max_depth_m)
-        self.single_action_space = self._sharded.single_action_space()
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-
     # -- public views ----------------------------------------------------------------------
     @property
     def poses(self) -> np.ndarray:
         """(N, 4, 4) every agent's camera-to-world pose (a copy)."""
-        if self._sharded is not None:
-            return self._sharded.poses()
         return self._poses.copy()
 
     @property
     def rays_cast(self) -> int:
         """Rays cast so far for frames, panoramas and escape checks."""
-        if self._sharded is not None:
-            return self._sharded.rays_cast()
         return self._frames.rays_cast
 
     @property
     def scene_pool(self) -> ScenePool:
-        """The agents' scenes and the cache of generated ones (in-process envs only)."""
-        return self._in_process("scene_pool")._pool
+        """The agents' scenes and the cache of generated ones."""
+        return self._pool
 
     @property
     def scene_runtimes(self) -> list[SceneRuntime | None]:
         """Per agent, the runtime of its current scene (ray caster, renderer, coverage
-        samples, ...); agents in one scene share it (in-process envs only)."""
-        return self._in_process("scene_runtimes")._pool.runtimes
-
-    @property
-    def scene_envs(self) -> list[SceneRuntime | None]:
-        """The earlier name of :attr:`scene_runtimes` (the runtimes have the ``scene``,
-        ``bounds``, ``raycaster`` and ``renderer`` its callers read)."""
-        return self._in_process("scene_envs")._pool.runtimes
-
-    @property
-    def worker_pids(self) -> list[int]:
-        """The process ids of the worker processes (empty with ``workers=1``)."""
-        return [] if self._sharded is None else self._sharded.pids
-
-    def _in_process(self, name: str) -> NarutoReconVectorEnv:
-        if self._sharded is not None:
-            raise RuntimeError(
-                f"{name} lives in the worker processes of an env with workers="
-                f"{self.num_workers}; make the env with workers=1 to reach it"
-            )
-        return self
+        samples, ...); agents in one scene share it."""
+        return self._pool.runtimes
 
     # -- gymnasium API ---------------------------------------------------------------------
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        if seed is None:
-            seeds: list[int | None] = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            seeds = [int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(
-                    f"seed list has length {len(seeds)}; it must match num_envs={self.num_envs}"
-                )
-        options = dict(options or {})
-        mask = options.pop("reset_mask", None)
-        if mask is None:
-            mask = np.ones(self.num_envs, bool)
-        elif not (
-            isinstance(mask, np.ndarray) and mask.dtype == np.bool_
-            and mask.shape == (self.num_envs,) and mask.any()
-        ):
-            raise ValueError(
-                f"options['reset_mask'] must be a bool numpy array of shape ({self.num_envs},) "
-                "with at least one True"
-            )
+        seeds, mask, options = self._reset_arguments(seed, options)
         indices = np.flatnonzero(mask)
-        if self._sharded is not None:
-            self._validate_reset_options(options, np.zeros(0, np.int64))
-            observations, infos = self._sharded.reset(seeds, mask, options)
-            self._started = True
-            return observations, infos
-        self._validate_reset_options(options, indices)
+        self._check_start_pose(options, indices)
         self._reset_agents(indices, [seeds[i] for i in indices], options)
         others = np.flatnonzero(~mask)
         self._frames.renew(keep=None if self._started else ~mask)
@@ -339,8 +209,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             # (the caller may have changed them): drawn again, the same frames.
             for group in self._pool.groups(others, np.ones(len(others), bool)):
                 members = others[group]
-                self._frames.draw(self._pool[members[0]], members, np.zeros(len(group), bool),
-                                  self._threads)
+                self._frames.draw(
+                    self._pool[members[0]], members, np.zeros(len(group), bool), self.thread_count
+                )
         gains = np.zeros(self.num_envs)
         gains[indices] = self._observe(indices, None)
         self._autoreset[indices] = False
@@ -353,11 +224,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
     def step(
         self, actions: Any
     ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        if not self._started:
-            raise RuntimeError("call reset() before step()")
         discrete, continuous = self._validated_actions(actions)
-        if self._sharded is not None:
-            return self._sharded.step(np.asarray(actions))
         n = self.num_envs
         everyone = np.arange(n)
         if self.autoreset_mode == AutoresetMode.NEXT_STEP and self._autoreset.any():
@@ -382,7 +249,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
                 truncated[stepping] = self._steps[stepping] >= self.max_episode_steps
         infos = self._infos(everyone, gains, collided, reasons)
         done = everyone[terminated | truncated]
-        if self._reconstruct:
+        if self.reconstruct:
             for i in done:
                 infos = self._add_info(
                     infos, {"reconstruction": self._reconstruction_metrics(int(i))}, int(i)
@@ -400,8 +267,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             self._frames.renew(keep=~agents_mask(n, done))
             reset_gains = np.zeros(n)
             reset_gains[done] = self._observe(done, None)
-            reset_infos = self._infos(done, reset_gains, np.zeros(n, bool),
-                                      np.full(n, "", dtype=object))
+            reset_infos = self._infos(
+                done, reset_gains, np.zeros(n, bool), np.full(n, "", dtype=object)
+            )
             infos = overwrite_agents(infos, reset_infos, done)
             if "_reconstruction" in infos:
                 infos["_reconstruction"][done] = False
@@ -415,20 +283,15 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
 
     def close_extras(self, **kwargs: Any) -> None:
         # Also reached from __del__ of an env whose constructor raised.
-        sharded = getattr(self, "_sharded", None)
-        if sharded is not None:
-            sharded.close()
         pool = getattr(self, "_pool", None)
         if pool is not None:
             pool.clear()
 
     # -- per-agent reset -------------------------------------------------------------------
-    def _validate_reset_options(self, options: dict[str, Any], indices: np.ndarray) -> None:
-        unknown = set(options) - {"pose"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; supported: ['pose']")
+    def _check_start_pose(self, options: dict[str, Any], indices: np.ndarray) -> None:
+        """Refuse a reset pose outside the scene of an agent that resets."""
         if "pose" in options:
-            pose = validate_pose(options["pose"], "options['pose']")
+            pose = np.asarray(options["pose"], dtype=np.float64)
             for i in indices:
                 runtime = self._pool[i]
                 if runtime is not None:
@@ -442,7 +305,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         for i, seed in zip(agents, seeds, strict=True):
             if seed is not None or self._rngs[i] is None:
                 self._rngs[i], _ = seeding.np_random(seed)
-        self._pool.draw_scenes(agents, [self._rngs[i] for i in agents], self._threads)
+        self._pool.draw_scenes(agents, [self._rngs[i] for i in agents], self.thread_count)
         for i in agents:
             self._reset_state(int(i), options)
 
@@ -459,50 +322,11 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         self._path_length[i] = 0.0
         self._clearances[i] = np.nan
         self._steps[i] = 0
-        if self._reconstruct:
+        if self.reconstruct:
             self._reconstructions[i] = EpisodeReconstruction(self.camera)
 
     def _reconstruction_metrics(self, i: int) -> dict[str, Any]:
         return self._pool[i].reconstruction_metrics(self._reconstructions[i])
-
-    # -- actions ---------------------------------------------------------------------------
-    def _validated_actions(self, actions: Any) -> tuple[np.ndarray, np.ndarray]:
-        n = self.num_envs
-        if self.action_mode == "discrete":
-            array = np.asarray(actions)
-            if array.shape not in ((n,), (n, 1)) or not np.issubdtype(array.dtype, np.integer):
-                raise ValueError(
-                    f"discrete actions must be {n} integers in [0, "
-                    f"{self.single_action_space.n}), got {actions!r}"
-                )
-            array = array.reshape(n).astype(np.int64)
-            if np.any(array < 0) or np.any(array >= self.single_action_space.n):
-                raise ValueError(
-                    f"discrete actions must lie in [0, {self.single_action_space.n}), got "
-                    f"{array.tolist()}"
-                )
-            return array, self._continuous_zeros
-        try:
-            array = np.asarray(actions, dtype=np.float64)
-        except (TypeError, ValueError) as error:
-            raise ValueError(f"actions must be a numeric array, got {actions!r}") from error
-        expected = (n, *self.single_action_space.shape)
-        if array.shape != expected:
-            raise ValueError(f"{self.action_mode} actions must have shape {expected}, got "
-                             f"{array.shape}")
-        if not np.all(np.isfinite(array)):
-            raise ValueError("actions contain NaN or inf")
-        low, high = self.single_action_space.low, self.single_action_space.high
-        if np.any(array < low - 1e-5) or np.any(array > high + 1e-5):
-            raise ValueError(f"{self.action_mode} actions lie outside the action space "
-                             f"[{low.tolist()}, {high.tolist()}]")
-        if self.action_mode == "pose" and np.any(np.linalg.norm(array[:, 3:7], axis=1) < 1e-6):
-            raise ValueError(
-                "pose action quaternion (x, y, z, w) has zero norm; pass a unit quaternion"
-            )
-        padded = np.zeros((n, 7))
-        padded[:, : array.shape[1]] = array
-        return self._discrete_zeros, padded
 
     # -- a step ----------------------------------------------------------------------------
     def _move_and_observe(
@@ -525,8 +349,10 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             runtime.renderer.frame_backend != "raster" for runtime in runtimes
         )
         pays = not casts_frames if self._split_steps is None else self._split_steps
-        parts = 1 if self._reconstruct or not pays else max(
-            1, min(self._threads, n // self._min_agents_per_part)
+        parts = (
+            1
+            if self.reconstruct or not pays
+            else max(1, min(self.thread_count, n // self._min_agents_per_part))
         )
         if parts == 1:
             moves = self._mover.move(stepping, discrete, continuous)
@@ -549,7 +375,10 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         )
 
     def _observe(
-        self, agents: np.ndarray, moves: Moves | None, part: int | None = None,
+        self,
+        agents: np.ndarray,
+        moves: Moves | None,
+        part: int | None = None,
         frames_start: Callable[[], None] | None = None,
     ) -> np.ndarray:
         """Render ``agents`` at their poses (one cast per scene, with the escape rays of the
@@ -557,7 +386,7 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         Returns each agent's coverage gain. ``part``: the share of the step this runs as
         (its compiled loops then stay in the calling thread); ``frames_start``: called once,
         as the first frames are drawn."""
-        threads = self._threads if part is None else 1
+        threads = self.thread_count if part is None else 1
         agents = np.asarray(agents, np.int64)
         gains = np.zeros(len(agents))
         if len(agents) == 0:
@@ -568,8 +397,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         refused: list[int] = []
         for group in self._pool.groups(agents, np.ones(len(agents), bool)):
             members = agents[group]
-            refused += self._frames.draw(self._pool[members[0]], members, escape[members],
-                                         threads, part, frames_start)
+            refused += self._frames.draw(
+                self._pool[members[0]], members, escape[members], threads, part, frames_start
+            )
             frames_start = None
         if refused:
             # A refused move stays at its start (with the new rotation): render it there.
@@ -579,8 +409,9 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             again = np.array(refused)
             for group in self._pool.groups(again, np.ones(len(refused), bool)):
                 members = again[group]
-                self._frames.draw(self._pool[members[0]], members, np.zeros(len(group), bool),
-                                  threads, part)
+                self._frames.draw(
+                    self._pool[members[0]], members, np.zeros(len(group), bool), threads, part
+                )
         if moves is not None and len(moves.agents):
             self._path_length[moves.agents] += np.linalg.norm(
                 self._poses[moves.agents, :3, 3] - moves.starts, axis=1
@@ -588,10 +419,13 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
         for group in self._pool.groups(agents, np.ones(len(agents), bool)):
             members = agents[group]
             gains[group] = self._coverage.update(
-                members, self._pool[members[0]].coverage, self._poses, self._frames.depth,
+                members,
+                self._pool[members[0]].coverage,
+                self._poses,
+                self._frames.depth,
                 threads,
             )
-        if self._reconstruct:
+        if self.reconstruct:
             for i in agents:
                 self._reconstructions[i].add_frame(
                     self._frames.rgb[i], self._frames.depth[i], self._poses[i]
@@ -616,11 +450,5 @@ class NarutoReconVectorEnv(gym.vector.VectorEnv):
             "path_length_m": (self._path_length, float),
             "step": (self._steps, int),
         }
-        no_hit = (self._frames.panorama_no_hit_shares() if self.panorama_camera is not None
-                  else None)
+        no_hit = self._frames.panorama_no_hit_shares() if self.panorama_camera is not None else None
         return batch_infos(self.num_envs, agents, columns, self._intrinsic_columns, no_hit)
-
-
-def make_vector_env(num_envs: int = 1, **kwargs: Any) -> NarutoReconVectorEnv:
-    """Vector entry point of the registered ids (``gymnasium.make_vec``)."""
-    return NarutoReconVectorEnv(num_envs=num_envs, **kwargs)

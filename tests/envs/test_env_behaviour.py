@@ -41,7 +41,7 @@ def test_random_start_is_collision_free(env):
     for seed in range(5):
         observation, _ = env.reset(seed=seed)
         position = observation["pose"][:3, 3].astype(np.float64)
-        assert env.collision.clearance(position) >= env.start_clearance_m - 1e-4
+        assert env.collision.clearance(position) >= env.settings.start_clearance_m - 1e-4
 
 
 def test_reset_with_exact_pose(env):
@@ -74,7 +74,7 @@ def test_pose_action_moves_at_most_the_limits(env):
     action[:3] = np.clip(action[:3], env.action_space.low[:3], env.action_space.high[:3])
     observation, _, _, _, info = env.step(action)
     pose = observation["pose"].astype(np.float64)
-    assert np.linalg.norm(pose[:3, 3] - start[:3, 3]) <= env.max_translation_m + 1e-6
+    assert np.linalg.norm(pose[:3, 3] - start[:3, 3]) <= env.settings.max_translation_m + 1e-6
     angle = (Rotation.from_matrix(start[:3, :3]).inv() * Rotation.from_matrix(pose[:3, :3]))
     assert angle.magnitude() == pytest.approx(np.deg2rad(20.0), abs=1e-4)
 
@@ -157,7 +157,7 @@ def test_coverage_grows_and_reward_is_gain(env):
     for _ in range(6):
         _, reward, _, _, info = env.step(
             np.array([0, 0, 0, 0, 1.0, 0], np.float32)
-            if env.action_mode == "delta"
+            if env.settings.action_mode == "delta"
             else _turn_in_place(env)
         )
         assert isinstance(reward, float)

@@ -62,7 +62,7 @@ def test_random_rollouts_never_leave_the_scanned_space(scene):
             # Independent of the env's rule: inside the closed building it was cut from.
             assert np.all(position >= envelope[0]) and np.all(position <= envelope[1]), position
             assert not env.collision.sees_escape(position)
-            assert env.collision.clearance(position) >= env.agent_radius_m - 1e-4
+            assert env.collision.clearance(position) >= env.settings.agent_radius_m - 1e-4
     assert blocked > 0
 
 
@@ -164,7 +164,7 @@ def test_reset_starts_inside_the_scanned_room(scene):
         assert 0 < position[2] < height
         assert np.all(position > envelope[0])
         assert env.collision.scanned_space.is_inside(position)
-        assert env.collision.clearance(position) >= env.start_clearance_m - 1e-4
+        assert env.collision.clearance(position) >= env.settings.start_clearance_m - 1e-4
 
 
 def test_closed_and_open_versions_start_alike():
@@ -180,7 +180,7 @@ def test_closed_and_open_versions_start_alike():
             same += 1
         else:
             clearance = closed.raycaster.unsigned_distance(open_start[None])[0]
-            assert clearance < closed.start_clearance_m
+            assert clearance < closed.settings.start_clearance_m
     assert same >= 3
 
 
@@ -192,7 +192,7 @@ def test_published_rule_behaves_as_before_when_selected():
     for seed in (0, 3):
         env.reset(seed=seed)
         expected = sample_free_positions(
-            env.raycaster, env.scene.face_normals, env.bounds, 1, env.start_clearance_m,
+            env.raycaster, env.scene.face_normals, env.bounds, 1, env.settings.start_clearance_m,
             seeding.np_random(seed)[0], 0.5, max_candidates=START_CANDIDATES,
         )[0]
         np.testing.assert_allclose(env.pose[:3, 3], expected)

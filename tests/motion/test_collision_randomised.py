@@ -34,7 +34,7 @@ def _scene_kwargs():
 
 
 def _random_action(env, rng: np.random.Generator):
-    if env.action_mode == "pose":
+    if env.settings.action_mode == "pose":
         # Far targets anywhere in the bounds, kept for a while: most lie behind walls or
         # furniture, so the straight line towards them runs into surfaces.
         if rng.random() < 0.03 or not hasattr(env, "_test_target"):
@@ -44,7 +44,7 @@ def _random_action(env, rng: np.random.Generator):
                 [position, quaternion / np.linalg.norm(quaternion)]
             ).astype(np.float32)
         return env._test_target
-    if env.action_mode == "delta":
+    if env.settings.action_mode == "delta":
         # Keep pushing in one direction for a while so that walls are actually reached.
         if rng.random() < 0.05 or not hasattr(env, "_test_direction"):
             env._test_direction = rng.uniform(-1, 1, 6).astype(np.float32)
@@ -59,7 +59,7 @@ def test_randomised_rollout_never_collides(scene_kwargs, action_mode):
     env = gym.make("NarutoRecon-v0", action_mode=action_mode, **TINY, **scene_kwargs).unwrapped
     env.reset(seed=11)
     rng = np.random.default_rng(11)
-    radius = env.agent_radius_m
+    radius = env.settings.agent_radius_m
     blocked = 0
     for _ in range(STEPS_PER_MODE):
         previous = env.pose[:3, 3]

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 import naruto_gym  # noqa: F401
 from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
 from naruto_gym.sensors.pinhole import PinholeCamera
-from naruto_gym.vector.vector_env import NarutoReconVectorEnv
+from naruto_gym.vector import NarutoReconVectorEnv, make_vector_env
 from tests.property.scenes import CHEAP, small_room
 from tests.property.strategies import any_float, any_integer, odd_value
 
@@ -23,6 +23,7 @@ FAST = {**CHEAP, "observable_only": False}
 #: In-range values of each keyword, drawn beside the odd ones (small where the cost grows).
 VALID: dict[str, st.SearchStrategy] = {
     "up_axis": st.sampled_from(["z", "y", "-y", "x", "-x", "-z"]),
+    "mesh_units": st.sampled_from(["m", "cm", "mm"]),
     "action_mode": st.sampled_from(["pose", "delta", "discrete"]),
     "image_scale": st.floats(0.01, 0.08),
     "max_depth_m": st.floats(0.01, 1e6),
@@ -64,7 +65,7 @@ def _reset_and_step(env: gym.Env) -> None:
 
 
 @pytest.mark.parametrize("keyword", sorted(VALID))
-@settings(max_examples=8)  # per keyword: 20 keywords
+@settings(max_examples=8)  # per keyword: 21 keywords
 @given(data=st.data())
 def test_every_keyword_is_used_or_refused_by_name(keyword, data):
     value = data.draw(st.one_of(odd_value, VALID[keyword]), label=keyword)
@@ -155,7 +156,7 @@ def _check_vector_keyword(keyword: str, value) -> None:
         return
     settings = {**FAST, "num_envs": 2, keyword: value}
     try:
-        env = NarutoReconVectorEnv(scene=small_room(), **settings)
+        env = make_vector_env(scene=small_room(), **settings)
     except ValueError as error:
         assert keyword in str(error) or (keyword == "autoreset_mode"), str(error)
         return

@@ -9,7 +9,6 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode
 
 import naruto_gym  # noqa: F401
-from naruto_gym.rl.observations import MAP_OCCUPIED, MAP_SEEN, pose_to_vector
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.vector import NarutoReconVectorEnv
 from naruto_gym.wrappers import (
@@ -19,6 +18,7 @@ from naruto_gym.wrappers import (
     ResizeFrames,
     for_learning,
 )
+from naruto_gym.wrappers.observation import MAP_OCCUPIED, MAP_SEEN, pose_to_vector
 
 SMALL = {
     "action_mode": "discrete",
@@ -95,7 +95,8 @@ def test_egocentric_map_accumulates_rotates_and_restarts():
 def test_vector_wrappers_match_wrapped_single_envs(mode):
     vector = for_learning(
         NarutoReconVectorEnv(2, max_episode_steps=4, autoreset_mode=mode, **SMALL),
-        size=16, top_down_map=True,
+        size=16,
+        top_down_map=True,
     )
     sync = gym.vector.SyncVectorEnv(
         [lambda: for_learning(make(max_episode_steps=4), size=16, top_down_map=True)] * 2,
@@ -110,8 +111,9 @@ def test_vector_wrappers_match_wrapped_single_envs(mode):
         action = rng.integers(0, 10, 2)
         got, expected = vector.step(action), sync.step(action)
         for key in expected[0]:
-            np.testing.assert_allclose(got[0][key], expected[0][key], atol=1e-6,
-                                       err_msg=f"step {step} {key}")
+            np.testing.assert_allclose(
+                got[0][key], expected[0][key], atol=1e-6, err_msg=f"step {step} {key}"
+            )
         if mode == AutoresetMode.SAME_STEP and "_final_obs" in expected[4]:
             for i in np.flatnonzero(expected[4]["_final_obs"]):
                 for key, value in expected[4]["final_obs"][i].items():

@@ -9,26 +9,30 @@ import pytest
 
 from naruto_gym.rl.rllib_env import make_rllib_env
 from naruto_gym.sensors.pinhole import PinholeCamera
-from naruto_gym.vector import NarutoReconVectorEnv
+from naruto_gym.vector import BatchedEnvBase
 
-CONFIG = {"size": 8, "action_mode": "discrete", "panorama_shape": None,
-          "camera": PinholeCamera(16, 16, 8, 8, 7.5, 7.5), "coverage_samples": 1000,
-          "max_episode_steps": 3}
+CONFIG = {
+    "size": 8,
+    "action_mode": "discrete",
+    "panorama_shape": None,
+    "camera": PinholeCamera(16, 16, 8, 8, 7.5, 7.5),
+    "coverage_samples": 1000,
+    "max_episode_steps": 3,
+}
 
 
 def test_with_num_envs_it_is_the_batched_env_with_flat_float_observations():
     envs = make_rllib_env({**CONFIG, "num_envs": 3})
     try:
         assert isinstance(envs, gym.vector.VectorEnv)
-        assert isinstance(envs.unwrapped, NarutoReconVectorEnv)
+        assert isinstance(envs.unwrapped, BatchedEnvBase)
         assert envs.num_envs == 3
         observations, _ = envs.reset(seed=0)
         assert observations.dtype == np.float32 and observations.ndim == 2
         assert envs.single_observation_space.contains(observations[0])
         # NextStep autoreset, as RLlib's env runner expects: episodes of 3 steps.
         for _ in range(4):
-            observations, rewards, terminated, truncated, _ = envs.step(
-                envs.action_space.sample())
+            observations, rewards, terminated, truncated, _ = envs.step(envs.action_space.sample())
         assert observations.shape == (3, envs.single_observation_space.shape[0])
         assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
     finally:
@@ -67,13 +71,20 @@ def test_a_config_that_is_not_a_mapping_is_refused():
 
 
 def test_the_env_config_of_the_rl_page_gives_the_batched_env_on_a_scene_stream():
-    config = {"size": 16, "action_mode": "discrete", "panorama_shape": None,
-              "image_scale": 0.05, "scene": "procedural:room", "max_episode_steps": 250,
-              "coverage_samples": 1000, "num_envs": 2}  # docs/rl.md#rllib, fewer samples
+    config = {
+        "size": 16,
+        "action_mode": "discrete",
+        "panorama_shape": None,
+        "image_scale": 0.05,
+        "scene": "procedural:room",
+        "max_episode_steps": 250,
+        "coverage_samples": 1000,
+        "num_envs": 2,
+    }  # docs/rl.md#rllib, fewer samples
     envs = make_rllib_env(config)
     try:
         observations, _ = envs.reset(seed=0)
-        assert isinstance(envs.unwrapped, NarutoReconVectorEnv)
+        assert isinstance(envs.unwrapped, BatchedEnvBase)
         assert observations.shape == (2, 16 * 16 * 4 + 9)  # rgb, depth, flat pose
     finally:
         envs.close()

@@ -41,9 +41,16 @@ def test_adapter_steps_like_sb3_expects():
 def test_ppo_learns_a_few_updates_with_the_features_extractor(tmp_path):
     venv = make_sb3_vec_env(2, size=32, top_down_map=True, **SETTINGS)
     model = PPO(
-        "MultiInputPolicy", venv, n_steps=8, batch_size=16, n_epochs=1, seed=0,
-        policy_kwargs={"features_extractor_class": NarutoFeaturesExtractor,
-                       "features_extractor_kwargs": {"features_dim": 32}},
+        "MultiInputPolicy",
+        venv,
+        n_steps=8,
+        batch_size=16,
+        n_epochs=1,
+        seed=0,
+        policy_kwargs={
+            "features_extractor_class": NarutoFeaturesExtractor,
+            "features_extractor_kwargs": {"features_dim": 32},
+        },
     )
     model.learn(32)
     model.save(tmp_path / "model.zip")
@@ -64,13 +71,24 @@ def test_saved_model_acts_as_a_harness_policy(tmp_path):
     from naruto_agent.rl.ppo_policy import PPOExplorer
 
     camera = PinholeCamera().scaled(0.05)
-    venv = make_sb3_vec_env(2, size=32, camera=camera, coverage_samples=2000,
-                            max_episode_steps=5)
-    PPO("MultiInputPolicy", venv, n_steps=8, batch_size=16,
-        policy_kwargs={"features_extractor_class": NarutoFeaturesExtractor,
-                       "features_extractor_kwargs": {"features_dim": 32}}).save(tmp_path / "m")
-    env = gym.make("NarutoRecon-v0", action_mode="discrete", camera=camera,
-                   coverage_samples=2000, max_episode_steps=5)
+    venv = make_sb3_vec_env(2, size=32, camera=camera, coverage_samples=2000, max_episode_steps=5)
+    PPO(
+        "MultiInputPolicy",
+        venv,
+        n_steps=8,
+        batch_size=16,
+        policy_kwargs={
+            "features_extractor_class": NarutoFeaturesExtractor,
+            "features_extractor_kwargs": {"features_dim": 32},
+        },
+    ).save(tmp_path / "m")
+    env = gym.make(
+        "NarutoRecon-v0",
+        action_mode="discrete",
+        camera=camera,
+        coverage_samples=2000,
+        max_episode_steps=5,
+    )
     policy = PPOExplorer(str(tmp_path / "m.zip"), size=32)
     policy.bind(EnvContext.from_env(env))
     observation, info = env.reset(seed=0)
@@ -86,17 +104,28 @@ def test_a_model_trained_with_the_map_acts_with_the_map_it_builds(tmp_path):
 
     from naruto_agent.policies import EnvContext
     from naruto_agent.rl.ppo_policy import PPOExplorer
-    from naruto_gym.rl.observations import LearningObservation
-    from naruto_gym.wrappers import for_learning
+    from naruto_gym.wrappers import LearningObservation, for_learning
 
     camera = PinholeCamera().scaled(0.05)
-    venv = make_sb3_vec_env(2, size=32, top_down_map=True, camera=camera,
-                            coverage_samples=2000, max_episode_steps=5)
-    PPO("MultiInputPolicy", venv, n_steps=8, batch_size=16,
-        policy_kwargs={"features_extractor_class": NarutoFeaturesExtractor,
-                       "features_extractor_kwargs": {"features_dim": 32}}).save(tmp_path / "m")
-    settings = {"action_mode": "discrete", "camera": camera, "coverage_samples": 2000,
-                "max_episode_steps": 6}
+    venv = make_sb3_vec_env(
+        2, size=32, top_down_map=True, camera=camera, coverage_samples=2000, max_episode_steps=5
+    )
+    PPO(
+        "MultiInputPolicy",
+        venv,
+        n_steps=8,
+        batch_size=16,
+        policy_kwargs={
+            "features_extractor_class": NarutoFeaturesExtractor,
+            "features_extractor_kwargs": {"features_dim": 32},
+        },
+    ).save(tmp_path / "m")
+    settings = {
+        "action_mode": "discrete",
+        "camera": camera,
+        "coverage_samples": 2000,
+        "max_episode_steps": 6,
+    }
     env = gym.make("NarutoRecon-v0", **settings)
     wrapped = for_learning(gym.make("NarutoRecon-v0", **settings), size=32, top_down_map=True)
     policy = PPOExplorer(str(tmp_path / "m.zip"), size=32, top_down_map=True)

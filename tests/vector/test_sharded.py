@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from naruto_gym.sensors.pinhole import PinholeCamera
-from naruto_gym.vector import NarutoReconVectorEnv
+from naruto_gym.vector import NarutoReconVectorEnv, ShardedVectorEnv, make_vector_env
 from naruto_gym.vector.sharded import WorkerError
 from tests.process_checks import alive
 
@@ -44,7 +44,7 @@ def assert_gone(pids: list[int], shm_before: set[str]) -> None:
 @pytest.fixture(scope="module")
 def env_and_shm():
     shm_before = shared_memory_entries()
-    env = NarutoReconVectorEnv(3, workers=2, max_episode_steps=5, **TINY)
+    env = ShardedVectorEnv(3, workers=2, max_episode_steps=5, **TINY)
     yield env, shm_before
     env.close()
 
@@ -60,7 +60,7 @@ def test_close_stops_the_workers_and_leaves_no_shared_memory(env_and_shm):
     env.step(np.array([0, 1, 2]))
     for key in held:  # the handed-out arrays are the caller's: the next step leaves them
         np.testing.assert_array_equal(observations[key], held[key])
-    with pytest.raises(RuntimeError, match="workers=1"):
+    with pytest.raises(RuntimeError, match="worker processes"):
         env.scene_runtimes  # noqa: B018
     with pytest.raises(ValueError, match="discrete actions"):  # checked before the workers
         env.step(np.array([0, 1]))
@@ -74,7 +74,7 @@ def test_close_stops_the_workers_and_leaves_no_shared_memory(env_and_shm):
 
 def test_bad_input_in_a_worker_is_raised_with_its_traceback_and_the_env_stays_usable():
     shm_before = shared_memory_entries()
-    env = NarutoReconVectorEnv(3, workers=2, **TINY)
+    env = ShardedVectorEnv(3, workers=2, **TINY)
     pids = env.worker_pids
     env.reset(seed=0)
     far = np.eye(4)
@@ -95,7 +95,7 @@ def test_bad_input_in_a_worker_is_raised_with_its_traceback_and_the_env_stays_us
 
 def test_a_worker_that_dies_is_reported_and_the_others_stopped():
     shm_before = shared_memory_entries()
-    env = NarutoReconVectorEnv(3, workers=2, **TINY)
+    env = ShardedVectorEnv(3, workers=2, **TINY)
     pids = env.worker_pids
     env.reset(seed=0)
     os.kill(pids[1], signal.SIGKILL)
@@ -109,7 +109,7 @@ def test_keyboard_interrupt_while_stepping_stops_the_workers():
     interrupt came while they stepped (the env closes itself) or between steps (the caller's
     ``close``, as a ``with`` block or ``finally`` gives it)."""
     shm_before = shared_memory_entries()
-    env = NarutoReconVectorEnv(3, workers=2, **TINY)
+    env = ShardedVectorEnv(3, workers=2, **TINY)
     pids = env.worker_pids
     env.reset(seed=0)
     # Python's own Ctrl-C handling, whatever an earlier test in this process installed
@@ -121,7 +121,7 @@ def test_keyboard_interrupt_while_stepping_stops_the_workers():
         with pytest.raises(KeyboardInterrupt):
             for _ in range(100_000):
                 env.step(np.array([0, 1, 2]))
-        assert all(alive(pid) for pid in pids) or env._sharded.closed  # noqa: SLF001
+        assert all(alive(pid) for pid in pids) or env.workers_stopped
     finally:
         timer.cancel()
         signal.signal(signal.SIGINT, previous)
@@ -135,8 +135,16 @@ def test_make_vec_shards_a_scene_stream_with_the_same_episodes():
     import gymnasium as gym
 
     kwargs = {**TINY, "scene": "procedural:room:test", "max_episode_steps": 2}
-    envs = [gym.make_vec("NarutoRecon-v0", num_envs=3, vectorization_mode="vector_entry_point",
-                         workers=workers, **kwargs) for workers in (1, 2)]
+    envs = [
+        gym.make_vec(
+            "NarutoRecon-v0",
+            num_envs=3,
+            vectorization_mode="vector_entry_point",
+            workers=workers,
+            **kwargs,
+        )
+        for workers in (1, 2)
+    ]
     assert [env.num_workers for env in envs] == [1, 2]
     results = [env.reset(seed=4)[0] for env in envs]
     for key in results[0]:
@@ -152,3 +160,18 @@ def test_make_vec_shards_a_scene_stream_with_the_same_episodes():
         np.testing.assert_array_equal(one[4]["coverage"], sharded[4]["coverage"])
     for env in envs:
         env.close()
+
+
+def test_make_vector_env_picks_the_class_from_workers_and_the_in_process_env_takes_none():
+    one = make_vector_env(3, workers=1, **TINY)
+    assert type(one) is NarutoReconVectorEnv and one.num_workers == 1 and one.worker_pids == []
+    one.close()
+    with pytest.raises(ValueError, match=r"make_vector_env\(num_envs, workers=2"):
+        NarutoReconVectorEnv(3, workers=2, **TINY)
+    with pytest.raises(ValueError, match="workers must be a positive integer"):
+        make_vector_env(3, workers=0, **TINY)
+    with pytest.raises(ValueError, match="more than num_envs"):
+        make_vector_env(3, workers=4, **TINY)
+    with pytest.raises(ValueError, match="scene_envs"):  # the old alias: an unknown keyword
+        make_vector_env(3, workers=2, scene_envs=None, **TINY)
+    assert not hasattr(NarutoReconVectorEnv, "scene_envs")

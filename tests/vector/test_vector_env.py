@@ -14,7 +14,12 @@ from naruto_gym import NarutoReconEnv
 from naruto_gym.scenes.catalogue import resolve_scene
 from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.pinhole import PinholeCamera
-from naruto_gym.vector import NarutoReconVectorEnv
+from naruto_gym.vector import (
+    BatchedEnvBase,
+    NarutoReconVectorEnv,
+    ShardedVectorEnv,
+    make_vector_env,
+)
 from naruto_gym.vector.scheduling import balanced_shares, share_bounds
 from naruto_gym.wrappers import FinalReconstructionMetrics
 
@@ -56,15 +61,23 @@ def assert_same(vector: Any, sync: Any, where: str) -> None:
 
 
 def run_both(
-    num_envs: int, steps: int, actions: Any, autoreset: AutoresetMode = AutoresetMode.NEXT_STEP,
-    budget: int = 12, seed: int = 3, split: bool = False, workers: int = 1, **kwargs: Any,
-) -> tuple[list[str], NarutoReconVectorEnv]:
+    num_envs: int,
+    steps: int,
+    actions: Any,
+    autoreset: AutoresetMode = AutoresetMode.NEXT_STEP,
+    budget: int = 12,
+    seed: int = 3,
+    split: bool = False,
+    workers: int = 1,
+    **kwargs: Any,
+) -> tuple[list[str], BatchedEnvBase]:
     settings = {**SMALL, **kwargs}
-    vector = NarutoReconVectorEnv(
+    vector = make_vector_env(
         num_envs, max_episode_steps=budget, autoreset_mode=autoreset, workers=workers, **settings
     )
+    assert isinstance(vector, ShardedVectorEnv if workers > 1 else NarutoReconVectorEnv)
     if split:  # each step in two shares, one per thread, however few the agents and frames
-        vector._threads, vector._min_agents_per_part, vector._split_steps = 2, 1, True
+        vector.thread_count, vector._min_agents_per_part, vector._split_steps = 2, 1, True
     sync = gym.vector.SyncVectorEnv(
         [lambda: gym.make("NarutoRecon-v0", max_episode_steps=budget, **settings)] * num_envs,
         autoreset_mode=autoreset,
@@ -74,8 +87,9 @@ def run_both(
     for step in range(steps):
         action = actions(step)
         got, expected = vector.step(action), sync.step(action)
-        for name, a, b in zip(("obs", "reward", "term", "trunc", "info"), got, expected,
-                              strict=True):
+        for name, a, b in zip(
+            ("obs", "reward", "term", "trunc", "info"), got, expected, strict=True
+        ):
             assert_same(a, b, f"step {step} {name}")
         reasons += [r for r in got[4]["collision_reason"] if r]
     sync.close()
@@ -93,8 +107,9 @@ def test_matches_sync_vector_env_with_autoreset_next_step(split, workers):
     rng = np.random.default_rng(0)
     # Mostly forward and down, so that agents reach walls and the floor within the test.
     weights = np.array([4, 1, 1, 1, 0, 12, 1, 0, 0, 0]) / 20
-    reasons, vector = run_both(3, 34, lambda _: rng.choice(10, 3, p=weights), budget=25,
-                               split=split, workers=workers)
+    reasons, vector = run_both(
+        3, 34, lambda _: rng.choice(10, 3, p=weights), budget=25, split=split, workers=workers
+    )
     assert vector.single_observation_space["rgb"].shape == (24, 24, 3)
     assert reasons, "no collision happened: the collision path went untested"
 
@@ -102,8 +117,15 @@ def test_matches_sync_vector_env_with_autoreset_next_step(split, workers):
 @pytest.mark.parametrize(("split", "workers"), SPLIT_OR_WORKERS)
 def test_matches_sync_vector_env_same_step_autoreset(split, workers):
     rng = np.random.default_rng(1)
-    run_both(3, 16, lambda _: rng.integers(0, 10, 3), AutoresetMode.SAME_STEP, budget=7,
-             split=split, workers=workers)
+    run_both(
+        3,
+        16,
+        lambda _: rng.integers(0, 10, 3),
+        AutoresetMode.SAME_STEP,
+        budget=7,
+        split=split,
+        workers=workers,
+    )
 
 
 @pytest.mark.parametrize(("split", "workers"), SPLIT_OR_WORKERS)
@@ -112,8 +134,15 @@ def test_matches_sync_in_open_scene_where_escapes_are_refused(rule, split, worke
     rng = np.random.default_rng(0)
     # Mostly forward, sometimes sideways, up or turning: some agents reach the open side.
     reasons, _ = run_both(
-        3, 60, lambda step: np.zeros(3, int) if step % 3 else rng.choice([0, 2, 3, 4, 6], 3),
-        budget=80, seed=0, split=split, workers=workers, scene=open_room(), escape_rule=rule,
+        3,
+        60,
+        lambda step: np.zeros(3, int) if step % 3 else rng.choice([0, 2, 3, 4, 6], 3),
+        budget=80,
+        seed=0,
+        split=split,
+        workers=workers,
+        scene=open_room(),
+        escape_rule=rule,
     )
     assert "surface" in reasons
     if rule == "published":
@@ -125,8 +154,14 @@ def test_matches_sync_with_rasterized_frames(split, workers):
     """Frames of many agents drawn in parallel (one rasterizer per thread, or each share of
     the step in its thread) are each agent's single-env rasterized frame."""
     rng = np.random.default_rng(5)
-    run_both(5, 30, lambda step: rng.integers(0, 10, 5), split=split, workers=workers,
-             pinhole_backend="raster")
+    run_both(
+        5,
+        30,
+        lambda step: rng.integers(0, 10, 5),
+        split=split,
+        workers=workers,
+        pinhole_backend="raster",
+    )
 
 
 def test_default_frames_are_rasterized_where_cheaper():
@@ -138,8 +173,12 @@ def test_default_frames_are_rasterized_where_cheaper():
     # 24 x 24: 7 per pixel, rasterized when drawn many at once, ray-cast one at a time.
     settings["camera"] = PinholeCamera(24, 24, 12, 12, 11.5, 11.5)
     assert NarutoReconVectorEnv(2, **settings).scene_runtimes[0].renderer.frame_backend == "raster"
-    single = gym.make("NarutoRecon-v0", pinhole_backend="auto", **{
-        k: v for k, v in settings.items() if k != "camera"}, camera=settings["camera"])
+    single = gym.make(
+        "NarutoRecon-v0",
+        pinhole_backend="auto",
+        **{k: v for k, v in settings.items() if k != "camera"},
+        camera=settings["camera"],
+    )
     assert single.unwrapped.renderer.frame_backend == "raycast"
     single.close()
     settings["camera"] = PinholeCamera(64, 64, 32, 32, 31.5, 31.5)
@@ -149,8 +188,14 @@ def test_default_frames_are_rasterized_where_cheaper():
 @pytest.mark.parametrize("workers", [1, 2])
 def test_matches_sync_with_delta_actions(workers):
     rng = np.random.default_rng(2)
-    run_both(3, 10, lambda _: rng.uniform(-1, 1, (3, 6)).astype(np.float32),
-             action_mode="delta", panorama_shape=None, workers=workers)
+    run_both(
+        3,
+        10,
+        lambda _: rng.uniform(-1, 1, (3, 6)).astype(np.float32),
+        action_mode="delta",
+        panorama_shape=None,
+        workers=workers,
+    )
 
 
 def test_partial_reset_mask_and_seeds_list():
@@ -170,8 +215,12 @@ def test_observations_handed_out_never_change_afterwards(split):
     new ones: what a caller holds (a rollout buffer, the final observations of ended
     episodes) stays as it was returned, and a caller changing it changes nothing the env
     returns later."""
-    vector = NarutoReconVectorEnv(3, max_episode_steps=4, autoreset_mode=AutoresetMode.SAME_STEP,
-                                  **{**SMALL, "pinhole_backend": "auto"})
+    vector = NarutoReconVectorEnv(
+        3,
+        max_episode_steps=4,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+        **{**SMALL, "pinhole_backend": "auto"},
+    )
     if split:
         vector._threads, vector._min_agents_per_part, vector._split_steps = 2, 1, True
     rng = np.random.default_rng(4)
@@ -204,8 +253,9 @@ def test_observations_handed_out_never_change_afterwards(split):
 
 
 def test_make_vec_vector_entry_point_returns_batched_env():
-    env = gym.make_vec("NarutoRecon-v0", num_envs=2,
-                       vectorization_mode="vector_entry_point", **SMALL)
+    env = gym.make_vec(
+        "NarutoRecon-v0", num_envs=2, vectorization_mode="vector_entry_point", **SMALL
+    )
     assert isinstance(env, NarutoReconVectorEnv)
     assert env.max_episode_steps == 2000
     observations, infos = env.reset(seed=0)
@@ -239,8 +289,15 @@ def test_env_truncates_at_its_step_budget_with_the_final_metrics(budget):
     """Given its step budget, the env ends the episode itself on the step that reaches it and
     puts the reference map's metrics into that step's info (no wrapper needed, which
     make_vec's vector entry point forbids); a TimeLimit of the same budget agrees."""
-    env = _cheap_metrics(gym.make("NarutoRecon-v0", max_episode_steps=budget,
-                                  step_budget=budget, reconstruct=True, **SMALL))
+    env = _cheap_metrics(
+        gym.make(
+            "NarutoRecon-v0",
+            max_episode_steps=budget,
+            step_budget=budget,
+            reconstruct=True,
+            **SMALL,
+        )
+    )
     for _ in range(2):  # a second episode after the reset, too
         env.reset(seed=0)
         steps = [env.step(0) for _ in range(budget)]
@@ -258,9 +315,9 @@ def test_env_truncates_at_its_step_budget_with_the_final_metrics(budget):
 def test_final_metrics_wrapper_sees_the_time_limit_end():
     """Without a step budget the env cannot know where gymnasium.make's TimeLimit ends the
     episode; FinalReconstructionMetrics, around it, adds the metrics there."""
-    env = FinalReconstructionMetrics(_cheap_metrics(
-        gym.make("NarutoRecon-v0", max_episode_steps=2, reconstruct=True, **SMALL)
-    ))
+    env = FinalReconstructionMetrics(
+        _cheap_metrics(gym.make("NarutoRecon-v0", max_episode_steps=2, reconstruct=True, **SMALL))
+    )
     env.reset(seed=0)
     infos = [env.step(0)[4] for _ in range(2)]
     assert ["reconstruction" in info for info in infos] == [False, True]
@@ -291,8 +348,13 @@ def test_the_clearances_carried_between_steps_are_those_a_query_gives(rule):
     (its stop, or its start after a refused or blocked move), is the distance a fresh query
     gives there, to the bit: the next sweep starts from it instead of asking again."""
     env = NarutoReconVectorEnv(
-        16, scene=resolve_scene("two_rooms"), camera=PinholeCamera(16, 16, 8.0, 8.0, 7.5, 7.5),
-        panorama_shape=None, action_mode="discrete", max_episode_steps=40, escape_rule=rule,
+        16,
+        scene=resolve_scene("two_rooms"),
+        camera=PinholeCamera(16, 16, 8.0, 8.0, 7.5, 7.5),
+        panorama_shape=None,
+        action_mode="discrete",
+        max_episode_steps=40,
+        escape_rule=rule,
     )
     env.reset(seed=5)
     rng = np.random.default_rng(0)

@@ -117,7 +117,7 @@ def test_unknown_and_invalid_settings_are_refused():
         FrontierPolicy(nope=1)
     with pytest.raises(TypeError, match="no setting"):
         PassivePolicy(max_held_moves=2)  # passive has no guard
-    with pytest.raises(ValueError, match="look-around heading"):
+    with pytest.raises(ValueError, match="look_around_headings must be an integer"):
         FrontierPolicy(look_around_headings=0)
     with pytest.raises(ValueError, match="min_run_steps"):
         RandomConfig(min_run_steps=0)

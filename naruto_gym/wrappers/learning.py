@@ -1,6 +1,6 @@
-"""Wrappers around ``NarutoReconEnv``: the final reconstruction metrics, and observations
-shaped for learning (their transforms are in :mod:`naruto_gym.rl.observations`, their vector
-versions in :mod:`naruto_gym.rl.vector_wrappers`)."""
+"""Observations shaped for learning: single-env wrappers of the transforms of
+:mod:`naruto_gym.wrappers.observation`, and :func:`for_learning`, the usual chain on a single
+env or a batched one (with :mod:`naruto_gym.wrappers.vector`)."""
 
 from __future__ import annotations
 
@@ -8,43 +8,24 @@ from typing import Any
 
 import gymnasium as gym
 
-__all__ = [
-    "EgocentricMap",
-    "FinalReconstructionMetrics",
-    "FlatPose",
-    "NormalizeDepth",
-    "ResizeFrames",
-    "for_learning",
-]
+from naruto_gym.wrappers.observation import (
+    DepthTransform,
+    DropKeys,
+    MapTransform,
+    ObservationTransform,
+    PoseTransform,
+    ResizeTransform,
+)
+from naruto_gym.wrappers.vector import VectorTransformObservation
+
+__all__ = ["EgocentricMap", "FlatPose", "NormalizeDepth", "ResizeFrames", "for_learning"]
 
 
-class FinalReconstructionMetrics(gym.Wrapper):
-    """Puts the reference reconstruction's metrics into the info of an episode's last step.
-
-    Wrap it around the ``TimeLimit`` (``gymnasium.make``'s, whatever its budget) or any other
-    wrapper that ends episodes: it sees every episode end, which the env itself cannot (the
-    env adds the metrics itself only on the step that reaches its own ``step_budget``). It
-    computes the metrics once per episode end, and not at all when the env already added them
-    or was made without ``reconstruct=True``.
-    """
-
-    def step(self, action: Any):
-        observation, reward, terminated, truncated, info = self.env.step(action)
-        env = self.env.unwrapped
-        if (
-            (terminated or truncated)
-            and "reconstruction" not in info
-            and getattr(env, "reconstruction", None) is not None
-        ):
-            info = {**info, "reconstruction": env.reconstruction_metrics()}
-        return observation, reward, terminated, truncated, info
-
-
-# -- observations shaped for learning --------------------------------------------------------
 class _TransformObservation(gym.Wrapper):
-    """Applies one :class:`naruto_gym.rl.observations.ObservationTransform` to a single env."""
+    """Applies one :class:`~naruto_gym.wrappers.observation.ObservationTransform` to a single
+    env."""
 
-    def __init__(self, env: gym.Env, transform: Any) -> None:
+    def __init__(self, env: gym.Env, transform: ObservationTransform) -> None:
         super().__init__(env)
         self.transform = transform
         self.observation_space = transform.space(env.observation_space)
@@ -73,7 +54,6 @@ class ResizeFrames(_TransformObservation, gym.utils.RecordConstructorArgs):
     """
 
     def __init__(self, env: gym.Env, size: int = 64) -> None:
-        from naruto_gym.rl.observations import ResizeTransform
 
         gym.utils.RecordConstructorArgs.__init__(self, size=size)
         super().__init__(env, ResizeTransform(size))
@@ -90,7 +70,6 @@ class NormalizeDepth(_TransformObservation, gym.utils.RecordConstructorArgs):
     """
 
     def __init__(self, env: gym.Env, dtype: str = "uint8", max_depth_m: float | None = None):
-        from naruto_gym.rl.observations import DepthTransform
 
         gym.utils.RecordConstructorArgs.__init__(self, dtype=dtype, max_depth_m=max_depth_m)
         super().__init__(env, DepthTransform(max_depth_m, dtype))  # type: ignore[arg-type]
@@ -100,7 +79,6 @@ class FlatPose(_TransformObservation, gym.utils.RecordConstructorArgs):
     """``pose`` 4x4 -> ``(9,)`` float32: position and the 6D rotation (first two columns)."""
 
     def __init__(self, env: gym.Env) -> None:
-        from naruto_gym.rl.observations import PoseTransform
 
         gym.utils.RecordConstructorArgs.__init__(self)
         super().__init__(env, PoseTransform())
@@ -119,9 +97,14 @@ class EgocentricMap(_TransformObservation, gym.utils.RecordConstructorArgs):
         obstacle_m: height above the floor estimate from which a hit is an obstacle.
     """
 
-    def __init__(self, env: gym.Env, cells: int = 32, cell_m: float = 0.15, stride: int = 2,
-                 obstacle_m: float = 0.15) -> None:
-        from naruto_gym.rl.observations import MapTransform
+    def __init__(
+        self,
+        env: gym.Env,
+        cells: int = 32,
+        cell_m: float = 0.15,
+        stride: int = 2,
+        obstacle_m: float = 0.15,
+    ) -> None:
 
         gym.utils.RecordConstructorArgs.__init__(
             self, cells=cells, cell_m=cell_m, stride=stride, obstacle_m=obstacle_m
@@ -130,29 +113,26 @@ class EgocentricMap(_TransformObservation, gym.utils.RecordConstructorArgs):
 
 
 def for_learning(
-    env: Any, size: int = 64, depth: str = "uint8", flat_pose: bool = True,
-    top_down_map: bool = False, keep_panorama: bool = False,
+    env: Any,
+    size: int = 64,
+    depth: str = "uint8",
+    flat_pose: bool = True,
+    top_down_map: bool = False,
+    keep_panorama: bool = False,
 ) -> Any:
-    """The usual learning chain on a single env or on a ``NarutoReconVectorEnv``:
+    """The usual learning chain on a single env or on a batched env:
     (egocentric map), frames resized to ``size``, depth normalised, pose flattened; the
     panorama dropped unless ``keep_panorama``.
 
     Args:
-        env: a ``NarutoReconEnv`` (wrapped or not) or a ``NarutoReconVectorEnv``.
+        env: a ``NarutoReconEnv`` (wrapped or not) or a batched env
+            (``naruto_gym.vector.make_vector_env``).
         size: square frame side (pixels).
         depth: ``"uint8"`` or ``"float"``.
         flat_pose: pose as position + 6D rotation.
         top_down_map: add the egocentric top-down map.
         keep_panorama: keep the ``panorama`` observation.
     """
-    from naruto_gym.rl.observations import (
-        DepthTransform,
-        DropKeys,
-        MapTransform,
-        PoseTransform,
-        ResizeTransform,
-    )
-
     transforms: list[Any] = []
     if top_down_map:
         transforms.append(MapTransform())
@@ -162,8 +142,6 @@ def for_learning(
     if not keep_panorama:
         transforms.append(DropKeys(("panorama",)))
     if isinstance(env, gym.vector.VectorEnv):
-        from naruto_gym.rl.vector_wrappers import VectorTransformObservation
-
         for transform in transforms:
             env = VectorTransformObservation(env, transform)
         return env

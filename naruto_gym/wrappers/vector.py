@@ -1,5 +1,5 @@
-"""Vector-env versions of the learning wrappers (``naruto_gym.wrappers``): the same transforms
-on the batch, for both autoreset modes.
+"""Vector-env versions of the learning wrappers (:mod:`naruto_gym.wrappers.learning`): the same
+transforms on the batch, for both autoreset modes.
 
 Gymnasium's ``VectorObservationWrapper`` refuses ``SAME_STEP`` autoreset, which
 Stable-Baselines3 needs; this wrapper supports it by also transforming
@@ -15,7 +15,9 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from naruto_gym.rl.observations import ObservationTransform
+from naruto_gym.wrappers.observation import ObservationTransform
+
+__all__ = ["VectorTransformObservation"]
 
 
 class VectorTransformObservation(gym.vector.VectorWrapper):
@@ -23,7 +25,7 @@ class VectorTransformObservation(gym.vector.VectorWrapper):
 
     Episode starts are read from the infos' ``step`` (0 on a reset), so per-episode state (the
     egocentric map) restarts with each sub-env's episode; scene bounds come from
-    ``env.unwrapped.scene_runtimes`` (``NarutoReconVectorEnv``).
+    ``env.unwrapped.scene_runtimes`` (a ``NarutoReconVectorEnv``; none elsewhere).
     """
 
     def __init__(self, env: gym.vector.VectorEnv, transform: ObservationTransform) -> None:

@@ -14,6 +14,20 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+__all__ = [
+    "MAP_OCCUPIED",
+    "MAP_SEEN",
+    "DepthFormat",
+    "DepthTransform",
+    "DropKeys",
+    "LearningObservation",
+    "MapTransform",
+    "ObservationTransform",
+    "PoseTransform",
+    "ResizeTransform",
+    "pose_to_vector",
+]
+
 DepthFormat = Literal["uint8", "float"]
 
 
@@ -67,8 +81,9 @@ class ResizeTransform(ObservationTransform):
         rgb = _require(space, "rgb", "ResizeFrames")
         height, width = rgb.shape[:2]
         # Pixel centres of the output, mapped back to the input.
-        self._rows = np.minimum(((np.arange(self.size) + 0.5) * height / self.size).astype(int),
-                                height - 1)
+        self._rows = np.minimum(
+            ((np.arange(self.size) + 0.5) * height / self.size).astype(int), height - 1
+        )
         self._columns = np.minimum(
             ((np.arange(self.size) + 0.5) * width / self.size).astype(int), width - 1
         )
@@ -78,8 +93,9 @@ class ResizeTransform(ObservationTransform):
         if "depth" in space.spaces:
             depth = space.spaces["depth"]
             shape = (self.size, self.size, *depth.shape[2:])
-            new["depth"] = spaces.Box(float(depth.low.min()), float(depth.high.max()), shape,
-                                      depth.dtype)
+            new["depth"] = spaces.Box(
+                float(depth.low.min()), float(depth.high.max()), shape, depth.dtype
+            )
         return _replace(space, **new)
 
     def apply(
@@ -125,8 +141,9 @@ class DepthTransform(ObservationTransform):
         self, batch: dict[str, np.ndarray], envs: np.ndarray | None = None
     ) -> dict[str, np.ndarray]:
         out = dict(batch)
-        scaled = np.clip(batch["depth"].reshape(*batch["depth"].shape[:3], 1) / self.max_depth_m,
-                         0.0, 1.0)
+        scaled = np.clip(
+            batch["depth"].reshape(*batch["depth"].shape[:3], 1) / self.max_depth_m, 0.0, 1.0
+        )
         if self.dtype == "uint8":
             out["depth"] = np.rint(scaled * 255.0).astype(np.uint8)
         else:
@@ -163,8 +180,15 @@ MAP_SEEN, MAP_OCCUPIED = 0, 1
 
 @numba.njit(cache=True, nogil=True)
 def _accumulate_map(
-    grid: np.ndarray, origin_x: float, origin_y: float, cell_m: float, depth: np.ndarray,
-    pose: np.ndarray, intrinsics: np.ndarray, stride: int, floor: np.ndarray,
+    grid: np.ndarray,
+    origin_x: float,
+    origin_y: float,
+    cell_m: float,
+    depth: np.ndarray,
+    pose: np.ndarray,
+    intrinsics: np.ndarray,
+    stride: int,
+    floor: np.ndarray,
     obstacle_m: float,
 ) -> None:
     """Mark the cells under every (strided) depth pixel's hit as seen, and as occupied when
@@ -181,8 +205,9 @@ def _accumulate_map(
             x = (u - cx) / fx * d
             y = (v - cy) / fy * d
             for axis in range(3):
-                points[count, axis] = (pose[axis, 0] * x + pose[axis, 1] * y
-                                       + pose[axis, 2] * d + pose[axis, 3])
+                points[count, axis] = (
+                    pose[axis, 0] * x + pose[axis, 1] * y + pose[axis, 2] * d + pose[axis, 3]
+                )
             floor[0] = min(floor[0], points[count, 2])
             count += 1
     rows, columns = grid.shape[1], grid.shape[2]
@@ -198,7 +223,11 @@ def _accumulate_map(
 
 @numba.njit(cache=True, nogil=True)
 def _egocentric_crop(
-    grid: np.ndarray, origin_x: float, origin_y: float, cell_m: float, pose: np.ndarray,
+    grid: np.ndarray,
+    origin_x: float,
+    origin_y: float,
+    cell_m: float,
+    pose: np.ndarray,
     out: np.ndarray,
 ) -> None:
     """Resample the world grid around the agent: row 0 ahead of it, the agent at the centre,
@@ -247,8 +276,9 @@ class MapTransform(ObservationTransform):
         obstacle_m: height above the floor estimate from which a hit is an obstacle.
     """
 
-    def __init__(self, cells: int = 32, cell_m: float = 0.15, stride: int = 2,
-                 obstacle_m: float = 0.15) -> None:
+    def __init__(
+        self, cells: int = 32, cell_m: float = 0.15, stride: int = 2, obstacle_m: float = 0.15
+    ) -> None:
         if cells < 2 or cell_m <= 0 or stride < 1:
             raise ValueError(
                 f"need cells >= 2, cell_m > 0 and stride >= 1, got {cells}, {cell_m}, {stride}"
@@ -265,9 +295,7 @@ class MapTransform(ObservationTransform):
     def space(self, space: spaces.Dict) -> spaces.Dict:
         _require(space, "depth", "EgocentricMap")
         _require(space, "pose", "EgocentricMap")
-        return _replace(
-            space, map=spaces.Box(0, 255, (self.cells, self.cells, 2), np.uint8)
-        )
+        return _replace(space, map=spaces.Box(0, 255, (self.cells, self.cells, 2), np.uint8))
 
     def bind(self, camera: Any, num_envs: int) -> None:
         """The camera intrinsics and number of envs (called by the wrappers)."""
@@ -297,9 +325,18 @@ class MapTransform(ObservationTransform):
                 raise RuntimeError("the map wrapper saw a step before its env's reset")
             pose = np.ascontiguousarray(batch["pose"][row], np.float64)
             ox, oy = self._origins[i]
-            _accumulate_map(grid, ox, oy, self.cell_m,
-                            np.ascontiguousarray(batch["depth"][row], np.float32), pose,
-                            self._intrinsics, self.stride, self._floors[i], self.obstacle_m)
+            _accumulate_map(
+                grid,
+                ox,
+                oy,
+                self.cell_m,
+                np.ascontiguousarray(batch["depth"][row], np.float32),
+                pose,
+                self._intrinsics,
+                self.stride,
+                self._floors[i],
+                self.obstacle_m,
+            )
             _egocentric_crop(grid, ox, oy, self.cell_m, pose, maps[row])
         return {**batch, "map": maps}
 
@@ -321,7 +358,7 @@ class DropKeys(ObservationTransform):
 
 class LearningObservation:
     """Callable mapping one raw env observation to the learning observation of
-    :func:`naruto_gym.wrappers.for_learning` (optional egocentric map, resize, depth, flat
+    :func:`~naruto_gym.wrappers.learning.for_learning` (optional egocentric map, resize, depth, flat
     pose, panorama dropped): what a model trained on that chain is given at evaluation, e.g.
     as ``SB3Policy(model, observation_transform=LearningObservation(64))``.
 
@@ -335,8 +372,13 @@ class LearningObservation:
         top_down_map: add the egocentric top-down map (:class:`MapTransform`'s defaults).
     """
 
-    def __init__(self, size: int = 64, depth: DepthFormat = "uint8",
-                 max_depth_m: float = 10.0, top_down_map: bool = False) -> None:
+    def __init__(
+        self,
+        size: int = 64,
+        depth: DepthFormat = "uint8",
+        max_depth_m: float = 10.0,
+        top_down_map: bool = False,
+    ) -> None:
         self.size = size
         self.depth = depth
         self.max_depth_m = max_depth_m
@@ -357,12 +399,21 @@ class LearningObservation:
             raise RuntimeError("call start_episode() at every reset when top_down_map is on")
         if self._transforms is None:
             space = spaces.Dict({key: _box_like(value) for key, value in observation.items()})
-            space = spaces.Dict({**space.spaces, "depth": spaces.Box(
-                0.0, self.max_depth_m, np.shape(observation["depth"]), np.float32)})
+            space = spaces.Dict(
+                {
+                    **space.spaces,
+                    "depth": spaces.Box(
+                        0.0, self.max_depth_m, np.shape(observation["depth"]), np.float32
+                    ),
+                }
+            )
             transforms: list[ObservationTransform] = [] if self.map is None else [self.map]
             self._transforms = transforms + [
-                ResizeTransform(self.size), DepthTransform(self.max_depth_m, self.depth),
-                PoseTransform(), DropKeys(("panorama",))]
+                ResizeTransform(self.size),
+                DepthTransform(self.max_depth_m, self.depth),
+                PoseTransform(),
+                DropKeys(("panorama",)),
+            ]
             for transform in self._transforms:
                 space = transform.space(space)
         batch = {key: np.asarray(value)[None] for key, value in observation.items()}
