@@ -18,9 +18,9 @@ from naruto_agent.naruto.recovery import RecoveryConfig
 from naruto_agent.planning import PlannerConfig
 from naruto_agent.policies.config import pop_guard_settings, rename_settings
 
-#: The mappers the agent can build (``NarutoPolicy(mapper=...)``).
+#: The mappers the agent can build (``NarutoPolicy(mapper_kind=...)``).
 MAPPERS = ("tsdf", "neural")
-"""Names of the mappers the agent can run on (``NarutoPolicy(mapper=...)``)."""
+"""Names of the mappers the agent can run on (``NarutoPolicy(mapper_kind=...)``)."""
 
 
 def _goal_search_defaults() -> GoalSearchConfig:
@@ -93,9 +93,9 @@ class NarutoConfig:
     planner: PlannerConfig = field(default_factory=_planner_defaults)
     """E-RRT settings (time limit 2 s; the seed is redrawn for every request)"""
     tsdf: TsdfMapperConfig = field(default_factory=TsdfMapperConfig)
-    """settings of the TSDF mapper (``mapper="tsdf"``)"""
+    """settings of the TSDF mapper (``mapper_kind="tsdf"``)"""
     neural: NeuralMapperConfig = field(default_factory=NeuralMapperConfig)
-    """settings of the neural mapper (``mapper="neural"``)"""
+    """settings of the neural mapper (``mapper_kind="neural"``)"""
 
     def __post_init__(self) -> None:
         if not self.planner_voxel_m > 0:

@@ -35,15 +35,15 @@ def naruto_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     returned = main(
         [
-            "--steps",
+            "--max-episode-steps",
             str(STEPS),
-            "--out",
+            "--output-dir",
             str(out),
             "--gif-frames",
             "6",
             "--gif-width",
             "160",
-            "--checkpoints",
+            "--eval-points",
             "1",
             "--map-snapshots",
             "3",
@@ -208,13 +208,13 @@ def test_frontier_policy_runs_and_is_scored_on_the_reference_map(tmp_path):
             [
                 "--policy",
                 "frontier",
-                "--steps",
+                "--max-episode-steps",
                 "8",
-                "--out",
+                "--output-dir",
                 str(tmp_path),
                 "--gif-frames",
                 "0",
-                "--checkpoints",
+                "--eval-points",
                 "0",
                 "--no-viewer",
                 *FAST,
@@ -235,13 +235,16 @@ def test_frontier_policy_runs_and_is_scored_on_the_reference_map(tmp_path):
         (["--policy", "nope"], "unknown policy 'nope'"),
         (["--policy", "json:dumps"], "is not a naruto_agent.policies.Policy subclass"),
         (["--scene", "no_such_room"], "unknown scene 'no_such_room'"),
-        (["--steps", "0"], "--steps must be at least 1"),
+        (["--max-episode-steps", "0"], "--max-episode-steps must be at least 1"),
+        (["--steps", "10"], "--steps was renamed: use --max-episode-steps"),
+        (["--out", "somewhere"], "--out was renamed: use --output-dir"),
+        (["--checkpoints", "2"], "--checkpoints was renamed: use --eval-points"),
         (["--policy", "random", "--policy-kwargs", "[1]"], "must be a JSON object"),
     ],
 )
 def test_bad_input_ends_with_a_clear_error(flags, message, tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:
-        main([*flags, "--out", str(tmp_path / "out")])
+        main([*flags, "--output-dir", str(tmp_path / "out")])
     assert exit_info.value.code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "out").exists()  # nothing written

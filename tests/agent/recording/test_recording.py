@@ -192,8 +192,9 @@ def test_benchmark_records_every_episode(tmp_path):
     from naruto_agent.benchmark.cli import main
 
     out = tmp_path / "bench"
-    failed = main(["--policies", "random", "--seeds", "0", "--steps", "4", "--workers", "0",
-                   "--record", "--out-dir", str(out), "--no-plots", "--eval-points", "0",
+    failed = main(["--policies", "random", "--seeds", "0", "--max-episode-steps", "4",
+                   "--workers", "0", "--record", "--output-dir", str(out), "--no-plots",
+                   "--eval-points", "0",
                    "--eval-samples", "5000", "--image-scale", "0.1", "--no-progress"])
     assert not failed
     files = sorted((out / "recordings").rglob("*.rrd"))
