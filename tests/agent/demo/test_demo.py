@@ -99,6 +99,14 @@ def test_printed_summary_names_the_scores(naruto_run, capsys):
     ):
         assert words in text
     assert f"{metrics['completion_ratio_pct']:.2f} %" in text
+    # The observable ratio comes first; the whole-surface one says what it counts.
+    lines = text.splitlines()
+    assert lines[1].startswith(
+        f"  observable completion ratio {metrics['observable_completion_ratio_pct']:.2f} %"
+    )
+    assert lines[2].startswith("  whole-surface completion ratio ")
+    assert "outer faces of walls" in lines[2]
+    assert text.index("observable completion ratio") < text.index("whole-surface")
     assert "68 x 120 (H x W) frames" in text  # height first, as the docs write "170 x 300"
 
 
