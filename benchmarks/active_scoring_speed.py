@@ -38,8 +38,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.mapping import NeuralMapper, NeuralMapperConfig
-from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.scenes.mesh_scene import load_scene
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
 
@@ -60,7 +60,7 @@ class Args:
     """timed runs per variant (median)"""
     seed: int = 0
     """seed of the mapper and of the pool"""
-    output: str = str(REPO_ROOT / "benchmarks" / "results" / "active_scoring_speed.json")
+    output_file: str = str(REPO_ROOT / "benchmarks" / "results" / "active_scoring_speed.json")
     """where the JSON goes"""
 
 
@@ -142,8 +142,8 @@ def main(args: Args) -> dict:
         "load_average_start": load_start,
         "load_average_end": os.getloadavg(),
     }
-    Path(args.output).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.output).write_text(json.dumps(record, indent=2))
+    Path(args.output_file).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.output_file).write_text(json.dumps(record, indent=2))
     print(
         f"\noffice0, {args.frames} frames mapped, pool of {len(pool)} rays, "
         f"{args.threads} thread(s), CPU time, median of {args.repeats}"
@@ -160,7 +160,7 @@ def main(args: Args) -> dict:
         print(f"top {config.active_top_rays} rays {score} shares with rendered: {share:.0%}")
     print(
         f"load average {load_start[0]:.1f} -> {record['load_average_end'][0]:.1f}; "
-        f"written {args.output}"
+        f"written {args.output_file}"
     )
     return record
 

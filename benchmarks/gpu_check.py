@@ -15,12 +15,12 @@ time is reported and the next one runs), then prints a summary:
 
 On one H100 or H200 with 16 cores the defaults should take five to seven minutes (an
 estimate: the script has not run on a GPU yet; each part's limit caps it at about 10). The JSON
-records and the logs go to ``--out-dir`` (``$OUT`` when set, so a lent machine returns them).
+records and the logs go to ``--output-dir`` (``$OUT`` when set, so a lent machine returns them).
 
 Usage::
 
     python benchmarks/gpu_check.py                       # everything, 250-step episodes
-    python benchmarks/gpu_check.py --steps 400 --parts iteration episodes
+    python benchmarks/gpu_check.py --max-episode-steps 400 --parts iteration episodes
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import parse_dataclass_args
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PARTS = ("tests", "iteration", "episodes")
@@ -54,15 +54,17 @@ class Args:
     """which parts to run: tests, iteration, episodes"""
     scene_dir: str = str(REPO_ROOT.parent / "shared" / "scenes" / "replica_office0")
     """folder with the Replica sample's mesh.ply and traj.txt"""
-    steps: int = 250
+    max_episode_steps: int = 250
     """step budget of each episode"""
     speed_iterations: int = 20
     """timed mapping iterations per variant"""
     reference_episode: bool = True
     """also run the episode with the PyTorch reference path (backend torch)"""
     reference_steps: int = 0
-    """step budget of the reference path's episode (0: ``steps``)"""
-    out_dir: str = os.environ.get("OUT") or str(REPO_ROOT / "benchmarks" / "results" / "gpu_check")
+    """step budget of the reference path's episode (0: ``max_episode_steps``)"""
+    output_dir: str = (
+        os.environ.get("OUT") or str(REPO_ROOT / "benchmarks" / "results" / "gpu_check")
+    )
     """where the JSON records and logs go"""
     tests_limit_s: int = 150
     """time limit of the tests"""
@@ -124,12 +126,14 @@ def environment() -> dict:
 
 
 def episode_command(args: Args, backend: str, out_dir: Path) -> list[str]:
-    steps = args.reference_steps if backend == "torch" and args.reference_steps else args.steps
+    steps = args.max_episode_steps
+    if backend == "torch" and args.reference_steps:
+        steps = args.reference_steps
     return [
         sys.executable, "benchmarks/naruto_episode.py",
         "--scene", str(Path(args.scene_dir) / "mesh.ply"),
-        "--mapper", "neural", "--device", "cuda", "--backend", backend,
-        "--image-scale", "1.0", "--steps", str(steps),
+        "--mapper-kind", "neural", "--device", "cuda", "--backend", backend,
+        "--image-scale", "1.0", "--max-episode-steps", str(steps),
         "--env-kwargs", '{"pinhole_backend": "raster"}',
         "--target-snapshots", "0", "--checkpoint-every", "100",
         "--output-dir", str(out_dir), "--tag", f"gpu_check_{backend}",
@@ -182,7 +186,7 @@ def main() -> None:
     unknown = set(args.parts) - set(PARTS)
     if unknown:
         sys.exit(f"unknown parts {sorted(unknown)}; choose from {PARTS}")
-    out_dir = Path(args.out_dir)
+    out_dir = Path(args.output_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     info = environment()
     print(json.dumps(info), flush=True)
@@ -201,7 +205,7 @@ def main() -> None:
             sys.executable, "benchmarks/mapping_quality.py", "--scene-dir", args.scene_dir,
             "--num-frames", "1", "--variants", "--device", "cuda",
             "--speed-iterations", str(args.speed_iterations),
-            "--output", str(out_dir / "mapping_iteration.json"),
+            "--output-file", str(out_dir / "mapping_iteration.json"),
         ]  # fmt: skip
         status["iteration"] = run_part("iteration", command, args.iteration_limit_s, out_dir)
     if "episodes" in args.parts:

@@ -39,6 +39,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.mapping import (
     NaiveHashGridEncoding,
     NeuralMapper,
@@ -48,7 +49,6 @@ from naruto_agent.mapping import (
     resolve_backend,
     resolve_device,
 )
-from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.evaluation import evaluate_reconstruction
 from naruto_gym.scenes.mesh_scene import Scene, load_scene
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
@@ -89,7 +89,7 @@ class Args:
     """margin added around the mesh bounds for the map's box"""
     seed: int = 0
     """seed of the mapper and of the evaluation sampling"""
-    output: str = str(REPO_ROOT / "benchmarks" / "results" / "mapping_quality.json")
+    output_file: str = str(REPO_ROOT / "benchmarks" / "results" / "mapping_quality.json")
     """where the JSON results go"""
 
 
@@ -343,13 +343,13 @@ def main() -> None:
         entry = {**timing, "mesh_s": mesh_seconds, "faces": len(mesh.faces), **metrics.as_dict()}
         results["variants"][variant] = entry
         print(f"{variant}: {json.dumps(entry, default=str)}", flush=True)
-        out_dir = Path(args.output).parent
+        out_dir = Path(args.output_file).parent
         out_dir.mkdir(parents=True, exist_ok=True)
-        Path(args.output).write_text(json.dumps(results, indent=2, default=str))
+        Path(args.output_file).write_text(json.dumps(results, indent=2, default=str))
 
     print_table(results)
-    Path(args.output).write_text(json.dumps(results, indent=2, default=str))
-    print(f"results written to {args.output}")
+    Path(args.output_file).write_text(json.dumps(results, indent=2, default=str))
+    print(f"results written to {args.output_file}")
 
 
 def print_table(results: dict) -> None:

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_gym.evaluation import (
     CullingCache,
     TsdfFusionMapper,
@@ -62,7 +62,7 @@ class Args:
     """steps of that episode"""
     culling_only: bool = False
     """time only the culling (written to benchmarks/results/culling_speed_<scene>.json)"""
-    out: str = "benchmarks/results/metrics_speed.json"
+    output_file: str = "benchmarks/results/metrics_speed.json"
     """the JSON report"""
 
 
@@ -94,9 +94,10 @@ def replica_reconstruction(scene, poses: np.ndarray, camera: PinholeCamera):
 def record_episode(scene_name: str, steps: int, seed: int = 0) -> dict[str, np.ndarray]:
     """A frontier episode with the harness's settings: its poses and the reference TSDF map at
     the harness's checkpoints (``mesh_<step>`` vertices and faces), recorded once."""
-    from naruto_agent.benchmark.runner import checkpoint_steps, make_env
+    from naruto_agent.benchmark.runner import make_env
     from naruto_agent.benchmark.spec import EpisodeSpec
-    from naruto_agent.policies import EnvContext, make_policy
+    from naruto_agent.episode_loop import EvalPoints, FrameFusion, run_episode_loop
+    from naruto_agent.policies import make_policy
     from naruto_gym.evaluation import EpisodeReconstruction
 
     path = REPO / "outputs" / "culling" / f"{scene_name}_frontier_{steps}_seed{seed}.npz"
@@ -105,22 +106,16 @@ def record_episode(scene_name: str, steps: int, seed: int = 0) -> dict[str, np.n
     spec = EpisodeSpec(scene=scene_name, policy="frontier", seed=seed, steps=steps)
     policy = make_policy(spec.policy)
     env = make_env(spec, policy.preferred_action_mode)
-    policy.bind(EnvContext.from_env(env, step_budget=steps))
     reconstruction = EpisodeReconstruction(env.unwrapped.camera, device="cpu")
-    observation, info = env.reset(seed=seed, options=policy.reset_options())
-    policy.reset(observation, info, seed=seed)
-    reconstruction.add_frame(observation["rgb"], observation["depth"], observation["pose"])
-    marks = set(checkpoint_steps(steps, spec.eval_points)) | {steps}
     record: dict[str, np.ndarray] = {}
-    for step in range(1, steps + 1):
-        observation, _, terminated, truncated, info = env.step(policy.act(observation, info))
-        reconstruction.add_frame(observation["rgb"], observation["depth"], observation["pose"])
-        if step in marks or terminated or truncated:
-            mesh = reconstruction.mesh()
-            record[f"vertices_{step}"] = np.asarray(mesh.vertices)
-            record[f"faces_{step}"] = np.asarray(mesh.faces)
-        if terminated or truncated:
-            break
+
+    def keep_mesh(step: int, last: bool) -> None:
+        mesh = reconstruction.mesh()
+        record[f"vertices_{step}"] = np.asarray(mesh.vertices)
+        record[f"faces_{step}"] = np.asarray(mesh.faces)
+
+    hooks = [FrameFusion(reconstruction), EvalPoints(steps, spec.eval_points, keep_mesh, True)]
+    run_episode_loop(env, policy, steps, seed, hooks)
     record["poses"] = reconstruction.poses
     record["camera"] = np.array(list(env.unwrapped.camera.as_dict().values()))
     env.close()
@@ -256,7 +251,7 @@ def main() -> None:
         f"(goal < {GOAL_S} s: {'met' if report['meets_goal'] else 'MISSED'})"
     )
     report.update(culling_report(args))
-    out = REPO / args.out
+    out = REPO / args.output_file
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(report, indent=2))
     print(f"saved {out.relative_to(REPO)}")

@@ -33,8 +33,8 @@ start and the end: on a shared 2-core CPU the timings move with it.
 Usage::
 
     python benchmarks/naruto_episode.py                          # replica_like_room, 500 steps
-    python benchmarks/naruto_episode.py --steps 200 --image-scale 0.25 --scene two_rooms
-    python benchmarks/naruto_episode.py --mapper neural --device cuda   # the published mapper
+    python benchmarks/naruto_episode.py --max-episode-steps 200 --image-scale 0.25 --scene two_rooms
+    python benchmarks/naruto_episode.py --mapper-kind neural --device cuda   # the published mapper
 """
 
 from __future__ import annotations
@@ -59,10 +59,14 @@ from tqdm import tqdm  # noqa: E402
 
 import naruto_gym  # noqa: E402,F401  (registers the env)
 from naruto_agent.benchmark.spec import SceneSpec  # noqa: E402
+from naruto_agent.cli_args import parse_dataclass_args
+from naruto_agent.episode_loop import (  # noqa: E402
+    EpisodeHook,
+    StepRecords,
+    run_episode_loop,
+)
 from naruto_agent.mapping import NeuralMapper  # noqa: E402
 from naruto_agent.naruto import NarutoPolicy  # noqa: E402
-from naruto_agent.policies import EnvContext  # noqa: E402
-from naruto_gym.cli_args import parse_dataclass_args
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # NARUTO paper (Feng et al., CVPR 2024), Replica room0 on a V100: per-frame averages.
@@ -77,11 +81,11 @@ class Args:
     """catalogue name or mesh path"""
     up_axis: str = "z"
     """up axis of a mesh file"""
-    steps: int = 500
+    max_episode_steps: int = 500
     """step budget of the episode"""
     image_scale: float = 0.5
     """camera resolution factor (0.5 gives 340 x 600)"""
-    mapper: str = "tsdf"
+    mapper_kind: str = "tsdf"
     """the agent's mapper: tsdf (fast) or neural (the published one; slow on a CPU)"""
     seed: int = 0
     """seed of the env's start pose and of the agent"""
@@ -228,6 +232,7 @@ def instrument(env: gym.Env, policy: NarutoPolicy, clock: PhaseClock) -> None:
     base.coverage.update = clock.wrap("coverage", base.coverage.update)
     if base.reconstruction is not None:
         base.reconstruction.add_frame = clock.wrap("reference_map", base.reconstruction.add_frame)
+
     def timed_check(check):  # noqa: ANN001, ANN202
         def move_check(start, end):  # noqa: ANN001, ANN202
             # A check may read a stale planner view first: that time is the planner view's.
@@ -311,8 +316,7 @@ def passive_reference(env: gym.Env, policy: NarutoPolicy, args: Args) -> dict:
     reference of the goal "episode at most 2x the passive mapping" is the mapping alone).
     """
     base = env.unwrapped
-    config = dataclasses.replace(policy.mapper.config, active_sampling=False,
-                                 unknown_space=False)
+    config = dataclasses.replace(policy.mapper.config, active_sampling=False, unknown_space=False)
     mapper = NeuralMapper(policy.context.bounds, base.camera, config)
     render_s = render_cpu_s = 0.0
     started, cpu_started = time.perf_counter(), time.process_time()
@@ -339,6 +343,84 @@ def passive_reference(env: gym.Env, policy: NarutoPolicy, args: Args) -> dict:
     }
 
 
+class Instrument(EpisodeHook):
+    """Wraps the env's components and the agent's move check once the policy is bound
+    (:func:`instrument`)."""
+
+    def __init__(self, clock: PhaseClock) -> None:
+        self.clock = clock
+
+    def before_reset(self, env: gym.Env, policy: NarutoPolicy) -> None:
+        instrument(env, policy, self.clock)
+
+
+class TargetSnapshots(EpisodeHook):
+    """Top-down pictures of the agent's targets at ``count`` steps evenly over the episode
+    (:func:`target_snapshot`); their wall and CPU seconds are kept apart, as they are not
+    the agent's time."""
+
+    def __init__(self, max_episode_steps: int, count: int) -> None:
+        self.steps = (
+            set(np.linspace(0, max_episode_steps, count + 1)[1:].astype(int).tolist())
+            if count > 0
+            else set()
+        )
+        self.pictures: list = []
+        self.seconds = self.cpu_seconds = 0.0
+        self.env: gym.Env | None = None
+        self.policy: NarutoPolicy | None = None
+
+    def before_reset(self, env: gym.Env, policy: NarutoPolicy) -> None:
+        self.env, self.policy = env, policy
+
+    def on_step(self, step: int, observation: dict, info: dict, last: bool) -> None:
+        if step in self.steps:
+            clock, cpu_clock = time.perf_counter(), time.process_time()
+            self.pictures.append(target_snapshot(self.env, self.policy, step))
+            self.seconds += time.perf_counter() - clock
+            self.cpu_seconds += time.process_time() - cpu_clock
+
+
+class ProgressFile(EpisodeHook):
+    """Every ``--checkpoint-every`` steps, a progress record of the episode so far: coverage,
+    wall and CPU time (pictures left out) and the wall time by phase."""
+
+    def __init__(
+        self,
+        args: Args,
+        path: Path,
+        records: StepRecords,
+        snapshots: TargetSnapshots,
+        clock: PhaseClock,
+        seconds: dict[str, float],
+        started: float,
+        cpu_started: float,
+    ) -> None:
+        self.args, self.path, self.records, self.snapshots = args, path, records, snapshots
+        self.clock, self.seconds = clock, seconds
+        self.started, self.cpu_started = started, cpu_started
+        self.policy: NarutoPolicy | None = None
+
+    def before_reset(self, env: gym.Env, policy: NarutoPolicy) -> None:
+        self.policy = policy
+
+    def on_step(self, step: int, observation: dict, info: dict, last: bool) -> None:
+        if step % self.args.checkpoint_every:
+            return
+        env_s = self.seconds["reset_env"] + self.seconds["env"]
+        progress = {
+            "args": dataclasses.asdict(self.args),
+            "steps_run": step,
+            "wall_s": time.perf_counter() - self.started - self.snapshots.seconds,
+            "cpu_s": time.process_time() - self.cpu_started - self.snapshots.cpu_seconds,
+            "phases_s": phase_seconds(self.policy, self.clock, env_s),
+            "coverage_curve": np.round(self.records.coverage, 5).tolist(),
+            "path_length_m": float(info.get("path_length_m", 0.0)),
+            "load_average": os.getloadavg(),
+        }
+        self.path.write_text(json.dumps(progress, indent=2))
+
+
 def json_object(text: str, flag: str, what: str) -> dict:
     """The dict a ``--flag`` holds as JSON ({} when empty), or exit saying what is wrong."""
     try:
@@ -363,68 +445,55 @@ def main(args: Args) -> dict:
         scene=args.scene,
         up_axis=args.up_axis,
         image_scale=args.image_scale,
-        max_episode_steps=args.steps + 1,
+        max_episode_steps=args.max_episode_steps + 1,
         reconstruct=True,
         render_mode="rgb_array",
         **env_kwargs,
     )
     base = env.unwrapped
-    policy = NarutoPolicy(mapper=args.mapper, device=args.device, **settings)
-    tag = args.tag or f"{SceneSpec(args.scene).label}_{args.mapper}_{args.steps}steps"
+    policy = NarutoPolicy(mapper_kind=args.mapper_kind, device=args.device, **settings)
+    tag = args.tag or (
+        f"{SceneSpec(args.scene).label}_{args.mapper_kind}_{args.max_episode_steps}steps"
+    )
     output_dir = Path(args.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
-    policy.bind(EnvContext.from_env(env, step_budget=args.steps))
     clock_phases = PhaseClock()
-    instrument(env, policy, clock_phases)
-    started = time.perf_counter()
+    records = StepRecords()
+    snapshots = TargetSnapshots(args.max_episode_steps, args.target_snapshots)
+    seconds: dict[str, float] = {}
     # CPU time of the process (all its threads): on a shared machine it moves far less with
     # the other jobs than wall time, so ratios between runs at different loads use it.
-    cpu_started = time.process_time()
-    observation, info = env.reset(seed=args.seed, options=policy.reset_options())
-    env_s = time.perf_counter() - started
-    clock = time.perf_counter()
-    policy.reset(observation, info, seed=args.seed)
-    reset_s = time.perf_counter() - clock
-
-    coverage = [float(info["coverage"])]
-    collisions = 0
-    snapshot_steps = (
-        set(np.linspace(0, args.steps, args.target_snapshots + 1)[1:].astype(int).tolist())
-        if args.target_snapshots > 0
-        else set()
-    )
-    snapshots = []
-    snapshot_cpu_s = 0.0
-    for step in tqdm(range(1, args.steps + 1), desc=f"NARUTO {args.scene}"):
-        action = policy.act(observation, info)
-        clock = time.perf_counter()
-        observation, _, terminated, truncated, info = env.step(action)
-        env_s += time.perf_counter() - clock
-        coverage.append(float(info["coverage"]))
-        collisions += int(info["collided"])
-        if step in snapshot_steps:
-            clock, cpu_clock = time.perf_counter(), time.process_time()
-            snapshots.append(target_snapshot(env, policy, step))
-            started += time.perf_counter() - clock  # pictures are not the agent's time
-            snapshot_cpu_s += time.process_time() - cpu_clock
-        if args.checkpoint_every > 0 and step % args.checkpoint_every == 0:
-            progress = {
-                "args": dataclasses.asdict(args),
-                "steps_run": step,
-                "wall_s": time.perf_counter() - started,
-                "cpu_s": time.process_time() - cpu_started - snapshot_cpu_s,
-                "phases_s": phase_seconds(policy, clock_phases, env_s),
-                "coverage_curve": np.round(coverage, 5).tolist(),
-                "path_length_m": float(info.get("path_length_m", 0.0)),
-                "load_average": os.getloadavg(),
-            }
-            (output_dir / f"naruto_episode_{tag}_progress.json").write_text(
-                json.dumps(progress, indent=2)
+    started, cpu_started = time.perf_counter(), time.process_time()
+    hooks: list[EpisodeHook] = [Instrument(clock_phases), records, snapshots]
+    if args.checkpoint_every > 0:
+        hooks.append(
+            ProgressFile(
+                args,
+                output_dir / f"naruto_episode_{tag}_progress.json",
+                records,
+                snapshots,
+                clock_phases,
+                seconds,
+                started,
+                cpu_started,
             )
-        if terminated or truncated:
-            break
-    episode_s = time.perf_counter() - started
-    episode_cpu_s = time.process_time() - cpu_started - snapshot_cpu_s
+        )
+    result = run_episode_loop(
+        env,
+        policy,
+        args.max_episode_steps,
+        args.seed,
+        hooks,
+        progress=f"NARUTO {args.scene}",
+        seconds=seconds,
+    )
+    info = result.info
+    coverage = records.coverage
+    collisions = int(sum(records.collisions.values()))
+    env_s = seconds["reset_env"] + seconds["env"]
+    reset_s = seconds["reset_policy"]
+    episode_s = time.perf_counter() - started - snapshots.seconds  # pictures: not the agent's
+    episode_cpu_s = time.process_time() - cpu_started - snapshots.cpu_seconds
     # The trajectory (one flattened camera-to-world matrix per line, like Replica's
     # traj.txt), so its frames can be mapped passively for comparison
     # (benchmarks/mapping_quality.py --trajectory).
@@ -482,7 +551,7 @@ def main(args: Args) -> dict:
             name: phases[name] / max(sum(phases[p] for p in PHASES), 1e-9) for name in PHASES
         },
         "neural_mapper_settings": policy.mapper.config.to_dict()
-        if args.mapper == "neural"
+        if args.mapper_kind == "neural"
         else None,
         "neural_mapper_backend": getattr(policy.mapper, "backend", None),
         "mapping_iterations": int(getattr(getattr(policy.mapper, "stats", None), "iterations", 0)),
@@ -498,7 +567,7 @@ def main(args: Args) -> dict:
         "cpu_count": os.cpu_count(),
         "host": platform.node(),
     }
-    if args.passive_reference and args.mapper == "neural":
+    if args.passive_reference and args.mapper_kind == "neural":
         passive = passive_reference(env, policy, args)
         # The env's reference TSDF fusion scores the episode; it is not the agent's work.
         agent_s = episode_s - phases.get("reference_tsdf", 0.0)
@@ -518,20 +587,20 @@ def main(args: Args) -> dict:
     save_curve(
         coverage,
         output_dir / f"naruto_episode_{tag}_coverage.png",
-        f"NARUTO ({args.mapper}) on {args.scene}",
+        f"NARUTO ({args.mapper_kind}) on {args.scene}",
     )
-    if snapshots:
+    if snapshots.pictures:
         save_target_pictures(
             env,
-            snapshots,
+            snapshots.pictures,
             output_dir / f"naruto_episode_{tag}_targets.png",
-            f"NARUTO ({args.mapper}) on {args.scene}: targets and path",
+            f"NARUTO ({args.mapper_kind}) on {args.scene}: targets and path",
         )
     env.close()
 
     print(
-        f"\nNARUTO ({args.mapper} mapper"
-        + (f", {record['neural_mapper_backend']} backend" if args.mapper == "neural" else "")
+        f"\nNARUTO ({args.mapper_kind} mapper"
+        + (f", {record['neural_mapper_backend']} backend" if args.mapper_kind == "neural" else "")
         + f") on {args.scene}, {steps_run} steps, "
         f"image scale {args.image_scale} ({base.camera.width} x {base.camera.height})"
     )

@@ -27,7 +27,7 @@ Example (the run of the docs page; naruto last, it is the slowest)::
     python benchmarks/open_scans.py --policies naruto --workers 1
 
 Writes ``records/`` (one JSON per episode), ``results.md`` (the harness table), and
-``open_scans.json`` / ``open_scans.md`` (this comparison) under ``--out-dir``.
+``open_scans.json`` / ``open_scans.md`` (this comparison) under ``--output-dir``.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ from naruto_agent.benchmark.cli import write_reports
 from naruto_agent.benchmark.executors import pending_specs, run_local
 from naruto_agent.benchmark.records import STATUS_OK, load_records, write_json_atomic
 from naruto_agent.benchmark.spec import SceneSpec, build_specs, parse_scene
-from naruto_gym.cli_args import dataclass_parser
+from naruto_agent.cli_args import dataclass_parser
 
 REPO = Path(__file__).resolve().parents[1]
 HABITAT_ROOM = REPO.parent / "shared" / "scenes" / "habitat_simple_room" / "simple_room.glb"
@@ -72,7 +72,7 @@ class Args:
     seeds: list[int] = field(default_factory=lambda: list(range(10)))
     """episode seeds (10: with 3, a refusal count of 0.3 against 0.7 is one bump in one
     episode, and a path's seed-to-seed spread is about 8 % of it)"""
-    steps: int = 300
+    max_episode_steps: int = 300
     """step budget of every episode"""
     image_scale: float = 0.25
     """camera resolution factor (0.25: 170 x 300)"""
@@ -86,7 +86,7 @@ class Args:
     """also fuse and score the reference TSDF map (completion ratio; about 5x slower)"""
     eval_points: int = 1
     """completion-ratio checkpoints per episode besides the final score"""
-    out_dir: str = "benchmarks/results/open_scans"
+    output_dir: str = "benchmarks/results/open_scans"
     """output folder"""
     report_only: bool = False
     """do not run episodes, only rebuild the tables from the records"""
@@ -121,7 +121,7 @@ def run_set(
     if not scenes or not policies:
         return 0
     specs = build_specs(
-        scenes, policies, args.seeds, args.steps, image_scale=args.image_scale,
+        scenes, policies, args.seeds, args.max_episode_steps, image_scale=args.image_scale,
         eval_points=args.eval_points, reconstruct=args.reconstruct,
         env_kwargs={"escape_rule": rule},
     )
@@ -367,7 +367,7 @@ def main(argv: list[str] | None = None) -> int:
     )))
     for scene in args.scenes:
         parse_scene(scene)  # validates early
-    out_dir = Path(args.out_dir)
+    out_dir = Path(args.output_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "args.json").write_text(json.dumps(asdict(args), indent=2))
     closed, opened = scene_arguments(args)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
 from naruto_gym.observability import visible_from_any, visible_from_any_per_viewpoint
 from naruto_gym.scenes.procedural import make_random_scene
@@ -42,15 +42,15 @@ CAMERA = PinholeCamera(64, 64, 32, 32, 31.5, 31.5)
 class Args:
     seeds: int = 5
     """scenes timed per kind and sample count"""
-    steps: int = 10_000
+    total_steps: int = 10_000
     """steps of the memory run"""
-    episode_steps: int = 50
+    max_episode_steps: int = 50
     """episode length of the memory run (a new scene at every reset)"""
     coverage_samples: int = 20_000
     """coverage samples of the memory run (the env's default)"""
     sample_every: int = 250
     """steps between memory samples"""
-    output: str = "benchmarks/results/procedural_scenes.json"
+    output_file: str = "benchmarks/results/procedural_scenes.json"
     """where the JSON (and the PNG beside it) go"""
 
 
@@ -104,14 +104,15 @@ def memory_run(args: Args) -> dict[str, Any]:
     from tqdm.auto import tqdm
 
     env = NarutoReconVectorEnv(
-        1, scene="procedural:room", max_episode_steps=args.episode_steps, action_mode="discrete",
+        1, scene="procedural:room", max_episode_steps=args.max_episode_steps,
+        action_mode="discrete",
         camera=CAMERA, panorama_shape=None, coverage_samples=args.coverage_samples,
     )
     rng = np.random.default_rng(0)
     env.reset(seed=0)
     names, steps, memory = set(), [], []
     started = time.perf_counter()
-    for step in tqdm(range(1, args.steps + 1), desc="steps, new scene every reset"):
+    for step in tqdm(range(1, args.total_steps + 1), desc="steps, new scene every reset"):
         env.step(rng.integers(0, 10, 1))
         names.add(env.scene_runtimes[0].scene.name)
         if step % args.sample_every == 0:
@@ -143,10 +144,10 @@ def main(args: Args) -> dict[str, Any]:
                   f"s with the per-viewpoint loop (load {row['load']})")
     run = memory_run(args)
     results["memory"] = run
-    print(f"{args.steps} steps, {run['scenes']} scenes in {run['seconds']:.0f} s: resident "
+    print(f"{args.total_steps} steps, {run['scenes']} scenes in {run['seconds']:.0f} s: resident "
           f"{run['resident_mib'][0]:.0f} -> {run['resident_mib'][-1]:.0f} MiB, growth after the "
           f"first quarter {run['growth_after_first_quarter_mib']:.1f} MiB (load {run['load']})")
-    path = Path(args.output)
+    path = Path(args.output_file)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(results, indent=1))
     import matplotlib
@@ -159,7 +160,7 @@ def main(args: Args) -> dict[str, Any]:
     axis.set_xlabel("step (a new generated room every reset)")
     axis.set_ylabel("resident memory (MiB)")
     axis.set_ylim(bottom=0)
-    axis.set_title(f"procedural:room, episodes of {args.episode_steps} steps")
+    axis.set_title(f"procedural:room, episodes of {args.max_episode_steps} steps")
     figure.tight_layout()
     figure.savefig(path.with_suffix(".png"), dpi=120)
     print(f"wrote {path} and {path.with_suffix('.png')}")

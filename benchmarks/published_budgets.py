@@ -15,7 +15,7 @@ the commands that make the records are on its docs page.
 
 Example::
 
-    python benchmarks/published_budgets.py --out benchmarks/results/published_budgets.md
+    python benchmarks/published_budgets.py --output-file benchmarks/results/published_budgets.md
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from typing import Any
 
 from naruto_agent.benchmark.records import load_records, write_json_atomic
 from naruto_agent.benchmark.tables import summarise
-from naruto_gym.cli_args import dataclass_parser
+from naruto_agent.cli_args import dataclass_parser
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -89,7 +89,7 @@ class Args:
     neural_replays: list[str] = field(default_factory=list)
     """replica_passive.py --trajectory replays of those episodes' poses, in the same order:
     the MAD of their reference maps (episodes recorded before MAD was scored)"""
-    out: str = str(RESULTS / "published_budgets.md")
+    output_file: str = str(RESULTS / "published_budgets.md")
     """the Markdown report (a JSON of the same rows is written beside it)"""
 
 
@@ -294,7 +294,7 @@ def main(argv: list[str] | None = None) -> int:
         sections.append(section)
         summaries.append(summary)
     report = "## The comparison at the published budgets\n\n" + "\n".join(sections)
-    out = Path(args.out)
+    out = Path(args.output_file)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(report)
     write_json_atomic(out.with_suffix(".json"), {"scenes": summaries})

@@ -35,7 +35,7 @@ import open3d as o3d
 import trimesh
 
 import naruto_gym  # noqa: F401
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_gym.scenes import Scene, resolve_scene
 from naruto_gym.sensors.panorama import EquirectangularCamera, render_panorama
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
@@ -62,7 +62,7 @@ class Args:
     """also time the published 1024 x 2048 panorama"""
     large_mesh: bool = True
     """add two_rooms subdivided four times (760,832 triangles) to the frame-size sweep"""
-    out: str = "benchmarks/results/render_speed.json"
+    output_file: str = "benchmarks/results/render_speed.json"
     """the JSON report"""
 
 
@@ -296,7 +296,7 @@ def main() -> None:
     load_after = list(os.getloadavg())
     print_tables(rows, sweep)
     print(f"load average before {load_before}, after {load_after}")
-    out = REPO / args.out
+    out = REPO / args.output_file
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(
         json.dumps(

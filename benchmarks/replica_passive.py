@@ -38,7 +38,7 @@ import numpy as np
 from tqdm import tqdm
 
 import naruto_gym  # noqa: F401  (registers the envs)
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_gym.evaluation import (
     EpisodeReconstruction,
     cull_mesh,
@@ -88,7 +88,7 @@ class Args:
     the scene's traj.txt)"""
     pinhole_backend: str = "raycast"
     """the env's pinhole_backend: raycast, raster, or auto (the rasterizer where cheaper)"""
-    out: str = ""
+    output_file: str = ""
     """the JSON report (default: benchmarks/results/replica_passive.json for the office0
     sample, replica_passive_<folder>.json for another scene folder)"""
     mesh_out: str = ""
@@ -213,7 +213,7 @@ def main(argv: list[str] | None = None) -> dict:
     }
     default_out = (DEFAULT_OUT if scene_dir.resolve() == REPLICA.resolve()
                    else f"benchmarks/results/replica_passive_{scene_dir.name}.json")
-    out = Path(args.out or default_out)
+    out = Path(args.output_file or default_out)
     out = out if out.is_absolute() else REPO / out
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(report, indent=2))

@@ -42,7 +42,7 @@ from typing import Any
 import gymnasium as gym
 import torch
 
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import parse_dataclass_args
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "rllib_ppo.py"
 
@@ -55,7 +55,7 @@ class Args:
     """how each runner builds its vector env (see examples/rllib_ppo.py)"""
     num_envs: int = 16
     """agents per env runner"""
-    episode_steps: int = 100
+    max_episode_steps: int = 100
     """episode budget (each runner's agents are reset when it ends)"""
     sample_steps: int = 512
     """env steps each runner samples per call (all its agents together)"""
@@ -72,7 +72,7 @@ class Args:
     torch_threads: int | None = 1
     """torch threads of the driver (the sampler with 0 runners, and the learner); 1 as Ray
     gives each env-runner actor of one CPU; none: torch's default (all cores)"""
-    output: str = "benchmarks/results/rllib_throughput.json"
+    output_file: str = "benchmarks/results/rllib_throughput.json"
     """JSON summary"""
 
 
@@ -125,7 +125,7 @@ def time_row(example: Any, PPOConfig: Any, args: Args, mode: str,  # noqa: N803
              runners: int) -> dict[str, Any]:
     example_args = replace(
         example.Args(), num_env_runners=runners, num_envs_per_env_runner=args.num_envs,
-        vectorization_mode=mode, episode_steps=args.episode_steps,
+        vectorization_mode=mode, episode_steps=args.max_episode_steps,
         train_batch_size=args.train_batch_size, minibatch_size=256,
     )
     algorithm = example.build_algorithm(PPOConfig, example_args)
@@ -167,7 +167,7 @@ def main(args: Args) -> dict[str, Any]:
                       f"training {row['train_steps_per_s']:.0f} steps/s (load {row['load']})")
     finally:
         ray.shutdown()
-    output = Path(args.output)
+    output = Path(args.output_file)
     output.parent.mkdir(parents=True, exist_ok=True)
     output.write_text(json.dumps(results, indent=2) + "\n")
     print(f"wrote {output}")

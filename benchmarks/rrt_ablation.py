@@ -42,8 +42,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.planning import FreeSpaceComponents, PlannerConfig, SdfVolume, plan_path
-from naruto_gym.cli_args import parse_dataclass_args
 
 REPO = Path(__file__).resolve().parents[1]
 REPLICA_MESH = REPO.parent / "shared" / "scenes" / "replica_office0" / "mesh.ply"
@@ -92,7 +92,7 @@ class Args:
     """nearest-neighbour search: cpu (numpy), auto, cuda"""
     variants: str = "RRT,without direct line,without fast tree,E-RRT"
     """comma-separated rows to run"""
-    out: str = "benchmarks/results/rrt_ablation.json"
+    output_file: str = "benchmarks/results/rrt_ablation.json"
     """the JSON report"""
 
 
@@ -344,7 +344,7 @@ def main() -> None:
             )
         print("  " + summary)
         if rrt is not None:
-            plot_path = (REPO / args.out).with_name(f"rrt_ablation_{scene_name}.png")
+            plot_path = (REPO / args.output_file).with_name(f"rrt_ablation_{scene_name}.png")
             # The pair with the longest E-RRT search shows the difference best.
             hardest = int(np.argmax([r["iterations"] for r in e_rrt["records"]]))
             plot_scene(sdf, components, pairs[hardest], rows, label, plot_path, args)
@@ -368,7 +368,7 @@ def main() -> None:
     output["load_average_after"] = os.getloadavg()
     print(f"load average {output['load_average_after'][0]:.2f} after the run")
     print("\n" + "\n".join(tables))
-    out = REPO / args.out
+    out = REPO / args.output_file
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(output, indent=1))
     print(f"wrote {out}")

@@ -10,7 +10,7 @@ it estimates the CPU minutes of the full test split at the suite's budgets. Resu
 docs/scenes.md (the suite section). Example::
 
     PYTHONPATH=. python benchmarks/suite_budgets.py --classes small --seeds 1000000 \\
-        --policies random frontier --steps 600 --out /tmp/suite_budgets.json
+        --policies random frontier --max-episode-steps 600 --output-file /tmp/suite_budgets.json
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import numpy as np
 
 from naruto_agent.benchmark.runner import run_episode
 from naruto_agent.benchmark.spec import build_specs
-from naruto_gym.cli_args import dataclass_parser
+from naruto_agent.cli_args import dataclass_parser
 from naruto_gym.scenes import suite
 
 
@@ -42,7 +42,7 @@ class Args:
     policies: list[str] = field(default_factory=lambda: ["passive", "random", "frontier",
                                                          "naruto"])
     """policies to run"""
-    steps: int = 0
+    max_episode_steps: int = 0
     """steps per episode; 0: 1.5 x the class's suite budget, to see past it"""
     episode_seed: int = 0
     """episode seed"""
@@ -53,7 +53,7 @@ class Args:
     reconstruct: bool = True
     """fuse and score the reference TSDF map as the harness does (off: coverage curves and
     the policy's and env's own cost only)"""
-    out: str = "suite_budgets.json"
+    output_file: str = "suite_budgets.json"
     """JSON file of the results (updated after every episode)"""
 
 
@@ -83,12 +83,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = dataclass_parser(Args, description="Coverage curves and costs of the suite.",
                               prog="suite_budgets.py")
     args = Args(**vars(parser.parse_args(argv)))
-    out = Path(args.out)
+    out = Path(args.output_file)
     results: list[dict[str, Any]] = json.loads(out.read_text()) if out.is_file() else []
     done = {(r["scene"], r["policy"], r["steps"], r["reconstruct"]) for r in results}
     for size_class in args.classes:
         budget = suite.budget(size_class)
-        steps = args.steps or int(1.5 * budget)
+        steps = args.max_episode_steps or int(1.5 * budget)
         for seed in args.seeds:
             scene = suite.scene_name(size_class, seed)
             for spec in build_specs([scene], args.policies, [args.episode_seed], steps,

@@ -9,7 +9,7 @@ acts with the 10 discrete moves; every episode is a new generated room from the 
 split (``procedural:room``). The reward is the env's: coverage gain in percentage points minus
 a collision penalty.
 
-Writes under ``run_dir``: checkpoints every ``checkpoint_every`` steps, ``final_model.zip``,
+Writes under ``output_dir``: checkpoints every ``checkpoint_every`` steps, ``final_model.zip``,
 ``learning_curve.csv`` and ``.png`` (mean final coverage of the episodes finished in each
 rollout), and TensorBoard logs when ``tensorboard`` is installed. Evaluate with
 ``naruto-benchmark`` (see ``naruto_agent/rl/ppo_policy.py``).
@@ -34,7 +34,7 @@ import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
 
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_gym.rl.sb3 import NarutoFeaturesExtractor, make_sb3_vec_env
 from naruto_gym.sensors.pinhole import PinholeCamera
 
@@ -53,7 +53,7 @@ class Args:
     """square side the frames are resized to"""
     top_down_map: bool = False
     """add the egocentric top-down map of what the episode has seen and what is occupied"""
-    episode_steps: int = 250
+    max_episode_steps: int = 250
     """episode budget in steps (250, as the reported runs and their evaluation)"""
     coverage_samples: int = 5000
     """coverage samples per scene (fewer makes a new scene cheaper)"""
@@ -79,7 +79,7 @@ class Args:
     """env steps between checkpoints"""
     max_hours: float | None = None
     """stop after this much wall-clock time (at the end of a rollout), whatever the steps"""
-    run_dir: str = "runs/ppo"
+    output_dir: str = "runs/ppo"
     """output folder"""
 
 
@@ -159,14 +159,14 @@ class ProgressBar(BaseCallback):
 
 
 def main(args: Args) -> dict[str, Any]:
-    run_dir = Path(args.run_dir)
+    run_dir = Path(args.output_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(args.torch_threads)
     camera = PinholeCamera().scaled(args.image_scale)
     venv = make_sb3_vec_env(
         args.num_envs, size=args.size, top_down_map=args.top_down_map, scene=args.scene,
         camera=camera,
-        max_episode_steps=args.episode_steps, coverage_samples=args.coverage_samples,
+        max_episode_steps=args.max_episode_steps, coverage_samples=args.coverage_samples,
     )
     venv.seed(args.seed)
     tensorboard = str(run_dir / "tensorboard") if importlib.util.find_spec("tensorboard") else None

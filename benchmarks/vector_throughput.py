@@ -59,7 +59,7 @@ import gymnasium as gym
 import numpy as np
 
 import naruto_gym  # noqa: F401  (registers the ids)
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_gym.sensors.kernels import fill_world_rays
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import default_thread_count
@@ -85,7 +85,7 @@ class Args:
     """square image sizes in pixels (64 and 128 are defined)"""
     async_workers: list[int] = field(default_factory=lambda: [2, 4])
     """worker counts of the AsyncVectorEnv reference"""
-    episode_steps: int = 500
+    max_episode_steps: int = 500
     """episode budget (autoresets are part of the timing)"""
     stream_counts: list[int] = field(default_factory=lambda: [16, 64])
     """numbers of envs of the scene-stream rows (empty: none)"""
@@ -119,7 +119,7 @@ class Args:
     """a trial of every part in under 2 minutes: short timings, few rows, 1 and 2 CPUs"""
     pinned_point: str = ""
     """(internal) time one scaling point, given as JSON, in this process and print it"""
-    output: str = "benchmarks/results/vector_throughput.json"
+    output_file: str = "benchmarks/results/vector_throughput.json"
     """where the JSON goes"""
 
 
@@ -203,10 +203,11 @@ def time_goal_round(args: Args) -> dict[str, Any]:
     for workers in args.async_workers:
         env = gym.make_vec("NarutoRecon-v0", num_envs=workers, vectorization_mode="async",
                            vector_kwargs={"context": "spawn"},
-                           max_episode_steps=args.episode_steps, **env_kwargs(64, False, **extra))
+                           max_episode_steps=args.max_episode_steps,
+                           **env_kwargs(64, False, **extra))
         row["async"][workers] = time_vector(env, args.seconds)["steps_per_s"]
         env.close()
-    env = NarutoReconVectorEnv(64, max_episode_steps=args.episode_steps,
+    env = NarutoReconVectorEnv(64, max_episode_steps=args.max_episode_steps,
                                **env_kwargs(64, False))
     row["batched_64"] = time_vector(env, args.seconds)["steps_per_s"]
     row["ratio"] = row["batched_64"] / max(row["async"].values())
@@ -287,7 +288,7 @@ def scaling_table(args: Args) -> dict[str, Any]:
     for count in cores:
         spec = {
             "num_envs": args.scaling_num_envs, "seconds": args.seconds,
-            "episode_steps": args.episode_steps,
+            "episode_steps": args.max_episode_steps,
             "workers": [w for w in args.scaling_workers if w <= count],
             # Async workers up to the CPU count: powers of two, and the count itself.
             "async_workers": sorted({w for w in (1, 2, 4, 8, 16, 32, 64) if w <= count}
@@ -330,7 +331,7 @@ def main(args: Args) -> dict[str, Any]:
         args.seconds, args.counts, args.sizes, args.async_workers = 0.2, [64], [64], [1]
         args.stream_counts, args.goal_rounds, args.scaling_cores = [], 1, [1, 2]
         args.scaling_workers = []
-        args.output = args.output.replace(".json", "_quick.json")
+        args.output_file = args.output_file.replace(".json", "_quick.json")
 
     unknown = set(args.parts) - {"table", "scaling"}
     if unknown:
@@ -349,7 +350,7 @@ def main(args: Args) -> dict[str, Any]:
             for point in points], indent=1))
     results["load_end"] = load()
     print(f"load average at end: {results['load_end']}")
-    path = Path(args.output)
+    path = Path(args.output_file)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(results, indent=1))
     print(f"wrote {path}")
@@ -361,7 +362,7 @@ def table(args: Args, results: dict[str, Any]) -> None:
     from tqdm.auto import tqdm
 
     for suffix, extra in (("", {}), ("_auto_frames", {"pinhole_backend": "auto"})):
-        row = results[f"single_env{suffix}"] = time_single(args.seconds, args.episode_steps,
+        row = results[f"single_env{suffix}"] = time_single(args.seconds, args.max_episode_steps,
                                                            **extra)
         print(f"single env{suffix}, 64 px, no panorama: {row['steps_per_s']:.0f} steps/s "
               f"(load {row['load']})")
@@ -369,14 +370,15 @@ def table(args: Args, results: dict[str, Any]) -> None:
         for workers in args.async_workers:
             env = gym.make_vec("NarutoRecon-v0", num_envs=workers, vectorization_mode="async",
                                vector_kwargs={"context": "spawn"},
-                               max_episode_steps=args.episode_steps,
+                               max_episode_steps=args.max_episode_steps,
                                **env_kwargs(64, False, **extra))
             row = results[f"async{suffix}"][workers] = time_vector(env, args.seconds)
             env.close()
             print(f"AsyncVectorEnv{suffix} {workers} workers: {row['steps_per_s']:.0f} steps/s "
                   f"(load {row['load']})")
         env = gym.make_vec("NarutoRecon-v0", num_envs=4, vectorization_mode="sync",
-                           max_episode_steps=args.episode_steps, **env_kwargs(64, False, **extra))
+                           max_episode_steps=args.max_episode_steps,
+                           **env_kwargs(64, False, **extra))
         row = results[f"sync_4{suffix}"] = time_vector(env, args.seconds)
         env.close()
         print(f"SyncVectorEnv{suffix} 4 envs: {row['steps_per_s']:.0f} steps/s "
@@ -386,7 +388,7 @@ def table(args: Args, results: dict[str, Any]) -> None:
     configs = [(size, panorama, count) for size in args.sizes for panorama in (False, True)
                for count in args.counts]
     for size, panorama, count in tqdm(configs, desc="batched env"):
-        env = NarutoReconVectorEnv(count, max_episode_steps=args.episode_steps,
+        env = NarutoReconVectorEnv(count, max_episode_steps=args.max_episode_steps,
                                    **env_kwargs(size, panorama))
         row = {"size": size, "panorama": panorama, "num_envs": count,
                **time_vector(env, args.seconds)}
@@ -397,7 +399,7 @@ def table(args: Args, results: dict[str, Any]) -> None:
     results["variants_64_envs_64_px"] = {}
     for name, extra in (("published_escape_rule", {"escape_rule": "published"}),
                         ("raycast_pinhole", {"pinhole_backend": "raycast"})):
-        env = NarutoReconVectorEnv(64, max_episode_steps=args.episode_steps,
+        env = NarutoReconVectorEnv(64, max_episode_steps=args.max_episode_steps,
                                    **env_kwargs(64, False, **extra))
         results["variants_64_envs_64_px"][name] = time_vector(env, args.seconds)
         row = results["variants_64_envs_64_px"][name]

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import naruto_gym  # noqa: F401  (registers the ids)
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_gym.rl.rllib_env import make_rllib_env
 from naruto_gym.sensors.pinhole import PinholeCamera
 
@@ -40,7 +40,7 @@ class Args:
     """PPO training iterations"""
     size: int = 16
     """square side of the frames fed to the MLP"""
-    episode_steps: int = 50
+    max_episode_steps: int = 50
     """episode budget"""
     train_batch_size: int = 400
     """env steps per iteration (all env runners together)"""
@@ -73,7 +73,7 @@ def env_config(args: Args) -> dict[str, Any]:
     return {
         "size": args.size, "flatten": True, "scene": args.scene, "action_mode": "discrete",
         "camera": PinholeCamera(32, 32, 16, 16, 15.5, 15.5), "panorama_shape": None,
-        "coverage_samples": 3000, "max_episode_steps": args.episode_steps,
+        "coverage_samples": 3000, "max_episode_steps": args.max_episode_steps,
     }
 
 

@@ -5,8 +5,8 @@ variants), steps the batched env, generates procedural scenes, and scores a fixe
 writes what came out (coverage curves, paths, refusals, checksums) as JSON. Run it before and
 after a change and compare the two files::
 
-    python scripts/behaviour_fingerprint.py --out before.json
-    python scripts/behaviour_fingerprint.py --out after.json --compare before.json
+    python scripts/behaviour_fingerprint.py --output-file before.json
+    python scripts/behaviour_fingerprint.py --output-file after.json --compare before.json
 
 The reference TSDF fusion of Open3D is multithreaded and not bit-for-bit repeatable, so the
 fingerprint leaves it out. Run it with ``--repeat`` first to see which entries repeat at all.
@@ -23,6 +23,8 @@ from typing import Any
 
 import numpy as np
 
+from naruto_agent.episode_loop import EpisodeHook
+
 
 def digest(*arrays: Any) -> str:
     """A short hash of arrays' bytes, shapes and dtypes."""
@@ -34,17 +36,30 @@ def digest(*arrays: Any) -> str:
     return hasher.hexdigest()[:16]
 
 
+class DepthDigests(EpisodeHook):
+    """Keeps a digest of every step's depth frame."""
+
+    def __init__(self) -> None:
+        self.digests: list[str] = []
+
+    def on_step(
+        self, step: int, observation: dict[str, Any], info: dict[str, Any], last: bool
+    ) -> None:
+        self.digests.append(digest(observation["depth"]))
+
+
 def policy_episode(policy_name: str, scene: str, steps: int, seed: int) -> dict[str, Any]:
     """A fixed-seed episode of a policy: coverage per step, path, refusals, frame hashes."""
     import gymnasium as gym
 
     import naruto_gym  # noqa: F401
-    from naruto_agent.policies import EnvContext, make_policy
+    from naruto_agent.episode_loop import StepRecords, run_episode_loop
+    from naruto_agent.policies import make_policy
 
     kwargs: dict[str, Any] = {}
     if policy_name == "naruto":
         # A long planning limit: the plan then depends on the seed, not on the load.
-        kwargs = {"mapper": "tsdf", "planner": {"time_limit_s": 120.0}}
+        kwargs = {"mapper_kind": "tsdf", "planner": {"time_limit_s": 120.0}}
     policy = make_policy(policy_name, **kwargs)
     env = gym.make(
         "NarutoRecon-v0",
@@ -53,27 +68,18 @@ def policy_episode(policy_name: str, scene: str, steps: int, seed: int) -> dict[
         image_scale=0.125,
         max_episode_steps=steps,
     )
-    policy.bind(EnvContext.from_env(env, step_budget=steps))
-    options = policy.reset_options()
-    observation, info = env.reset(seed=seed, options=options)
-    policy.reset(observation, info, seed=seed)
-    coverage, positions, refusals, frames = [], [], 0, []
-    for _ in range(steps):
-        action = policy.act(observation, info)
-        observation, _, terminated, truncated, info = env.step(action)
-        coverage.append(round(float(info["coverage"]), 6))
-        positions.append(np.round(observation["pose"][:3, 3].astype(float), 4).tolist())
-        refusals += int(bool(info["collided"]))
-        frames.append(digest(observation["depth"]))
-        if terminated or truncated:
-            break
+    records, depths = StepRecords(), DepthDigests()
+    run_episode_loop(env, policy, steps, seed, [records, depths])
+    refusals = sum(records.collisions.values())
+    coverage = [round(value, 6) for value in records.coverage[1:]]
+    positions = [np.round(position, 4).tolist() for position in records.positions[1:]]
     env.close()
     policy.close()
     return {
         "coverage": coverage,
         "path": positions,
         "refusals": refusals,
-        "frames": digest(np.array(frames)),
+        "frames": digest(np.array(depths.digests)),
     }
 
 
@@ -125,8 +131,11 @@ def scoring(seed: int) -> dict[str, Any]:
     mesh = trimesh.Trimesh(np.asarray(scene.vertices) + 0.01, np.asarray(scene.faces))
     scores = env.unwrapped.evaluate(mesh)
     env.close()
-    return {key: (round(float(value), 6) if isinstance(value, (int, float)) else value)
-            for key, value in scores.items() if not isinstance(value, (dict, list))}
+    return {
+        key: (round(float(value), 6) if isinstance(value, (int, float)) else value)
+        for key, value in scores.items()
+        if not isinstance(value, (dict, list))
+    }
 
 
 def fingerprint() -> dict[str, Any]:
@@ -161,12 +170,15 @@ def differences(before: Any, after: Any, where: str = "") -> list[str]:
 
 
 def main() -> int:
+    from naruto_agent.cli_args import refuse_renamed_flags
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, required=True, help="where to write the JSON")
+    parser.add_argument("--output-file", type=Path, required=True, help="where to write the JSON")
     parser.add_argument("--compare", type=Path, help="a fingerprint to compare against")
+    refuse_renamed_flags(parser, ["--output-file", "--compare"])
     args = parser.parse_args()
     result = fingerprint()
-    args.out.write_text(json.dumps(result, indent=1))
+    args.output_file.write_text(json.dumps(result, indent=1))
     if args.compare:
         found = differences(json.loads(args.compare.read_text()), result)
         for path in found:

@@ -16,7 +16,7 @@ The release (``--source``)::
         ...                        the same for room0-2 and office1-4
     cull_replica_mesh/office0.ply  NICE-SLAM's culled ground truth (optional), inside or beside
 
-What it writes (``--out``)::
+What it writes (``--output-dir``)::
 
     data/replica/replica_office0/
         mesh.ply                   office0_mesh.ply (a link, or a copy with --copy)
@@ -28,7 +28,7 @@ What it writes (``--out``)::
 
 Usage::
 
-    python scripts/prepare_replica.py --source ~/data/Replica --out data/replica
+    python scripts/prepare_replica.py --source ~/data/Replica --output-dir data/replica
     python scripts/prepare_replica.py --source ~/data/Replica --scenes office0 room0 --copy
 """
 
@@ -68,7 +68,7 @@ class Args:
     source: str = ""
     """folder of the Replica release as NICE-SLAM prepared it: cam_params.json, a folder per
     scene (traj.txt, results/) and <scene>_mesh.ply beside it"""
-    out: str = "data/replica"
+    output_dir: str = "data/replica"
     """where the scene folders (replica_<scene>/) are written"""
     scenes: list[str] = field(default_factory=lambda: list(REPLICA_SCENES))
     """scenes to prepare (default: all eight)"""
@@ -308,7 +308,7 @@ def write_scene(check: SceneCheck, camera_file: Path, out: Path, copy: bool) -> 
 
 
 def prepare(args: Args) -> dict[str, Any]:
-    """Check every scene of ``args.scenes``, then lay them out under ``args.out``.
+    """Check every scene of ``args.scenes``, then lay them out under ``args.output_dir``.
 
     Returns:
         the report written to ``replica_scenes.json``: the camera and, per scene, its poses,
@@ -343,7 +343,7 @@ def prepare(args: Args) -> dict[str, Any]:
             problems.append(f"{name}: {error}")
     if problems:
         raise ReplicaLayoutError("\n".join(problems))
-    out = Path(args.out).expanduser()
+    out = Path(args.output_dir).expanduser()
     report = {"source": str(source.resolve()), "camera": camera, "scenes": {}}
     for check in checks:
         folder = write_scene(check, camera_file, out, args.copy)
@@ -371,7 +371,7 @@ def _camera_note(camera: dict[str, float]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 when a check fails)."""
-    from naruto_gym.cli_args import dataclass_parser
+    from naruto_agent.cli_args import dataclass_parser
 
     parser = dataclass_parser(Args, description=__doc__.split("\n\n")[1].replace("\n", " "),
                               prog="prepare_replica.py")
@@ -388,7 +388,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {name} | {scene['folder']} | {scene['poses']} | "
               f"{scene['trajectory_length_m']:.2f} | {scene['triangles']:,} | "
               f"{scene.get('frames', '-')} | {'yes' if scene['culled_mesh'] else 'no'} |")
-    print(f"\nwrote {Path(args.out) / 'replica_scenes.json'}; next: docs/replica.md")
+    print(f"\nwrote {Path(args.output_dir) / 'replica_scenes.json'}; next: docs/replica.md")
     return 0
 
 

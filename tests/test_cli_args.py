@@ -10,14 +10,14 @@ from pathlib import Path
 
 import pytest
 
-from naruto_gym.cli_args import dataclass_parser, parse_dataclass_args
+from naruto_agent.cli_args import dataclass_parser, parse_dataclass_args
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
 @dataclass
 class ExampleArgs:
-    steps: int = 10
+    max_episode_steps: int = 10
     """how many steps"""
     scale: float = 0.5
     """resolution (100 % is full size)"""
@@ -31,7 +31,8 @@ def test_defaults_and_types():
     assert args == ExampleArgs()
     args = parse_dataclass_args(
         ExampleArgs,
-        ["--steps", "3", "--scale", "0.25", "--scenes", "a", "b", "--no-plots", "--device", "cpu"],
+        ["--max-episode-steps", "3", "--scale", "0.25", "--scenes", "a", "b", "--no-plots",
+         "--device", "cpu"],
     )
     assert args == ExampleArgs(3, 0.25, ["a", "b"], False, "cpu")
     # A list flag given without values is an empty list (benchmarks: "empty: none").
@@ -58,7 +59,65 @@ def test_every_benchmark_script_prints_its_help(script):
 
 def test_bad_value_is_rejected():
     with pytest.raises(SystemExit):
-        parse_dataclass_args(ExampleArgs, ["--steps", "many"])
+        parse_dataclass_args(ExampleArgs, ["--max-episode-steps", "many"])
+
+
+@dataclass
+class FolderArgs:
+    output_dir: str = "out"
+    max_episode_steps: int = 5
+    eval_points: int = 1
+
+
+@dataclass
+class FileArgs:
+    output_file: str = "out.json"
+
+
+@pytest.mark.parametrize(
+    ("cls", "old", "new"),
+    [
+        (FolderArgs, "--out", "--output-dir"),
+        (FolderArgs, "--out-dir", "--output-dir"),
+        (FolderArgs, "--output", "--output-dir"),
+        (FolderArgs, "--results-dir", "--output-dir"),
+        (FolderArgs, "--steps", "--max-episode-steps"),
+        (FolderArgs, "--episode-steps", "--max-episode-steps"),
+        (FolderArgs, "--checkpoints", "--eval-points"),
+        (FileArgs, "--out", "--output-file"),
+        (FileArgs, "--output", "--output-file"),
+    ],
+)
+def test_an_earlier_spelling_is_refused_naming_the_new_flag(cls, old, new, capsys):
+    """No silent alias: argparse would otherwise read "--out" as a prefix of "--output-dir"."""
+    with pytest.raises(SystemExit) as raised:
+        parse_dataclass_args(cls, [old, "7"])
+    assert raised.value.code == 2
+    assert f"{old} was renamed: use {new}" in capsys.readouterr().err
+    parsed = parse_dataclass_args(cls, [new, "7"])
+    assert str(getattr(parsed, new[2:].replace("-", "_"))) == "7"
+
+
+def test_a_tool_that_has_no_such_concept_keeps_argparse_error(capsys):
+    with pytest.raises(SystemExit):
+        parse_dataclass_args(FileArgs, ["--steps", "3"])
+    assert "unrecognized arguments: --steps" in capsys.readouterr().err
+
+
+def test_the_device_flags_say_whose_device(capsys):
+    """``--device`` is the agent's mapper's; the harness's reference mapper has its own flag."""
+    from naruto_agent.benchmark.cli import parse_args as benchmark_args
+    from naruto_agent.demo.run import parse_args as demo_args
+
+    assert benchmark_args(["--reference-device", "cpu"]).reference_device == "cpu"
+    with pytest.raises(SystemExit):
+        benchmark_args(["--device", "cpu"])
+    assert "--device was renamed: use --reference-device" in capsys.readouterr().err
+    demo = demo_args(["--device", "cpu", "--reference-device", "cpu", "--mapper-kind", "neural"])
+    assert (demo.device, demo.reference_device, demo.mapper_kind) == ("cpu", "cpu", "neural")
+    with pytest.raises(SystemExit):
+        demo_args(["--mapper", "neural"])
+    assert "--mapper was renamed: use --mapper-kind" in capsys.readouterr().err
 
 
 def _script_args_fields(path: Path) -> tuple[list[str], set[str]]:
@@ -81,6 +140,17 @@ def _script_args_fields(path: Path) -> tuple[list[str], set[str]]:
 
 SCRIPTS = sorted([*BENCHMARKS.glob("*.py"), *(BENCHMARKS.parent / "scripts").glob("*.py"),
                   *(BENCHMARKS.parent / "examples").glob("*.py")])
+
+
+#: Field names the tools no longer use: one concept, one name (naruto_agent.cli_args).
+RENAMED_FIELDS = {"out", "out_dir", "output", "results_dir", "run_dir", "steps",
+                  "episode_steps", "step_budget", "checkpoints", "mapper"}
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda path: f"{path.parent.name}/{path.name}")
+def test_no_script_uses_an_earlier_name(script):
+    fields, _ = _script_args_fields(script)
+    assert not RENAMED_FIELDS & set(fields), f"{script.name}: {RENAMED_FIELDS & set(fields)}"
 
 
 @pytest.mark.parametrize("script", SCRIPTS, ids=lambda path: f"{path.parent.name}/{path.name}")
@@ -113,8 +183,8 @@ def test_benchmark_help_lists_every_policy_and_scene_form():
 
 
 def test_demo_help_gives_the_same_conventions():
+    from naruto_agent.cli_args import dataclass_parser
     from naruto_agent.demo.run import DemoArgs
-    from naruto_gym.cli_args import dataclass_parser
 
     text = " ".join(dataclass_parser(DemoArgs).format_help().split())
     for form in ("PATH@AXIS", "path/to/file.py:ClassName", '{"random": {"max_run_steps": 20}}',
@@ -135,7 +205,7 @@ def test_train_ppo_default_budget_is_the_documented_one():
     assert "250, as the reported runs and their evaluation) (default: 250)" in text
     docs = BENCHMARKS.parent / "docs"
     assert "every 250-step episode" in (docs / "benchmarks" / "ppo.md").read_text()
-    assert "--episode-steps 250" in (docs / "rl.md").read_text()
+    assert "--max-episode-steps 250" in (docs / "rl.md").read_text()
 
 
 @dataclass

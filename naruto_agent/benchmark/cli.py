@@ -10,7 +10,7 @@ Example::
 
     naruto-benchmark --scenes replica_like_room apartment \\
         ../shared/scenes/replica_office0/mesh.ply --policies passive random frontier \\
-        --seeds 0 1 2 --steps 1000 --workers 2 --out-dir runs/compare_policies
+        --seeds 0 1 2 --max-episode-steps 1000 --workers 2 --output-dir runs/compare_policies
 """
 
 from __future__ import annotations
@@ -32,9 +32,9 @@ from naruto_agent.benchmark.runner import run_episode_safe
 from naruto_agent.benchmark.spec import EpisodeSpec, build_specs
 from naruto_agent.benchmark.suite_report import write_statistics
 from naruto_agent.benchmark.tables import failure_lines, markdown_table, summarise
-from naruto_gym.cli_args import dataclass_parser
+from naruto_agent.cli_args import dataclass_parser
 
-DEFAULT_STEPS = 500
+DEFAULT_MAX_EPISODE_STEPS = 500
 DEFAULT_EVAL_POINTS = 4
 
 
@@ -51,8 +51,9 @@ class Args:
     the working directory is found) or path/to/file.py:ClassName"""
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
     """episode seeds"""
-    steps: int | None = None
-    """step budget of every episode (default 500; with --suite each scene's class budget)"""
+    max_episode_steps: int | None = None
+    """length of every episode in steps (default 500; with --suite each scene's class
+    budget)"""
     up_axis: str = "z"
     """up axis of the mesh paths written without @AXIS: z, y, -y, x, -x, -z or auto (from a
     recognised dataset layout)"""
@@ -62,22 +63,23 @@ class Args:
     """parallel worker processes (0: run in this process)"""
     ray_address: str | None = None
     """run on Ray instead: auto, HOST:PORT, or local"""
-    out_dir: str = "runs/compare_policies"
+    output_dir: str = "runs/compare_policies"
     """output folder (records/, results.md, summary.json, plots)"""
     eval_points: int | None = None
-    """completion-ratio checkpoints per episode besides the final score (0: final only;
-    default 4, with --suite 9)"""
+    """completion-ratio evaluation points per episode besides the final score (0: final
+    only; default 4, with --suite 9)"""
     eval_samples: int = 200_000
     """surface samples per mesh of the final score"""
     checkpoint_samples: int = 50_000
-    """surface samples per mesh at the checkpoints"""
+    """surface samples per mesh at the evaluation points"""
     eval_samples_per_m2: float = 2_000.0
     """least sample density (per m^2) of the surface distances are measured to; 0: the sample
     counts alone, as published (large scenes then score sample spacing, not the map)"""
     reconstruct: bool = True
     """fuse frames with the reference TSDF mapper and score them"""
-    device: str = "auto"
-    """Open3D device of the reference mapper (auto, cpu, cuda)"""
+    reference_device: str = "auto"
+    """Open3D device of the reference TSDF mapper (auto, cpu, cuda); the device of a policy's
+    own mapper goes in --policy-kwargs, e.g. '{"naruto": {"device": "cuda"}}'"""
     policy_kwargs: str = "{}"
     """JSON object of constructor arguments keyed by policy, e.g. '{"random":
     {"max_run_steps": 20}}'; with one policy also its arguments directly, e.g.
@@ -96,7 +98,7 @@ class Args:
     plots: bool = True
     """write the plots"""
     record: bool = False
-    """write a Rerun recording of every episode run, OUT_DIR/recordings/EPISODE.rrd (needs
+    """write a Rerun recording of every episode run, OUTPUT_DIR/recordings/EPISODE.rrd (needs
     the viewer extra; local workers only)"""
     progress: bool = True
     """show a progress bar"""
@@ -133,19 +135,19 @@ def _json_dict(text: str, name: str) -> dict[str, Any]:
     return value
 
 
-def write_reports(out_dir: str | Path, plots: bool = True) -> dict[str, Any]:
-    """Table, summary and plots of every record under ``out_dir``; returns the summary."""
-    out_dir = Path(out_dir)
-    records = load_records(out_dir)
+def write_reports(output_dir: str | Path, plots: bool = True) -> dict[str, Any]:
+    """Table, summary and plots of every record under ``output_dir``; returns the summary."""
+    output_dir = Path(output_dir)
+    records = load_records(output_dir)
     rows = summarise(records)
     table = markdown_table(rows)
-    (out_dir / "results.md").write_text(table)
+    (output_dir / "results.md").write_text(table)
     summary = {"rows": rows, "episodes": len(records)}
-    write_json_atomic(out_dir / "summary.json", summary)
+    write_json_atomic(output_dir / "summary.json", summary)
     if plots and records:
-        plot_curves(records, out_dir / "curves.png")
-        plot_trajectories(records, out_dir)
-    write_statistics(out_dir, records, plots)
+        plot_curves(records, output_dir / "curves.png")
+        plot_trajectories(records, output_dir)
+    write_statistics(output_dir, records, plots)
     return summary
 
 
@@ -166,7 +168,7 @@ def check_policies(policies: list[str]) -> None:
 
 def recording_fn(args: Args) -> dict[str, Any]:
     """``run_local``'s ``episode_fn`` that records each episode under
-    ``OUT_DIR/recordings`` with ``--record`` (empty otherwise).
+    ``OUTPUT_DIR/recordings`` with ``--record`` (empty otherwise).
 
     Raises:
         SystemExit: ``--record`` with Ray, or without rerun-sdk (the message says what to do).
@@ -177,11 +179,12 @@ def recording_fn(args: Args) -> dict[str, Any]:
     from naruto_agent.recording.live import RERUN_EXTRA_HINT
 
     if args.ray_address:
-        raise SystemExit("naruto-benchmark: --record runs with local workers only (drop "
-                         "--ray-address)")
+        raise SystemExit(
+            "naruto-benchmark: --record runs with local workers only (drop --ray-address)"
+        )
     if not rerun_available():
         raise SystemExit(f"naruto-benchmark: --record needs rerun-sdk: {RERUN_EXTRA_HINT}")
-    folder = str(Path(args.out_dir) / "recordings")
+    folder = str(Path(args.output_dir) / "recordings")
     return {"episode_fn": functools.partial(run_episode_safe, record_dir=folder)}
 
 
@@ -197,18 +200,22 @@ def episode_specs(args: Args, argv: list[str] | None = None) -> list[EpisodeSpec
         checkpoint_samples=args.checkpoint_samples,
         eval_samples_per_m2=args.eval_samples_per_m2,
         reconstruct=args.reconstruct,
-        device=args.device,
+        device=args.reference_device,
         policy_kwargs=_json_dict(args.policy_kwargs, "policy-kwargs"),
         env_kwargs=_json_dict(args.env_kwargs, "env-kwargs"),
     )
     if not args.suite:
         return build_specs(
-            args.scenes, args.policies, args.seeds, args.steps or DEFAULT_STEPS, **settings
+            args.scenes,
+            args.policies,
+            args.seeds,
+            args.max_episode_steps or DEFAULT_MAX_EPISODE_STEPS,
+            **settings,
         )
     scenes = suite.select_scenes(args.suite, args.size_class, args.variant, args.suite_limit)
-    specs = suite.suite_specs(scenes, args.policies, args.seeds, args.steps, **settings)
+    specs = suite.suite_specs(scenes, args.policies, args.seeds, args.max_episode_steps, **settings)
     suite.write_manifest(
-        args.out_dir, suite.manifest_entries(scenes, args.steps), args.suite, argv
+        args.output_dir, suite.manifest_entries(scenes, args.max_episode_steps), args.suite, argv
     )
     return specs
 
@@ -217,7 +224,7 @@ def run(args: Args, argv: list[str] | None = None) -> int:
     """Run the comparison; returns the number of failed episodes."""
     check_policies(args.policies)
     specs = episode_specs(args, argv)
-    todo = pending_specs(specs, args.out_dir)
+    todo = pending_specs(specs, args.output_dir)
     print(
         f"{len(specs)} episodes, {len(specs) - len(todo)} already done, running {len(todo)} "
         f"({'Ray ' + args.ray_address if args.ray_address else f'{args.workers} workers'})",
@@ -227,18 +234,19 @@ def run(args: Args, argv: list[str] | None = None) -> int:
     failed = 0
     if todo:
         if args.ray_address:
-            failed = run_ray(todo, args.out_dir, args.ray_address, args.progress)
+            failed = run_ray(todo, args.output_dir, args.ray_address, args.progress)
         else:
-            failed = run_local(todo, args.out_dir, args.workers, args.progress,
-                               **recording_fn(args))
-    summary = write_reports(args.out_dir, args.plots)
-    out_dir = Path(args.out_dir)
-    print((out_dir / "results.md").read_text())
+            failed = run_local(
+                todo, args.output_dir, args.workers, args.progress, **recording_fn(args)
+            )
+    summary = write_reports(args.output_dir, args.plots)
+    output_dir = Path(args.output_dir)
+    print((output_dir / "results.md").read_text())
     print(
-        f"{summary['episodes']} records in {out_dir}; this run: {len(todo)} episodes, "
+        f"{summary['episodes']} records in {output_dir}; this run: {len(todo)} episodes, "
         f"{failed} failed, {time.perf_counter() - started:.0f} s"
     )
-    failures = failure_lines(specs, out_dir)
+    failures = failure_lines(specs, output_dir)
     if failures:
         print(f"{len(failures)} failed episode(s); the traceback is in each record:")
         print("\n".join(failures))

@@ -30,21 +30,21 @@ from naruto_agent.benchmark.spec import EpisodeSpec
 MAX_POOL_RESTARTS_PER_EPISODE = 1
 
 
-def pending_specs(specs: Iterable[EpisodeSpec], out_dir: str | Path) -> list[EpisodeSpec]:
-    """The episodes without a successful record of the same settings under ``out_dir``."""
-    return [spec for spec in specs if not is_done(spec.record_path(out_dir), spec.config_hash)]
+def pending_specs(specs: Iterable[EpisodeSpec], output_dir: str | Path) -> list[EpisodeSpec]:
+    """The episodes without a successful record of the same settings under ``output_dir``."""
+    return [spec for spec in specs if not is_done(spec.record_path(output_dir), spec.config_hash)]
 
 
 class _Progress:
     """Writes records as they come and keeps a progress bar."""
 
-    def __init__(self, out_dir: Path, total: int, show: bool) -> None:
-        self.out_dir = out_dir
+    def __init__(self, output_dir: Path, total: int, show: bool) -> None:
+        self.output_dir = output_dir
         self.bar = tqdm(total=total, desc="episodes", disable=not show, unit="ep")
         self.failed = 0
 
     def done(self, spec: EpisodeSpec, record: dict[str, Any]) -> None:
-        write_json_atomic(spec.record_path(self.out_dir), record)
+        write_json_atomic(spec.record_path(self.output_dir), record)
         if record.get("status") != STATUS_OK:
             self.failed += 1
         self.bar.update(1)
@@ -69,7 +69,7 @@ def stop_with_parent(parent_pid: int, interval_s: float = 1.0) -> None:
 
 def run_local(
     specs: list[EpisodeSpec],
-    out_dir: str | Path,
+    output_dir: str | Path,
     workers: int = 2,
     progress: bool = True,
     episode_fn: Callable[[dict[str, Any]], dict[str, Any]] = run_episode_safe,
@@ -78,7 +78,7 @@ def run_local(
 
     Args:
         specs: the episodes to run (see :func:`pending_specs` to skip finished ones).
-        out_dir: output folder; records go to ``out_dir/records/...``.
+        output_dir: output folder; records go to ``output_dir/records/...``.
         workers: worker processes (spawn start method: Open3D/Embree are not fork-safe).
         progress: show a progress bar.
         episode_fn: picklable function from a spec dict to a record (for tests).
@@ -86,8 +86,8 @@ def run_local(
     Returns:
         The number of failed episodes.
     """
-    out_dir = Path(out_dir)
-    reporter = _Progress(out_dir, len(specs), progress)
+    output_dir = Path(output_dir)
+    reporter = _Progress(output_dir, len(specs), progress)
     try:
         if workers <= 0:
             for spec in specs:
@@ -138,7 +138,7 @@ def run_local(
 
 def run_ray(
     specs: list[EpisodeSpec],
-    out_dir: str | Path,
+    output_dir: str | Path,
     address: str = "auto",
     progress: bool = True,
     num_cpus_per_episode: float = 1.0,
@@ -148,7 +148,7 @@ def run_ray(
 
     Args:
         specs: the episodes to run.
-        out_dir: output folder on the driver's machine.
+        output_dir: output folder on the driver's machine.
         address: ``"auto"`` (a running cluster), ``"HOST:PORT"``, or ``"local"`` to start a
             local Ray instance. An already initialised Ray (``ray.init`` called by the user) is
             used as it is.
@@ -174,7 +174,7 @@ def run_ray(
         else:
             ray.init(address=address, log_to_driver=False)
     remote_episode = ray.remote(num_cpus=num_cpus_per_episode, max_retries=1)(run_episode_safe)
-    reporter = _Progress(Path(out_dir), len(specs), progress)
+    reporter = _Progress(Path(output_dir), len(specs), progress)
     try:
         refs = {remote_episode.remote(spec.as_dict()): spec for spec in specs}
         outstanding = list(refs)

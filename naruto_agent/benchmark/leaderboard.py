@@ -36,9 +36,9 @@ from naruto_agent.benchmark.suite_report import (
 SKIP = "<!-- docs-test: skip (the suite run takes hours; covered by: suite) -->"
 TWIN = """<!-- docs-test: twin suite bash slow
 naruto-benchmark --suite test --size-class small --suite-limit 1 --policies random --seeds 0 \\
-    --steps 3 --workers 0 --image-scale 0.1 --eval-points 1 --eval-samples 2000 \\
+    --max-episode-steps 3 --workers 0 --image-scale 0.1 --eval-points 1 --eval-samples 2000 \\
     --checkpoint-samples 2000 --eval-samples-per-m2 0 --no-plots --no-progress \\
-    --out-dir suite_check
+    --output-dir suite_check
 python -m naruto_agent.benchmark.leaderboard suite_check --img-dir img > leaderboard.md
 grep -q "## small" leaderboard.md
 -->"""
@@ -174,7 +174,7 @@ def leaderboard_markdown(
     if manifest is None:
         raise ValueError(
             f"{results_dir} holds no suite.json; run naruto-benchmark --suite test "
-            f"--out-dir {results_dir} first"
+            f"--output-dir {results_dir} first"
         )
     records = load_records(results_dir)
     if not records:
@@ -264,7 +264,7 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m naruto_agent.benchmark.leaderboard",
         description="Print the leaderboard page of a naruto-benchmark --suite results folder.",
     )
-    parser.add_argument("results_dir", help="the --out-dir of the suite run")
+    parser.add_argument("results_dir", help="the --output-dir of the suite run")
     parser.add_argument("--img-dir", default="docs/benchmarks/img",
                         help="where the curve pictures are written")
     parser.add_argument("--img-link", default="img",

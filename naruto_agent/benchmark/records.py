@@ -75,10 +75,10 @@ def is_done(path: str | Path, config_hash: str) -> bool:
     )
 
 
-def load_records(out_dir: str | Path) -> list[dict[str, Any]]:
-    """Every readable record under ``out_dir/records`` (sorted by episode id)."""
+def load_records(output_dir: str | Path) -> list[dict[str, Any]]:
+    """Every readable record under ``output_dir/records`` (sorted by episode id)."""
     records = []
-    for path in sorted((Path(out_dir) / "records").glob("*/*/*.json")):
+    for path in sorted((Path(output_dir) / "records").glob("*/*/*.json")):
         record = read_record(path)
         if record is not None and "episode_id" in record:
             records.append(record)

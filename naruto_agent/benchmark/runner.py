@@ -1,11 +1,13 @@
 """Run one benchmark episode and describe it as a JSON-able record.
 
-The runner builds the env in the policy's preferred action mode, fuses every frame with the
-reference TSDF mapper (``naruto_gym.evaluation.EpisodeReconstruction``, the mapper the env's
-``reconstruct=True`` option uses; done here so its time is measured apart from the env's),
-and times three phases per step: the policy's ``act``, the env's ``step`` (motion, collision
-checks, rendering, coverage) and mapping (fusion). Completion ratio is scored at a few
-checkpoints with fewer samples, and at the end with the full protocol.
+The runner builds the env in the policy's preferred action mode and runs the tools' episode
+loop (:func:`naruto_agent.episode_loop.run_episode_loop`) with hooks that fuse every frame
+with the reference TSDF mapper (``naruto_gym.evaluation.EpisodeReconstruction``, the mapper
+the env's ``reconstruct=True`` option uses; done here so its time is measured apart from the
+env's), keep the per-step record, record the episode and score it at the evaluation points.
+Three phases per step are timed: the policy's ``act``, the env's ``step`` (motion, collision
+checks, rendering, coverage) and mapping (fusion). Completion ratio is scored at the
+evaluation points with fewer samples, and at the end with the full protocol.
 
 :func:`run_episode_safe` never raises: an episode that crashes comes back as a ``failed``
 record with its error and traceback, so the other episodes go on.
@@ -16,23 +18,21 @@ from __future__ import annotations
 import platform
 import time
 import traceback
-from collections import Counter
 from typing import Any
 
 import numpy as np
 
 from naruto_agent.benchmark.records import STATUS_FAILED, STATUS_OK
 from naruto_agent.benchmark.spec import EpisodeSpec
+from naruto_agent.episode_loop import (
+    EpisodeHook,
+    EvalPoints,
+    FrameFusion,
+    StepRecords,
+    run_episode_loop,
+)
 
 ENV_ID = "NarutoRecon-v0"
-
-
-def checkpoint_steps(steps: int, points: int) -> list[int]:
-    """Steps (1..steps-1) at which to score the reconstruction during an episode."""
-    if points <= 0 or steps < 2:
-        return []
-    marks = np.linspace(0, steps, points + 2)[1:-1]
-    return sorted({int(round(mark)) for mark in marks if 1 <= round(mark) < steps})
 
 
 def make_env(spec: EpisodeSpec, action_mode: str) -> Any:
@@ -52,24 +52,6 @@ def make_env(spec: EpisodeSpec, action_mode: str) -> Any:
     )
 
 
-def timed_step(
-    policy: Any,
-    env: Any,
-    observation: dict[str, Any],
-    info: dict[str, Any],
-    times: dict[str, float],
-) -> tuple[dict[str, Any], bool, bool, dict[str, Any]]:
-    """One ``policy.act`` and ``env.step``; their seconds are added to ``times["policy"]`` and
-    ``times["env"]``. Returns the new observation, terminated, truncated and info."""
-    clock = time.perf_counter()
-    action = policy.act(observation, info)
-    times["policy"] += time.perf_counter() - clock
-    clock = time.perf_counter()
-    observation, _, terminated, truncated, info = env.step(action)
-    times["env"] += time.perf_counter() - clock
-    return observation, terminated, truncated, info
-
-
 def run_episode(
     spec: EpisodeSpec, progress: bool = False, record_dir: str | None = None
 ) -> dict[str, Any]:
@@ -81,73 +63,49 @@ def run_episode(
         record_dir: write a Rerun recording of the episode under this folder
             (``SCENE/POLICY/seedN.rrd``; see :mod:`naruto_agent.recording`).
     """
-    from tqdm.auto import tqdm
-
-    from naruto_agent.policies import EnvContext, make_policy
+    from naruto_agent.policies import make_policy
 
     started = time.perf_counter()
     policy = make_policy(spec.policy, **spec.policy_kwargs)
     env = make_env(spec, policy.preferred_action_mode)
     try:
         base = env.unwrapped
-        policy.bind(EnvContext.from_env(env, step_budget=spec.steps))
+        records = StepRecords()
+        hooks: list[EpisodeHook] = []
         reconstruction = None
         if spec.reconstruct:
             from naruto_gym.evaluation import EpisodeReconstruction
 
             reconstruction = EpisodeReconstruction(base.camera, device=spec.device)
-
-        times = {"policy": 0.0, "env": 0.0, "mapping": 0.0}
-        clock = time.perf_counter()
-        observation, info = env.reset(seed=spec.seed, options=policy.reset_options())
-        reset_s = time.perf_counter() - clock
-        policy.reset(observation, info, seed=spec.seed)
+            hooks.append(FrameFusion(reconstruction))
+        hooks.append(records)
         recorder = _recorder(spec, base, record_dir)
-        map_mesh = reconstruction.mesh if reconstruction is not None else None
         if recorder is not None:
-            recorder.observe(0, observation, info, policy, map_mesh)
-        if reconstruction is not None:
-            clock = time.perf_counter()
-            reconstruction.add_frame(observation["rgb"], observation["depth"], observation["pose"])
-            times["mapping"] += time.perf_counter() - clock
-
-        coverage = [float(info["coverage"])]
-        positions = [np.asarray(observation["pose"], np.float64)[:3, 3].copy()]
-        reasons: Counter[str] = Counter()
-        checkpoints = set(checkpoint_steps(spec.steps, spec.eval_points if spec.reconstruct else 0))
+            map_mesh = reconstruction.mesh if reconstruction is not None else None
+            hooks.append(_RecorderHook(recorder, policy, map_mesh))
         completion_curve: list[dict[str, Any]] = []
-        evaluation_s = 0.0
-        steps_run = 0
-        for step in tqdm(range(1, spec.steps + 1), disable=not progress, desc=spec.episode_id):
-            observation, terminated, truncated, info = timed_step(
-                policy, env, observation, info, times
-            )
-            steps_run = step
-            if reconstruction is not None:
-                clock = time.perf_counter()
-                reconstruction.add_frame(
-                    observation["rgb"], observation["depth"], observation["pose"]
-                )
-                times["mapping"] += time.perf_counter() - clock
-            coverage.append(float(info["coverage"]))
-            positions.append(np.asarray(observation["pose"], np.float64)[:3, 3].copy())
-            if info.get("collided", False):
-                reasons[info.get("collision_reason", "") or "unknown"] += 1
+
+        def evaluate(step: int, last: bool) -> None:
+            scores = _score(reconstruction, base, spec.checkpoint_samples, spec.eval_samples_per_m2)
+            completion_curve.append({"step": step, **_curve_point(scores)})
             if recorder is not None:
-                recorder.observe(step, observation, info, policy, map_mesh,
-                                 last=terminated or truncated or step == spec.steps)
-            if reconstruction is not None and step in checkpoints:
-                clock = time.perf_counter()
-                scores = _score(reconstruction, base, spec.checkpoint_samples,
-                                spec.eval_samples_per_m2)
-                evaluation_s += time.perf_counter() - clock
-                completion_curve.append({"step": step, **_curve_point(scores)})
-                if recorder is not None:
-                    recorder.log_scores(step, scores)
-            if terminated or truncated:
-                break
+                recorder.log_scores(step, scores)
+
+        eval_points = spec.eval_points if spec.reconstruct else 0
+        hooks.append(EvalPoints(spec.steps, eval_points, evaluate))
+        result = run_episode_loop(
+            env,
+            policy,
+            spec.steps,
+            spec.seed,
+            hooks,
+            progress=spec.episode_id if progress else None,
+        )
         if recorder is not None:
             recorder.close()
+        steps_run, info, seconds = result.steps_run, result.info, result.seconds
+        times = {phase: seconds.get(phase, 0.0) for phase in ("policy", "env", "mapping")}
+        evaluation_s = seconds["eval_points"]
 
         metrics: dict[str, Any] = {}
         own_metrics: dict[str, Any] | None = None
@@ -172,15 +130,15 @@ def run_episode(
             "camera": base.camera.as_dict(),
             "metrics": metrics,
             "own_map_metrics": own_metrics,
-            "coverage_final": coverage[-1],
-            "coverage_curve": np.round(coverage, 5).tolist(),
+            "coverage_final": records.coverage[-1],
+            "coverage_curve": np.round(records.coverage, 5).tolist(),
             "completion_curve": completion_curve,
-            "trajectory": np.round(np.array(positions), 3).tolist(),
+            "trajectory": np.round(np.array(records.positions), 3).tolist(),
             "path_length_m": float(info.get("path_length_m", 0.0)),
-            "collisions": int(sum(reasons.values())),
-            "collision_reasons": dict(reasons),
+            "collisions": int(sum(records.collisions.values())),
+            "collision_reasons": dict(records.collisions),
             "wall_time_s": time.perf_counter() - started,
-            "reset_s": reset_s,
+            "reset_s": seconds["reset_env"],
             "evaluation_s": evaluation_s,
             "time_per_step_ms": {
                 phase: 1000.0 * total / per_step for phase, total in times.items()
@@ -190,6 +148,24 @@ def run_episode(
     finally:
         policy.close()
         env.close()
+
+
+class _RecorderHook(EpisodeHook):
+    """Writes every step of the episode to an :class:`~naruto_agent.recording.EpisodeRecorder`
+    (the map, when ``map_mesh`` gives one, on the recorder's schedule)."""
+
+    def __init__(self, recorder: Any, policy: Any, map_mesh: Any) -> None:
+        self.recorder = recorder
+        self.policy = policy
+        self.map_mesh = map_mesh
+
+    def on_reset(self, observation: dict[str, Any], info: dict[str, Any]) -> None:
+        self.recorder.observe(0, observation, info, self.policy, self.map_mesh)
+
+    def on_step(
+        self, step: int, observation: dict[str, Any], info: dict[str, Any], last: bool
+    ) -> None:
+        self.recorder.observe(step, observation, info, self.policy, self.map_mesh, last=last)
 
 
 def _recorder(spec: EpisodeSpec, env: Any, record_dir: str | None) -> Any | None:

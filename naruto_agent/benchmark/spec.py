@@ -183,10 +183,10 @@ class EpisodeSpec:
         text = json.dumps(self.as_dict(), sort_keys=True, default=str)
         return hashlib.sha1(text.encode()).hexdigest()[:12]
 
-    def record_path(self, out_dir: str | Path) -> Path:
+    def record_path(self, output_dir: str | Path) -> Path:
         """Where this episode's record lives under an output folder."""
         return (
-            Path(out_dir)
+            Path(output_dir)
             / "records"
             / self.scene_label
             / self.policy_label

@@ -170,12 +170,12 @@ def _git_commit() -> str | None:
 
 
 def write_manifest(
-    out_dir: str | Path,
+    output_dir: str | Path,
     scenes: dict[str, dict[str, Any]],
     split: str,
     argv: list[str] | None = None,
 ) -> dict[str, Any]:
-    """Add a run's scenes, command and machine to ``out_dir/suite.json``; returns it.
+    """Add a run's scenes, command and machine to ``output_dir/suite.json``; returns it.
 
     Scenes of earlier runs into the same folder stay (a class run later joins the table); the
     command and machine of each run are kept in ``runs``.
@@ -183,19 +183,19 @@ def write_manifest(
     Raises:
         ValueError: the folder holds results of another suite version or split.
     """
-    path = Path(out_dir) / MANIFEST_FILE
-    manifest = read_manifest(out_dir) or {"scenes": {}, "runs": []}
+    path = Path(output_dir) / MANIFEST_FILE
+    manifest = read_manifest(output_dir) or {"scenes": {}, "runs": []}
     suite = suite_module()
     earlier = manifest.get("suite_version")
     if earlier is not None and earlier != suite.SUITE_VERSION:
         raise ValueError(
-            f"{out_dir} holds results of suite version {earlier}, this naruto-gym has version "
-            f"{suite.SUITE_VERSION} (its scenes or budgets differ): give another --out-dir"
+            f"{output_dir} holds results of suite version {earlier}, this naruto-gym has version "
+            f"{suite.SUITE_VERSION} (its scenes or budgets differ): give another --output-dir"
         )
     if manifest.get("split") not in (None, split):
         raise ValueError(
-            f"{out_dir} holds results of the {manifest['split']} split: give another --out-dir "
-            f"for the {split} split"
+            f"{output_dir} holds results of the {manifest['split']} split: give another "
+            f"--output-dir for the {split} split"
         )
     manifest["suite_version"] = suite.SUITE_VERSION
     manifest["split"] = split
@@ -206,9 +206,9 @@ def write_manifest(
     return manifest
 
 
-def read_manifest(out_dir: str | Path) -> dict[str, Any] | None:
-    """``out_dir/suite.json``, or None when the folder holds no suite run."""
-    return read_record(Path(out_dir) / MANIFEST_FILE)
+def read_manifest(output_dir: str | Path) -> dict[str, Any] | None:
+    """``output_dir/suite.json``, or None when the folder holds no suite run."""
+    return read_record(Path(output_dir) / MANIFEST_FILE)
 
 
 GROUP_ORDER = ("small", "apartment", "house", "all", "other")

@@ -1,7 +1,7 @@
 """The main command: one episode of a policy (the NARUTO agent by default) and what to look at.
 
 ``naruto-demo`` (``python -m naruto_agent.demo``, or ``bash scripts/run_demo.sh`` after set-up)
-runs one episode and writes into ``--out`` (default ``outputs/demo``):
+runs one episode and writes into ``--output-dir`` (default ``outputs/demo``):
 
 * ``reconstruction.ply``: the policy's own map as a mesh (the NARUTO agent's TSDF or neural
   map); for a policy that keeps no map, the reference TSDF fusion of the episode's frames;
@@ -9,7 +9,7 @@ runs one episode and writes into ``--out`` (default ``outputs/demo``):
   completion ratio over the whole and the observable surface), coverage, path length,
   collisions and time per step (also printed);
 * ``curves.csv`` / ``curves.png``: coverage at every step, completion ratio at a few
-  checkpoints (scored with cheaper settings than the final metrics);
+  evaluation points (scored with cheaper settings than the final metrics);
 * ``trajectory.png``: the trajectory on the top-down map, with the goals the policy chose;
 * ``episode.gif``: the env's ``rgb_array`` frames (map, RGB, depth), subsampled, with the
   agent's map from above beside each;

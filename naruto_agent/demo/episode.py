@@ -21,14 +21,14 @@ class Episode:
     Attributes:
         steps_run: steps taken.
         coverage: coverage (fraction of the observable surface seen) after reset and each step.
-        completion_curve: ``{"step", "completion_ratio_pct", ...}`` at the checkpoints.
+        completion_curve: ``{"step", "completion_ratio_pct", ...}`` at the evaluation points.
         poses: (steps_run + 1, 4, 4) camera-to-world poses, start included.
         goals: (G, 3) goals the policy chose.
         frames: (step, picture) of the subsampled ``rgb_array`` frames.
         collisions: refused or shortened moves, by reason.
         path_length_m: distance travelled.
         times_s: seconds per phase (``policy``, ``env``, ``mapping``, ``pictures``,
-            ``checkpoints``).
+            ``eval_points``, ``recording``).
         mesh: the reconstruction scored at the end.
         map_source: where ``mesh`` comes from.
         camera_size: (height, width) of the frames, the order of the docs and of image

@@ -40,6 +40,12 @@ CURVE_COLUMNS = (
     "completion_cm",
     "accuracy_cm",
 )
+#: What the whole-surface completion ratio counts, printed beside it: the observable ratio
+#: is the one to read, as no camera inside a room sees the outer faces of its walls.
+WHOLE_SURFACE_NOTE = (
+    "counts every face of the mesh, the outer faces of walls and other sides no camera "
+    "inside can see included"
+)
 #: How long the GIF shows each frame, and its last one (milliseconds).
 GIF_FRAME_MS = 120
 GIF_LAST_FRAME_MS = 2000
@@ -111,7 +117,7 @@ def write_mesh(path: Path, episode: Episode) -> Path:
 
 
 def curve_rows(episode: Episode) -> list[dict[str, Any]]:
-    """One row per step: coverage (%) always, the completion scores at checkpoints."""
+    """One row per step: coverage (%) always, the completion scores at the evaluation points."""
     scored = {point["step"]: point for point in episode.completion_curve}
     rows = []
     for step, coverage in enumerate(episode.coverage):
@@ -125,8 +131,8 @@ def curve_rows(episode: Episode) -> list[dict[str, Any]]:
 def write_curves(
     folder: Path, episode: Episode, title: str, metrics: dict[str, Any] | None = None
 ) -> list[Path]:
-    """``curves.csv`` (a row per step; completion columns filled at checkpoints only) and
-    ``curves.png`` (coverage, and the completion ratios at the checkpoints, with the final
+    """``curves.csv`` (a row per step; completion columns filled at the evaluation points only) and
+    ``curves.png`` (coverage, and the completion ratios at the evaluation points, with the final
     full-protocol scores of ``metrics`` as stars)."""
     rows = curve_rows(episode)
     csv_path = folder / "curves.csv"
@@ -148,7 +154,7 @@ def write_curves(
     ):
         values = [p.get(key) for p in points]
         if values and all(value is not None for value in values):
-            line = right.plot(steps, values, marker="o", label=f"{label}, checkpoints")[0]
+            line = right.plot(steps, values, marker="o", label=f"{label}, evaluation points")[0]
             final = (metrics or {}).get(key)
             if final is not None:
                 right.plot(
@@ -165,8 +171,9 @@ def write_curves(
     right.set_title("completion of the map")
     if metrics is not None:
         right.set_title(
-            f"completion of the map\n(checkpoints: {metrics['evaluation']['checkpoint_samples']:,}"
-            f" samples; final: {metrics['evaluation']['samples']:,})",
+            f"completion of the map\n(evaluation points: "
+            f"{metrics['evaluation']['checkpoint_samples']:,} samples; final: "
+            f"{metrics['evaluation']['samples']:,})",
             fontsize=10,
         )
     if points:
@@ -273,10 +280,12 @@ def summary_text(metrics: dict[str, Any], folder: Path) -> str:
         [
             f"{metrics['policy']} on {metrics['scene']}, seed {metrics['seed']}: "
             f"{metrics['steps']} steps, {height} x {width} (H x W) frames",
+            f"  observable completion ratio {number('observable_completion_ratio_pct', '%')} "
+            f"(of the surface a camera inside the scene can see) | accuracy "
+            f"{number('accuracy_cm', 'cm')} | completion {number('completion_cm', 'cm')}",
+            f"  whole-surface completion ratio {number('completion_ratio_pct', '%')}: "
+            f"{WHOLE_SURFACE_NOTE}",
             f"  map: {metrics['map']}, {metrics['mesh_faces']:,} faces",
-            f"  accuracy {number('accuracy_cm', 'cm')} | completion {number('completion_cm', 'cm')}"
-            f" | completion ratio {number('completion_ratio_pct', '%')}"
-            f" | observable completion ratio {number('observable_completion_ratio_pct', '%')}",
             f"  coverage {metrics['coverage_pct']:.2f} % | path length "
             f"{metrics['path_length_m']:.2f} m | collisions {metrics['collisions']} | time "
             f"per step {times['total']:.0f} ms ({phases})",

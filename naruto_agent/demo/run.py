@@ -1,10 +1,10 @@
 """The demo's arguments and its episode loop (see :mod:`naruto_agent.demo` for the outputs).
 
-The loop is the benchmark harness's (:mod:`naruto_agent.benchmark.runner`): bind the policy to
-the env, reset both with the same seed, ``act`` / ``step`` until the budget, with the env made
-in the policy's preferred action mode. On top of it the demo keeps what a person wants to see:
-the coverage at every step, the completion ratio of the policy's own map at a few
-checkpoints, the goals the policy chose, and subsampled ``rgb_array`` frames.
+The loop is the tools' one (:func:`naruto_agent.episode_loop.run_episode_loop`): bind the
+policy to the env, reset both with the same seed, ``act`` / ``step`` until the episode's end,
+with the env made in the policy's preferred action mode. Its hooks keep what a person wants to
+see: the coverage at every step, the completion ratio of the policy's own map at a few
+evaluation points, the goals the policy chose, and subsampled ``rgb_array`` frames.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import os
 import sys
 import time
 import typing
-from collections import Counter
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -24,15 +24,22 @@ from typing import Any
 import numpy as np
 import trimesh
 
+from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.demo.episode import Episode
-from naruto_gym.cli_args import parse_dataclass_args
+from naruto_agent.episode_loop import (
+    EpisodeHook,
+    EvalPoints,
+    FrameFusion,
+    StepRecords,
+    run_episode_loop,
+)
 
-#: The default step budget (the README gives its run time).
-DEFAULT_STEPS = 1000
-#: Cheaper scoring at the checkpoints of the completion curve than at the end.
-CHECKPOINT_CULL_EVERY = 10
+#: The default episode length (the README gives its run time).
+DEFAULT_MAX_EPISODE_STEPS = 1000
+#: Cheaper scoring at the evaluation points of the completion curve than at the end.
+EVAL_POINT_CULL_EVERY = 10
 #: Demo settings handed to a policy whose constructor takes them (see :func:`policy_settings`).
-POLICY_SETTINGS = ("mapper", "device")
+POLICY_SETTINGS = ("mapper_kind", "device")
 
 
 class DemoInputError(ValueError):
@@ -52,27 +59,30 @@ class DemoArgs:
     up_axis: str = "z"
     """up axis of a mesh path written without @AXIS: z, y, -y, x, -x, -z or auto (from a
     recognised dataset layout)"""
-    steps: int = DEFAULT_STEPS
-    """step budget of the episode"""
+    max_episode_steps: int = DEFAULT_MAX_EPISODE_STEPS
+    """length of the episode in steps"""
     seed: int = 0
     """seed of the start pose and of the policy"""
-    mapper: str = "tsdf"
+    mapper_kind: str = "tsdf"
     """the policy's mapper, for a policy that takes one (NARUTO: tsdf, fast, or neural, the
     published one, slow on a CPU)"""
     device: str = "auto"
     """device of the policy's mapper, for a policy that takes one (auto: CUDA when present)"""
+    reference_device: str = "auto"
+    """Open3D device of the reference TSDF mapper that fuses the frames of a policy keeping
+    no map of its own (auto, cpu, cuda)"""
     policy_kwargs: str = ""
     """JSON object of further keyword arguments of the policy's constructor, e.g.
     '{"max_run_steps": 20}', or keyed by the policy as naruto-benchmark takes them, e.g.
     '{"random": {"max_run_steps": 20}}'"""
     image_scale: float = 0.25
     """camera resolution factor of the 680 x 1200 (H x W) camera (0.25: 170 x 300)"""
-    out: str = "outputs/demo"
+    output_dir: str = "outputs/demo"
     """folder the outputs are written to"""
-    checkpoints: int = 4
-    """completion-ratio checkpoints during the episode (besides the last step)"""
+    eval_points: int = 4
+    """completion-ratio evaluation points during the episode (besides the last step)"""
     checkpoint_samples: int = 50_000
-    """surface samples per mesh at the checkpoints"""
+    """surface samples per mesh at the evaluation points"""
     eval_samples: int = 200_000
     """surface samples per mesh of the final metrics (200,000 as published)"""
     gif_frames: int = 60
@@ -97,18 +107,19 @@ class DemoArgs:
 
 
 def parse_args(argv: list[str] | None = None) -> DemoArgs:
-    """Parse command-line flags (``--policy naruto --steps 500 ...``) into :class:`DemoArgs`."""
+    """Parse command-line flags (``--policy naruto --max-episode-steps 500 ...``) into
+    :class:`DemoArgs`."""
     return parse_dataclass_args(DemoArgs, argv, "Run one episode and write what to look at.")
 
 
 def check_args(args: DemoArgs) -> None:
     """Raise ``ValueError`` for settings that cannot run (before anything is built)."""
-    if args.steps < 1:
-        raise ValueError(f"--steps must be at least 1, got {args.steps}")
+    if args.max_episode_steps < 1:
+        raise ValueError(f"--max-episode-steps must be at least 1, got {args.max_episode_steps}")
     if not 0 < args.image_scale <= 1:
         raise ValueError(f"--image-scale must be in (0, 1], got {args.image_scale}")
-    if args.checkpoints < 0 or args.gif_frames < 0 or args.map_snapshots < 0:
-        raise ValueError("--checkpoints, --gif-frames and --map-snapshots must be >= 0")
+    if args.eval_points < 0 or args.gif_frames < 0 or args.map_snapshots < 0:
+        raise ValueError("--eval-points, --gif-frames and --map-snapshots must be >= 0")
     if args.checkpoint_samples < 1000 or args.eval_samples < 1000:
         raise ValueError("--checkpoint-samples and --eval-samples must be at least 1000")
     if args.gif_width < 32:
@@ -117,7 +128,7 @@ def check_args(args: DemoArgs) -> None:
 
 def build_policy(args: DemoArgs) -> Any:
     """The policy named by ``--policy`` with ``--policy-kwargs``, plus the demo's policy
-    settings (``--mapper``, ``--device``) that its constructor takes (:func:`policy_settings`).
+    settings (``--mapper-kind``, ``--device``) that its constructor takes (:func:`policy_settings`).
 
     ``--policy-kwargs`` is flat (the constructor's arguments) or keyed by the policy's name,
     as ``naruto-benchmark`` takes it (:func:`~naruto_agent.benchmark.spec.split_policy_kwargs`).
@@ -160,8 +171,8 @@ def policy_settings(cls: type, args: DemoArgs) -> dict[str, Any]:
     named = {
         name
         for name, parameter in parameters.items()
-        if parameter.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD,
-                              inspect.Parameter.KEYWORD_ONLY)
+        if parameter.kind
+        in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
     }
     overrides = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values())
     if overrides and "config" in named:
@@ -245,7 +256,8 @@ def _curve_point(step: int, metrics: dict[str, Any] | None) -> dict[str, Any]:
 
 
 def make_env(args: DemoArgs, scene: Any, action_mode: str) -> Any:
-    """The episode's env: the default camera scaled, the budget as its time limit."""
+    """The episode's env: the default camera scaled, the episode's length as its time
+    limit."""
     import gymnasium as gym
 
     import naruto_gym  # noqa: F401  (registers the env ids)
@@ -255,79 +267,101 @@ def make_env(args: DemoArgs, scene: Any, action_mode: str) -> Any:
         scene=scene,
         action_mode=action_mode,
         image_scale=args.image_scale,
-        max_episode_steps=args.steps,
+        max_episode_steps=args.max_episode_steps,
         render_mode="rgb_array",
     )
+
+
+class _DemoHooks(EpisodeHook):
+    """What the demo keeps of each step besides :class:`StepRecords`: the watch's pictures,
+    snapshots and recording (the watch made by ``make_watch`` once the env is reset), and the
+    completion scores at the evaluation points."""
+
+    def __init__(
+        self, args: DemoArgs, env: Any, source: _MapSource, make_watch: Callable[[], Any]
+    ) -> None:
+        self.env = env
+        self.source = source
+        self.make_watch = make_watch
+        self.watch: Any = None
+        self.cheap = {"num_samples": args.checkpoint_samples, "cull_every": EVAL_POINT_CULL_EVERY}
+        self.curve: list[dict[str, Any]] = []
+        self.eval_points = EvalPoints(
+            args.max_episode_steps, args.eval_points, self.score, at_last=True
+        )
+
+    def on_reset(self, observation: dict[str, Any], info: dict[str, Any]) -> None:
+        self.watch = self.make_watch()
+        self.watch.observe(0, observation, info, last=False)
+
+    def on_step(
+        self, step: int, observation: dict[str, Any], info: dict[str, Any], last: bool
+    ) -> None:
+        self.watch.observe(step, observation, info, last)
+
+    def score(self, step: int, last: bool) -> None:
+        mesh = self.watch.final_mesh(step) if last else None
+        scores = _score(self.env, self.source.mesh() if mesh is None else mesh, **self.cheap)
+        self.curve.append(_curve_point(step, scores))
+        self.watch.scores(step, scores)
 
 
 def run_episode(args: DemoArgs, env: Any, policy: Any, recorder: Any | None = None) -> Episode:
     """Run one episode of ``policy`` in ``env`` and keep what the outputs need (and write
     it to ``recorder``, an :class:`~naruto_agent.recording.EpisodeRecorder`, when given)."""
-    from tqdm.auto import tqdm
-
-    from naruto_agent.benchmark.runner import checkpoint_steps, timed_step
     from naruto_agent.demo.watch import EpisodeWatch
-    from naruto_agent.policies import EnvContext
 
     base = env.unwrapped
-    policy.bind(EnvContext.from_env(env, step_budget=args.steps))
-    source = _MapSource(policy, base.camera, args.device)
-    times = dict.fromkeys(
-        ("policy", "env", "mapping", "pictures", "checkpoints", "recording"), 0.0
-    )
-    observation, info = env.reset(seed=args.seed, options=policy.reset_options())
-    policy.reset(observation, info, seed=args.seed)
-    source.add_frame(observation)
+    source = _MapSource(policy, base.camera, args.reference_device)
+    times = {"pictures": 0.0, "recording": 0.0}
 
-    watch = EpisodeWatch(env, policy, source.mesh, args.steps, args.gif_frames,
-                         args.gif_width, args.map_snapshots, recorder, times)
-    watch.observe(0, observation, info, last=False)
-    checkpoints = set(checkpoint_steps(args.steps, args.checkpoints))
-    cheap = {"num_samples": args.checkpoint_samples, "cull_every": CHECKPOINT_CULL_EVERY}
-    coverage = [float(info["coverage"])]
-    curve: list[dict[str, Any]] = []
-    collisions: Counter[str] = Counter()
-    steps_run = 0
-    bar = tqdm(
-        range(1, args.steps + 1),
-        desc=f"{args.policy} on {args.scene}",
-        disable=not args.progress,
-        unit="step",
+    def make_watch() -> EpisodeWatch:
+        return EpisodeWatch(
+            env,
+            policy,
+            source.mesh,
+            args.max_episode_steps,
+            args.gif_frames,
+            args.gif_width,
+            args.map_snapshots,
+            recorder,
+            times,
+        )
+
+    records = StepRecords()
+    demo = _DemoHooks(args, env, source, make_watch)
+    hooks: list[EpisodeHook] = [records, demo, demo.eval_points]
+    if source.reference is not None:
+        hooks.insert(0, FrameFusion(source.reference))
+    result = run_episode_loop(
+        env,
+        policy,
+        args.max_episode_steps,
+        args.seed,
+        hooks,
+        progress=f"{args.policy} on {args.scene}" if args.progress else None,
     )
-    for step in bar:
-        observation, terminated, truncated, info = timed_step(policy, env, observation, info, times)
-        clock = time.perf_counter()
-        source.add_frame(observation)
-        times["mapping"] += time.perf_counter() - clock
-        steps_run = step
-        coverage.append(float(info["coverage"]))
-        if info.get("collided", False):
-            collisions[info.get("collision_reason", "") or "unknown"] += 1
-        last = terminated or truncated or step == args.steps
-        watch.observe(step, observation, info, last)
-        if step in checkpoints or (last and args.checkpoints > 0):
-            clock = time.perf_counter()
-            mesh = watch.final_mesh(step) if last else None
-            scores = _score(env, source.mesh() if mesh is None else mesh, **cheap)
-            curve.append(_curve_point(step, scores))
-            watch.scores(step, scores)
-            times["checkpoints"] += time.perf_counter() - clock
-        if step % 10 == 0:
-            bar.set_postfix(coverage=f"{100 * coverage[-1]:.1f}%", refresh=False)
-        if last:
-            break
-    bar.close()
-    final_mesh = watch.final_mesh(steps_run)
+    watch = demo.watch
+    final_mesh = watch.final_mesh(result.steps_run)
     watch.close()
+    seconds = result.seconds
+    times = {
+        "policy": seconds["policy"],
+        "env": seconds["env"],
+        "mapping": seconds.get("mapping", 0.0),
+        "pictures": times["pictures"],
+        "eval_points": seconds["eval_points"],
+        "recording": times["recording"],
+    }
     return Episode(
-        steps_run=steps_run,
-        coverage=coverage,
-        completion_curve=curve,
+        steps_run=result.steps_run,
+        coverage=records.coverage,
+        completion_curve=demo.curve,
         poses=base.poses,
         goals=chosen_goals(policy),
         frames=watch.frames,
-        collisions=collisions,
-        path_length_m=float(info.get("path_length_m", 0.0)),
+        collisions=records.collisions,
+        path_length_m=float(result.info.get("path_length_m", 0.0)),
         times_s=times,
         mesh=source.mesh() if final_mesh is None else final_mesh,
         map_source=source.label,
@@ -356,7 +390,8 @@ def prepare(args: DemoArgs) -> tuple[Any, Any]:
 
 
 def run_demo(args: DemoArgs) -> dict[str, Any]:
-    """Run the episode, score it, write every output into ``args.out``; return the metrics.
+    """Run the episode, score it, write every output into ``args.output_dir``; return the
+    metrics.
 
     Raises:
         DemoInputError: bad settings, an unknown policy or scene.
@@ -366,7 +401,7 @@ def run_demo(args: DemoArgs) -> dict[str, Any]:
     load_start = os.getloadavg()
     begun = time.perf_counter()
     scene, policy = prepare(args)
-    out = Path(args.out)
+    out = Path(args.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     env = make_env(args, scene, policy.preferred_action_mode)
     try:
@@ -423,14 +458,21 @@ def _recorder(args: DemoArgs, env: Any, out: Path) -> Any | None:
 
     base = env.unwrapped
     try:
-        return make_recorder(out / "episode.rrd", base.camera, _title(args), args.record,
-                             args.live, args.live_url, scene=base.scene)
+        return make_recorder(
+            out / "episode.rrd",
+            base.camera,
+            _title(args),
+            args.record,
+            args.live,
+            args.live_url,
+            scene=base.scene,
+        )
     except (LiveViewerError, ValueError) as error:
         raise DemoInputError(str(error)) from error
 
 
 def _title(args: DemoArgs) -> str:
-    name = f"NARUTO ({args.mapper})" if args.policy == "naruto" else args.policy
+    name = f"NARUTO ({args.mapper_kind})" if args.policy == "naruto" else args.policy
     return f"{name} on {args.scene}, seed {args.seed}"
 
 

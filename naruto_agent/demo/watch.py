@@ -69,7 +69,7 @@ class EpisodeWatch:
         clock = time.perf_counter()
         if self.recorder is not None:
             self.recorder.log_step(step, observation, info)
-            self.recorder.log_policy(step, self.policy)
+            self.recorder.log_policy(step, self.policy, last)
         if step in self.snapshots or last:
             mesh = self.map_mesh()
             self.last_map = (step, mesh)

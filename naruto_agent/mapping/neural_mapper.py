@@ -128,11 +128,14 @@ class NeuralMapper:
         if self._device.type == "cpu" and self.config.tune_cpu_allocator:
             keep_freed_memory_for_reuse()
         torch.manual_seed(self.config.seed)
-        self._backend = resolve_backend(self.config.backend, self._device)
+        # The field owns the backend in use (resolved here once); ``backend`` reads it.
         self.field = NeuralField(
-            self.bounds, self.config, hash_encoding_cls, backend=self._backend
+            self.bounds,
+            self.config,
+            hash_encoding_cls,
+            backend=resolve_backend(self.config.backend, self._device),
         ).to(self._device)
-        if self._backend == "triton":
+        if self.field.backend == "triton":
             self._check_fast_path()
         self.uncertainty = UncertaintyGrid(
             self.bounds,
@@ -173,7 +176,7 @@ class NeuralMapper:
         if self.config.backend == "triton":
             raise RuntimeError(f"{error}; use backend='torch' (the reference) on this machine")
         warnings.warn(f"{error}; the neural mapper uses the PyTorch path", stacklevel=3)
-        self._backend = self.field.backend = "torch"
+        self.field.backend = "torch"
 
     def _adam(self, parameters, lr: float) -> torch.optim.Optimizer:  # noqa: ANN001
         # Co-SLAM's betas; the fused kernel when this torch has it for the device.
@@ -194,8 +197,8 @@ class NeuralMapper:
     @property
     def backend(self) -> str:
         """The compute path in use: "torch" (the reference) or "triton" (fused kernels),
-        resolved from ``config.backend`` and the device."""
-        return self._backend
+        resolved from ``config.backend`` and the device (the field holds it)."""
+        return self.field.backend
 
     @property
     def active_sampling(self) -> bool:
@@ -394,7 +397,7 @@ class NeuralMapper:
         if self.config.active_score == "grid":
             return measured_point_variance(self.uncertainty, rays)
         # The fast path scores the whole pool at once (its memory is no concern on a GPU).
-        fixed = self._backend == "triton"
+        fixed = self.field.backend == "triton"
         chunk = len(rays) if fixed else _SCORING_CHUNK
         scores = []
         for begin in range(0, len(rays), max(chunk, 1)):
@@ -426,7 +429,7 @@ class NeuralMapper:
     def train_iteration(self, rays: RayBatch) -> dict[str, float]:
         """One optimisation step on a batch of rays; returns the loss values."""
         cfg = self.config
-        fixed = self._backend == "triton"
+        fixed = self.field.backend == "triton"
         output = render_rays(
             self.field,
             rays,

@@ -16,7 +16,7 @@
 
 Run it like any policy::
 
-    policy = NarutoPolicy(mapper="tsdf")
+    policy = NarutoPolicy(mapper_kind="tsdf")
     policy.bind(EnvContext.from_env(env))
     obs, info = env.reset(seed=0)
     policy.reset(obs, info, seed=0)

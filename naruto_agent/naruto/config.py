@@ -19,9 +19,9 @@ from naruto_agent.planning import PlannerConfig
 from naruto_agent.policies.config import pop_guard_settings, refuse_renamed_settings
 from naruto_gym.utils.checks import check_integer, check_number
 
-#: The mappers the agent can build (``NarutoPolicy(mapper=...)``).
+#: The mappers the agent can build (``NarutoPolicy(mapper_kind=...)``).
 MAPPERS = ("tsdf", "neural")
-"""Names of the mappers the agent can run on (``NarutoPolicy(mapper=...)``)."""
+"""Names of the mappers the agent can run on (``NarutoPolicy(mapper_kind=...)``)."""
 
 
 def _goal_search_defaults() -> GoalSearchConfig:
@@ -94,9 +94,9 @@ class NarutoConfig:
     planner: PlannerConfig = field(default_factory=_planner_defaults)
     """E-RRT settings (time limit 2 s; the seed is redrawn for every request)"""
     tsdf: TsdfMapperConfig = field(default_factory=TsdfMapperConfig)
-    """settings of the TSDF mapper (``mapper="tsdf"``)"""
+    """settings of the TSDF mapper (``mapper_kind="tsdf"``)"""
     neural: NeuralMapperConfig = field(default_factory=NeuralMapperConfig)
-    """settings of the neural mapper (``mapper="neural"``)"""
+    """settings of the neural mapper (``mapper_kind="neural"``)"""
 
     def __post_init__(self) -> None:
         check_number("planner_voxel_m", self.planner_voxel_m, low=0.0)

@@ -13,7 +13,7 @@ CVPR 2024):
    and E-RRT); every move is checked first by
    :class:`~naruto_agent.naruto.move_checks.MoveChecker`.
 
-Mappers (``mapper=``):
+Mappers (``mapper_kind=``; ``policy.mapper`` is the mapper object of the episode):
 
 * ``"tsdf"`` (default): :class:`~naruto_agent.mapping.TsdfUncertaintyMapper`, TSDF fusion with
   an uncertainty derived from observation counts; fast on a CPU.
@@ -74,8 +74,8 @@ class NarutoPolicy(Policy):
     """NARUTO: uncertainty-aware goal search + E-RRT on the agent's own map ("pose" actions).
 
     Args:
-        mapper: ``"tsdf"`` (fast, default) or ``"neural"`` (the published mapper; slow on a
-            CPU).
+        mapper_kind: ``"tsdf"`` (fast, default) or ``"neural"`` (the published mapper; slow on
+            a CPU).
         config: full settings; ``settings`` override its fields (see
             :func:`~naruto_agent.naruto.config.build_config`).
         device: device of the mapper and the planner's nearest-neighbour search ("auto":
@@ -84,6 +84,7 @@ class NarutoPolicy(Policy):
             its ``guard`` section (:class:`~naruto_agent.guards.ScanGuardConfig`) by name.
 
     Attributes:
+        mapper_kind: the kind of mapper each episode builds (``mapper`` is the object).
         config: the settings.
         machine: the state machine (``machine.history`` holds the state of every action).
         monitor: progress, failed plans and goals of the episode.
@@ -103,15 +104,20 @@ class NarutoPolicy(Policy):
 
     def __init__(
         self,
-        mapper: Literal["tsdf", "neural"] = "tsdf",
+        mapper_kind: Literal["tsdf", "neural"] = "tsdf",
         config: NarutoConfig | None = None,
         device: str = "auto",
         **settings: Any,
     ) -> None:
         super().__init__()
-        if mapper not in MAPPERS:
-            raise ValueError(f"mapper must be one of {MAPPERS}, got {mapper!r}")
-        self.mapper_name = mapper
+        if "mapper" in settings:
+            raise ValueError(
+                f"NarutoPolicy's mapper= was renamed: pass mapper_kind={settings['mapper']!r} "
+                "(policy.mapper is the mapper object)"
+            )
+        if mapper_kind not in MAPPERS:
+            raise ValueError(f"mapper_kind must be one of {MAPPERS}, got {mapper_kind!r}")
+        self.mapper_kind = mapper_kind
         self.device = device
         self.config = build_config(config, **settings)
         self.machine = NarutoStateMachine(self.config.max_rotation_step_deg,
@@ -190,7 +196,7 @@ class NarutoPolicy(Policy):
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
         super().reset(observation, info, seed)
         self._rng = np.random.default_rng(self.config.seed if seed is None else seed)
-        mapper = build_mapper(self.mapper_name, self.context, self.config, self.device,
+        mapper = build_mapper(self.mapper_kind, self.context, self.config, self.device,
                               self._rng)
         if not self.config.stay_in_scanned_space:
             mapper.observed_space.configure(support_below_m=None)

@@ -26,12 +26,15 @@ class RecordingContents:
         columns: entity path -> the component columns logged at it (``Archetype:field``).
         map_vertices: (V, 3) vertices of the last map logged at ``world/map`` (None if none).
         map_faces: (F, 3) its triangles.
+        chunks: how many chunks the file holds (Rerun warns of an unoptimized recording
+            when there are many small ones).
     """
 
     steps: dict[str, list[int]] = field(default_factory=dict)
     columns: dict[str, set[str]] = field(default_factory=dict)
     map_vertices: np.ndarray | None = None
     map_faces: np.ndarray | None = None
+    chunks: int = 0
 
     @property
     def entities(self) -> list[str]:
@@ -54,7 +57,9 @@ def read_recording(path: str | Path) -> RecordingContents:
     steps: dict[str, set[int]] = defaultdict(set)
     columns: dict[str, set[str]] = defaultdict(set)
     last_map: tuple[int, np.ndarray, np.ndarray] | None = None
+    chunks = 0
     for chunk in RrdReader(str(path)).store().stream():
+        chunks += 1
         entity = _UNESCAPE.sub(r"\1", chunk.entity_path.lstrip("/"))
         if entity.startswith("__"):  # the recording's own properties
             continue
@@ -77,6 +82,7 @@ def read_recording(path: str | Path) -> RecordingContents:
     contents = RecordingContents(
         steps={entity: sorted(found) for entity, found in steps.items()},
         columns=dict(columns),
+        chunks=chunks,
     )
     if last_map is not None:
         contents.map_vertices, contents.map_faces = last_map[1], last_map[2]

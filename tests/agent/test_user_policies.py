@@ -42,13 +42,14 @@ class NeedsMap(ForwardTurn):
 
 # Tiny episodes: small frames, few coverage samples, no reference map.
 TINY_BENCHMARK = [
-    "--scenes", "two_rooms", "--seeds", "0", "--steps", "3", "--workers", "0",
+    "--scenes", "two_rooms", "--seeds", "0", "--max-episode-steps", "3", "--workers", "0",
     "--image-scale", "0.1", "--no-reconstruct", "--no-plots", "--no-progress",
     "--env-kwargs", '{"panorama_shape": [16, 32], "coverage_samples": 2000}',
 ]
 TINY_DEMO = [
-    "--steps", "3", "--scene", "two_rooms", "--image-scale", "0.1", "--checkpoints", "0",
-    "--gif-frames", "0", "--no-viewer", "--no-progress", "--eval-samples", "5000",
+    "--max-episode-steps", "3", "--scene", "two_rooms", "--image-scale", "0.1",
+    "--eval-points", "0", "--gif-frames", "0", "--no-viewer", "--no-progress",
+    "--eval-samples", "5000",
     "--checkpoint-samples", "5000",
 ]
 
@@ -103,26 +104,26 @@ def test_a_missing_file_module_or_class_is_a_clear_error(user_folder, name, mess
 
 def test_the_demo_runs_a_policy_from_the_working_directory(user_folder, capsys):
     demo_main(["--policy", "mypolicy:ForwardTurn", "--policy-kwargs", '{"period": 2}',
-               "--out", "out", *TINY_DEMO])
+               "--output-dir", "out", *TINY_DEMO])
     metrics = json.loads((user_folder / "out" / "metrics.json").read_text())
     assert metrics["policy"] == "mypolicy:ForwardTurn" and metrics["steps"] == 3
 
 
 def test_the_demo_takes_a_file_path_and_benchmark_style_kwargs(user_folder):
-    demo_main(["--policy", "policies/forward.py:ForwardTurn", "--out", "out", *TINY_DEMO,
+    demo_main(["--policy", "policies/forward.py:ForwardTurn", "--output-dir", "out", *TINY_DEMO,
                "--policy-kwargs", '{"policies/forward.py:ForwardTurn": {"period": 2}}'])
     assert json.loads((user_folder / "out" / "metrics.json").read_text())["steps"] == 3
 
 
 def test_the_demo_takes_the_up_axis_as_the_benchmark_does(user_folder, capsys):
     with pytest.raises(SystemExit):
-        demo_main(["--scene", "room.obj@w", "--out", "out"])
+        demo_main(["--scene", "room.obj@w", "--output-dir", "out"])
     assert "write PATH@AXIS with AXIS one of" in capsys.readouterr().err
 
 
 def test_the_benchmark_runs_a_policy_from_the_working_directory(user_folder, capsys):
     code = benchmark_main([*TINY_BENCHMARK, "--policies", "mypolicy:ForwardTurn", "random",
-                           "--out-dir", "runs", "--policy-kwargs",
+                           "--output-dir", "runs", "--policy-kwargs",
                            '{"mypolicy:ForwardTurn": {"period": 2}}'])
     assert code == 0, capsys.readouterr()
     record = json.loads(
@@ -133,7 +134,7 @@ def test_the_benchmark_runs_a_policy_from_the_working_directory(user_folder, cap
 
 def test_the_benchmark_takes_flat_kwargs_for_one_policy(user_folder, capsys):
     code = benchmark_main([*TINY_BENCHMARK, "--policies", "policies/forward.py:ForwardTurn",
-                           "--out-dir", "runs", "--policy-kwargs", '{"period": 2}'])
+                           "--output-dir", "runs", "--policy-kwargs", '{"period": 2}'])
     assert code == 0, capsys.readouterr()
     record = json.loads(
         (user_folder / "runs/records/two_rooms/ForwardTurn/seed0.json").read_text()
@@ -144,7 +145,7 @@ def test_the_benchmark_takes_flat_kwargs_for_one_policy(user_folder, capsys):
 
 def test_the_benchmark_stops_early_on_a_policy_it_cannot_load(user_folder, capsys):
     code = benchmark_main([*TINY_BENCHMARK, "--policies", "random", "mypolicy:Nope",
-                           "--out-dir", "runs"])
+                           "--output-dir", "runs"])
     assert code == 2
     assert "mypolicy has no 'Nope'" in capsys.readouterr().err
     assert not (user_folder / "runs").exists()
@@ -152,7 +153,7 @@ def test_the_benchmark_stops_early_on_a_policy_it_cannot_load(user_folder, capsy
 
 def test_the_benchmark_prints_why_episodes_failed_and_where(user_folder, capsys):
     code = benchmark_main([*TINY_BENCHMARK, "--policies", "mypolicy:NeedsMap", "random",
-                           "--out-dir", "runs"])
+                           "--output-dir", "runs"])
     assert code == 1
     out = capsys.readouterr().out
     record = Path("runs") / "records" / "two_rooms" / "NeedsMap" / "seed0.json"
@@ -164,6 +165,6 @@ def test_the_benchmark_prints_why_episodes_failed_and_where(user_folder, capsys)
 @pytest.mark.slow
 def test_spawned_workers_find_the_working_directory_module(user_folder, capsys):
     code = benchmark_main([*TINY_BENCHMARK, "--workers", "1", "--policies",
-                           "mypolicy:ForwardTurn", "--out-dir", "runs"])
+                           "mypolicy:ForwardTurn", "--output-dir", "runs"])
     assert code == 0, capsys.readouterr()
     assert (user_folder / "runs/records/two_rooms/ForwardTurn/seed0.json").is_file()

@@ -56,7 +56,7 @@ def test_a_damaged_record_is_run_again(tmp_path, damage):
 )
 def test_an_unknown_name_stops_the_run_before_any_episode(tmp_path, capsys, argument, message):
     out_dir = tmp_path / "run"
-    code = main(["--out-dir", str(out_dir), "--steps", "2", "--workers", "0",
+    code = main(["--output-dir", str(out_dir), "--max-episode-steps", "2", "--workers", "0",
                  "--no-progress", "--no-plots", *argument])
     assert code == 2
     assert message in capsys.readouterr().err

@@ -21,7 +21,7 @@ import trimesh
 from PIL import Image
 
 from naruto_agent.benchmark import build_specs, run_episode
-from naruto_gym.cli_args import field_docs
+from naruto_agent.cli_args import field_docs
 from naruto_gym.scenes.catalogue import resolve_scene
 from naruto_gym.scenes.mesh_scene import dataset_up_axis
 
@@ -76,7 +76,7 @@ def write_release(root: Path, scenes=("office0", "room0"), poses: int = 4) -> Pa
 
 
 def run_prepare(source: Path, out: Path, *flags: str) -> int:
-    return prepare_replica.main(["--source", str(source), "--out", str(out),
+    return prepare_replica.main(["--source", str(source), "--output-dir", str(out),
                                  "--scenes", "office0", "room0", *flags])
 
 
@@ -217,7 +217,7 @@ def test_replica_passive_replays_a_prepared_scene(tmp_path, capsys):
     sys.modules["replica_passive"] = module
     spec.loader.exec_module(module)
     report = module.main(["--scene-dir", str(tmp_path / "out" / "replica_room0"),
-                          "--num-samples", "2000", "--out", str(tmp_path / "room0.json")])
+                          "--num-samples", "2000", "--output-file", str(tmp_path / "room0.json")])
     assert report["scene"] == "replica_room0" and report["frames"] == 4
     assert report["image"] == "12 x 16"  # the scene's own camera (cam_params.json)
     assert report["poses_not_reached"] == 0

@@ -24,7 +24,7 @@ from naruto_agent.benchmark import (
 )
 from naruto_agent.benchmark.cli import parse_args, write_reports
 from naruto_agent.benchmark.plots import plot_curves
-from naruto_agent.benchmark.runner import checkpoint_steps
+from naruto_agent.episode_loop import eval_point_steps
 
 # Tiny episodes: a small camera, few coverage samples, few evaluation samples.
 TINY = {
@@ -70,10 +70,10 @@ def test_passive_gets_the_trajectory_beside_a_mesh(replica_dir):
     assert spec[0].scene_label == "replica_office0"
 
 
-def test_checkpoint_steps():
-    assert checkpoint_steps(100, 3) == [25, 50, 75]
-    assert checkpoint_steps(100, 0) == []
-    assert checkpoint_steps(1, 4) == []
+def test_eval_point_steps():
+    assert eval_point_steps(100, 3) == [25, 50, 75]
+    assert eval_point_steps(100, 0) == []
+    assert eval_point_steps(1, 4) == []
 
 
 # -- records -----------------------------------------------------------------------------
@@ -129,8 +129,10 @@ def test_summary_table_and_curve_plot(tmp_path):
 
 
 def test_cli_arguments_come_from_the_dataclass():
-    args = parse_args(["--scenes", "a", "b", "--seeds", "3", "4", "--steps", "7", "--no-plots"])
-    assert args.scenes == ["a", "b"] and args.seeds == [3, 4] and args.steps == 7
+    args = parse_args(
+        ["--scenes", "a", "b", "--seeds", "3", "4", "--max-episode-steps", "7", "--no-plots"]
+    )
+    assert args.scenes == ["a", "b"] and args.seeds == [3, 4] and args.max_episode_steps == 7
     assert args.plots is False and args.ray_address is None and args.image_scale == 0.25
 
 

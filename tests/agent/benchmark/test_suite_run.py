@@ -22,7 +22,7 @@ suite = pytest.importorskip("naruto_gym.scenes.suite")
 ROOT = Path(__file__).resolve().parents[3]
 
 TINY = [
-    "--seeds", "0", "--steps", "4", "--image-scale", "0.1", "--eval-points", "1",
+    "--seeds", "0", "--max-episode-steps", "4", "--image-scale", "0.1", "--eval-points", "1",
     "--eval-samples", "2000", "--checkpoint-samples", "2000", "--eval-samples-per-m2", "0",
     "--env-kwargs", '{"panorama_shape": [16, 32], "coverage_samples": 2000}',
     "--no-plots", "--no-progress",
@@ -32,9 +32,9 @@ TINY = [
 def test_suite_flags_parse_and_default_to_the_class_budgets(tmp_path):
     args = parse_args(["--suite", "test", "--size-class", "small", "apartment",
                        "--variant", "closed", "--suite-limit", "2", "--policies", "random",
-                       "--seeds", "0", "--out-dir", str(tmp_path)])
+                       "--seeds", "0", "--output-dir", str(tmp_path)])
     assert args.suite == "test" and args.size_class == ["small", "apartment"]
-    assert args.suite_limit == 2 and args.steps is None and args.eval_points is None
+    assert args.suite_limit == 2 and args.max_episode_steps is None and args.eval_points is None
     specs = episode_specs(args, [])
     chosen = select_scenes("test", ["small", "apartment"], "closed", 2)
     assert [spec.scene for spec in specs] == [entry.scene for entry in chosen]
@@ -47,7 +47,7 @@ def test_suite_flags_parse_and_default_to_the_class_budgets(tmp_path):
     # a folder of another split or suite version is not mixed into
     with pytest.raises(ValueError, match="split"):
         episode_specs(parse_args(["--suite", "train", "--size-class", "small",
-                                  "--out-dir", str(tmp_path)]), [])
+                                  "--output-dir", str(tmp_path)]), [])
     manifest["suite_version"] = "0"
     (tmp_path / "suite.json").write_text(json.dumps(manifest))
     with pytest.raises(ValueError, match="suite version 0"):
@@ -74,14 +74,14 @@ def test_the_test_split_is_fixed_and_disjoint_from_training():
     ],
 )
 def test_bad_suite_flags_say_what_is_wrong(argv, message, tmp_path, capsys):
-    assert main([*argv, "--policies", "random", "--out-dir", str(tmp_path)]) == 2
+    assert main([*argv, "--policies", "random", "--output-dir", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err
 
 
 def _command(out_dir: Path) -> list[str]:
     return ["--suite", "test", "--size-class", "small", "--suite-limit", "2",
             "--policies", "random", "frontier", "--workers", "0", *TINY,
-            "--out-dir", str(out_dir)]
+            "--output-dir", str(out_dir)]
 
 
 def test_a_tiny_suite_run_resumes_after_a_kill_and_makes_the_leaderboard(tmp_path):
@@ -118,7 +118,7 @@ def test_a_tiny_suite_run_resumes_after_a_kill_and_makes_the_leaderboard(tmp_pat
 def test_a_suite_runs_on_ray_unchanged(tmp_path):
     ray = pytest.importorskip("ray")
     argv = ["--suite", "test", "--size-class", "small", "--suite-limit", "1",
-            "--policies", "random", *TINY, "--out-dir", str(tmp_path / "ray")]
+            "--policies", "random", *TINY, "--output-dir", str(tmp_path / "ray")]
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
         assert main([*argv, "--ray-address", "auto"]) == 0

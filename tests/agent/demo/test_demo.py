@@ -35,15 +35,15 @@ def naruto_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     returned = main(
         [
-            "--steps",
+            "--max-episode-steps",
             str(STEPS),
-            "--out",
+            "--output-dir",
             str(out),
             "--gif-frames",
             "6",
             "--gif-width",
             "160",
-            "--checkpoints",
+            "--eval-points",
             "1",
             "--map-snapshots",
             "3",
@@ -99,6 +99,14 @@ def test_printed_summary_names_the_scores(naruto_run, capsys):
     ):
         assert words in text
     assert f"{metrics['completion_ratio_pct']:.2f} %" in text
+    # The observable ratio comes first; the whole-surface one says what it counts.
+    lines = text.splitlines()
+    assert lines[1].startswith(
+        f"  observable completion ratio {metrics['observable_completion_ratio_pct']:.2f} %"
+    )
+    assert lines[2].startswith("  whole-surface completion ratio ")
+    assert "outer faces of walls" in lines[2]
+    assert text.index("observable completion ratio") < text.index("whole-surface")
     assert "68 x 120 (H x W) frames" in text  # height first, as the docs write "170 x 300"
 
 
@@ -187,9 +195,11 @@ def test_recording_replays_the_episode_with_the_map_growing(naruto_run):
     out, metrics = naruto_run
     contents = read_recording(out / "episode.rrd")
     every_step = list(range(STEPS + 1))
-    for entity in ("world/camera", "world/camera/rgb", "metrics/coverage (%)",
-                   "world/policy/frontier", "world/policy/goals chosen"):
+    for entity in ("world/camera", "world/camera/rgb", "metrics/coverage (%)"):
         assert contents.steps[entity] == every_step, entity
+    # A policy layer is logged at the start and again whenever it changed.
+    for entity in ("world/policy/frontier", "world/policy/goals chosen"):
+        assert contents.steps[entity][0] == 0 and set(contents.steps[entity]) <= set(every_step)
     assert contents.steps["world/map"][0] == 0 and contents.steps["world/map"][-1] == STEPS
     assert len(contents.steps["world/map"]) > 2
     assert contents.steps["metrics/completion ratio (%)"][-1] == STEPS
@@ -208,13 +218,13 @@ def test_frontier_policy_runs_and_is_scored_on_the_reference_map(tmp_path):
             [
                 "--policy",
                 "frontier",
-                "--steps",
+                "--max-episode-steps",
                 "8",
-                "--out",
+                "--output-dir",
                 str(tmp_path),
                 "--gif-frames",
                 "0",
-                "--checkpoints",
+                "--eval-points",
                 "0",
                 "--no-viewer",
                 *FAST,
@@ -235,13 +245,16 @@ def test_frontier_policy_runs_and_is_scored_on_the_reference_map(tmp_path):
         (["--policy", "nope"], "unknown policy 'nope'"),
         (["--policy", "json:dumps"], "is not a naruto_agent.policies.Policy subclass"),
         (["--scene", "no_such_room"], "unknown scene 'no_such_room'"),
-        (["--steps", "0"], "--steps must be at least 1"),
+        (["--max-episode-steps", "0"], "--max-episode-steps must be at least 1"),
+        (["--steps", "10"], "--steps was renamed: use --max-episode-steps"),
+        (["--out", "somewhere"], "--out was renamed: use --output-dir"),
+        (["--checkpoints", "2"], "--checkpoints was renamed: use --eval-points"),
         (["--policy", "random", "--policy-kwargs", "[1]"], "must be a JSON object"),
     ],
 )
 def test_bad_input_ends_with_a_clear_error(flags, message, tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:
-        main([*flags, "--out", str(tmp_path / "out")])
+        main([*flags, "--output-dir", str(tmp_path / "out")])
     assert exit_info.value.code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "out").exists()  # nothing written

@@ -35,7 +35,7 @@ def run_episode(steps: int, seed: int = 0, policy: NarutoPolicy | None = None,
     # reconstruct=True fuses the env's reference TSDF map to compare the agent's own with.
     env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=SCALE, panorama_shape=None,
                    max_episode_steps=steps + 1, reconstruct=True)
-    policy = policy or NarutoPolicy(mapper="tsdf", device="cpu", **settings)
+    policy = policy or NarutoPolicy(mapper_kind="tsdf", device="cpu", **settings)
     policy.bind(EnvContext.from_env(env))
     observation, info = env.reset(seed=seed, options=policy.reset_options())
     policy.reset(observation, info, seed=seed)
@@ -131,8 +131,10 @@ def test_settings_and_errors():
     assert policy.config.goal_attempts == 1 and policy.config.planner.time_limit_s == 1.0
     assert build_config().goal_search.target_subset == 300
     assert isinstance(make_policy("naruto"), NarutoPolicy)  # the harness's registry name
-    with pytest.raises(ValueError, match="mapper"):
-        NarutoPolicy(mapper="octomap")
+    with pytest.raises(ValueError, match="mapper_kind"):
+        NarutoPolicy(mapper_kind="octomap")
+    with pytest.raises(ValueError, match="renamed: pass mapper_kind='neural'"):
+        NarutoPolicy(mapper="neural")
     with pytest.raises(ValueError, match="unknown NARUTO settings"):
         NarutoPolicy(speed=3)
     with pytest.raises(ValueError, match="shortcut_margin_m"):
@@ -157,7 +159,7 @@ def test_public_seams_wrap_the_move_check_refresh_the_view_and_learn_refusals(ep
             return check(start, end)
         return wrapped
 
-    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
     policy.wrap_move_check(counting)
     run = run_episode(60, policy=policy)
     assert np.array_equal(run.actions, episode.actions[:60])
@@ -213,7 +215,7 @@ def test_neural_mapper_runs_the_same_loop():
     """The published mapper, cut down to run in seconds on a CPU."""
     env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=0.1, panorama_shape=None)
     policy = NarutoPolicy(
-        mapper="neural", device="cpu", initial_look_around=False,
+        mapper_kind="neural", device="cpu", initial_look_around=False,
         neural={"first_frame_iterations": 10, "iterations_per_step": 2, "rays_per_iteration": 256,
                 "current_frame_rays": 32, "active_top_rays": 64, "hash_log2_table_size": 12,
                 "active_score": "surface"},

@@ -133,7 +133,7 @@ def _first_move(reason: str, offset: np.ndarray | None = None):
     where it stands), and the agent after the env refused it."""
     env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1,
                    max_episode_steps=1000)
-    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
     policy.bind(EnvContext.from_env(env.unwrapped))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)
@@ -235,7 +235,7 @@ def test_randomised_episodes_never_stall(scene) -> None:
     seed = 7 if isinstance(scene, str) else scene[1]
     env = gym.make("NarutoRecon-v0", scene=mesh, image_scale=0.1, panorama_shape=(32, 64),
                    max_episode_steps=steps + 1)
-    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
     policy.bind(EnvContext.from_env(env.unwrapped, step_budget=steps))
     observation, info = env.reset(seed=seed)
     policy.reset(observation, info, seed=seed)
@@ -261,7 +261,7 @@ def test_on_an_open_scan_goals_stay_inside_the_scanned_space() -> None:
     steps = 150
     env = gym.make("NarutoRecon-v0", scene="replica_like_room:no_ceiling", image_scale=0.1,
                    coverage_samples=2000, max_episode_steps=steps + 1)
-    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
     policy.bind(EnvContext.from_env(env.unwrapped, step_budget=steps))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)
@@ -284,7 +284,7 @@ def test_goals_may_stay_as_high_as_the_agent_stands_over_a_low_scan() -> None:
     without this it had no goal at all and never moved."""
     env = gym.make("NarutoRecon-v0", scene="replica_like_room:no_ceiling", image_scale=0.1,
                    coverage_samples=2000, max_episode_steps=20)
-    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
     policy.bind(EnvContext.from_env(env.unwrapped, step_budget=20))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)
@@ -341,7 +341,7 @@ def test_sectors_seen_below_over_a_floor_with_a_hole() -> None:
 def _agent_after(scene: str, steps: int) -> NarutoPolicy:
     env = gym.make("NarutoRecon-v0", scene=scene, image_scale=0.1, coverage_samples=2000,
                    max_episode_steps=steps)
-    policy = NarutoPolicy(mapper="tsdf", device="cpu")
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
     policy.bind(EnvContext.from_env(env.unwrapped, step_budget=steps))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)

@@ -116,6 +116,7 @@ def test_recording_reads_back(tmp_path):
             "depth": np.full((camera.height, camera.width), 1.5, np.float32),
         }
         layers = [PointsLayer("frontier", np.random.default_rng(step).random((5, 3))),
+                  PointsLayer("goals", np.ones((2, 3)) * (step // 4)),
                   ScalarLayer("score", step)]
         if step < 3:
             layers.append(LinesLayer("planned path", (np.zeros((2, 3)) + step,)))
@@ -129,10 +130,16 @@ def test_recording_reads_back(tmp_path):
     contents = read_recording(tmp_path / "run" / "episode.rrd")
     assert contents.steps["world/camera"] == list(range(6))
     assert contents.steps["world/camera/rgb"] == list(range(6))
-    assert contents.steps["world/camera/depth"] == [0, 5]  # every 5th step
+    assert contents.steps["world/camera/depth"] == [0]  # every 10th step
     assert contents.steps["metrics/coverage (%)"] == list(range(6))
     assert contents.steps["world/map"] == [0, 2, 4, 5]
     assert contents.steps["world/policy/frontier"] == list(range(6))
+    # A layer is logged again only when it changed (the viewer shows the latest one).
+    assert contents.steps["world/policy/goals"] == [0, 4]
+    # The trajectory every 10 steps from the second position on, and whole at the end.
+    assert contents.steps["world/trajectory"] == [5]
+    # Batched by size: a chunk or so per entity, not one per step and entity.
+    assert contents.chunks <= 2 * len(contents.entities)
     assert contents.steps["policy/score"] == list(range(6))
     assert contents.steps["metrics/completion ratio (%)"] == [5]
     assert "metrics/observable completion ratio (%)" not in contents.steps
@@ -192,8 +199,9 @@ def test_benchmark_records_every_episode(tmp_path):
     from naruto_agent.benchmark.cli import main
 
     out = tmp_path / "bench"
-    failed = main(["--policies", "random", "--seeds", "0", "--steps", "4", "--workers", "0",
-                   "--record", "--out-dir", str(out), "--no-plots", "--eval-points", "0",
+    failed = main(["--policies", "random", "--seeds", "0", "--max-episode-steps", "4",
+                   "--workers", "0", "--record", "--output-dir", str(out), "--no-plots",
+                   "--eval-points", "0",
                    "--eval-samples", "5000", "--image-scale", "0.1", "--no-progress"])
     assert not failed
     files = sorted((out / "recordings").rglob("*.rrd"))

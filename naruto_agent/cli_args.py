@@ -3,6 +3,9 @@
 Each field becomes ``--field-name``; its type hint picks the parsing (``bool`` gives
 ``--flag / --no-flag``, ``list[X]`` takes one or more values, ``X | None`` parses as ``X``), and
 the string literal written under a field becomes its help text.
+
+One concept has one flag across the tools (:data:`RENAMED_FLAGS`): a flag of an earlier
+spelling is refused with an error naming the flag that replaced it, never taken silently.
 """
 
 from __future__ import annotations
@@ -11,9 +14,28 @@ import argparse
 import ast
 import dataclasses
 import inspect
+from collections.abc import Iterable
 from typing import Any, TypeVar, get_args, get_origin, get_type_hints
 
 ArgsT = TypeVar("ArgsT")
+
+#: Earlier spellings of the tools' flags -> the flags that replaced them. Where a spelling
+#: named two concepts (a folder or a file), the replacement is the one the tool has; a parser
+#: that has none of them, or still defines the old flag itself, is left alone.
+RENAMED_FLAGS: dict[str, tuple[str, ...]] = {
+    "--out": ("--output-dir", "--output-file"),
+    "--out-dir": ("--output-dir",),
+    "--output": ("--output-dir", "--output-file"),
+    "--results-dir": ("--output-dir",),
+    "--run-dir": ("--output-dir",),
+    "--steps": ("--max-episode-steps",),
+    "--episode-steps": ("--max-episode-steps",),
+    "--step-budget": ("--max-episode-steps",),
+    "--checkpoints": ("--eval-points",),
+    "--mapper": ("--mapper-kind",),
+    # The reference TSDF mapper's device, in a tool whose --device would not be the agent's.
+    "--device": ("--reference-device",),
+}
 
 
 def field_docs(cls: type) -> dict[str, str]:
@@ -47,8 +69,10 @@ def dataclass_parser(
     hints = get_type_hints(cls)
     docs = field_docs(cls)
     names = {item.name for item in dataclasses.fields(cls)}
+    flags_made: list[str] = []
     for item in dataclasses.fields(cls):
         flag = "--" + item.name.replace("_", "-")
+        flags_made.append(flag)
         kind = hints[item.name]
         default: Any = (
             item.default if item.default is not dataclasses.MISSING else item.default_factory()
@@ -64,14 +88,59 @@ def dataclass_parser(
             # A list flag also answers to its singular ("--policy" for "--policies"), as users
             # type it; otherwise argparse would read "--policy" as a prefix of another flag.
             singular = _singular(item.name)
-            flags = [flag] if singular in names or singular == item.name else [
-                flag, "--" + singular.replace("_", "-")]
-            parser.add_argument(*flags, dest=item.name, nargs="*", type=element,
-                                default=default, help=help_text)
+            flags = (
+                [flag]
+                if singular in names or singular == item.name
+                else [flag, "--" + singular.replace("_", "-")]
+            )
+            flags_made += flags
+            parser.add_argument(
+                *flags, dest=item.name, nargs="*", type=element, default=default, help=help_text
+            )
         else:
             element = next((a for a in get_args(kind) if a is not type(None)), kind)
             parser.add_argument(flag, type=element, default=default, help=help_text)
+    refuse_renamed_flags(parser, flags_made)
     return parser
+
+
+class _RenamedFlag(argparse.Action):
+    """A flag's earlier spelling: using it ends parsing with an error naming the new flag."""
+
+    def __init__(self, option_strings: list[str], dest: str, new_flag: str, **kwargs: Any):
+        self.new_flag = new_flag
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: Any,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        parser.error(f"{option_string} was renamed: use {self.new_flag}")
+
+
+def refuse_renamed_flags(parser: argparse.ArgumentParser, flags: Iterable[str]) -> None:
+    """Make ``parser``, whose flags are ``flags``, refuse their earlier spellings
+    (:data:`RENAMED_FLAGS`).
+
+    Without this, argparse would also read an old spelling that is a prefix of the new one
+    (``--out`` of ``--output-dir``) as that flag, silently.
+    """
+    defined = set(flags)
+    for old, replacements in RENAMED_FLAGS.items():
+        new = next((flag for flag in replacements if flag in defined), None)
+        if old in defined or new is None:
+            continue
+        parser.add_argument(
+            old,
+            action=_RenamedFlag,
+            new_flag=new,
+            nargs="*",
+            default=argparse.SUPPRESS,
+            help=argparse.SUPPRESS,
+        )
 
 
 def _singular(name: str) -> str:
