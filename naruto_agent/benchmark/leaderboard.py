@@ -46,13 +46,13 @@ grep -q "## small" leaderboard.md
 #: the example policy of docs/policies.md, shipped as examples/my_policies.py.
 ADD_YOUR_POLICY = (
     "naruto-benchmark --suite test --policies examples/my_policies.py:TurnerPolicy --seeds 0 \\\n"
-    "    --eval-points 4 --out-dir runs/my_suite"
+    "    --eval-points 4 --output-dir runs/my_suite"
 )
 ADD_YOUR_POLICY_TWIN = """<!-- docs-test: twin add-policy bash slow
 naruto-benchmark --suite test --size-class small --suite-limit 1 \\
-    --policies examples/my_policies.py:TurnerPolicy --seeds 0 --steps 3 --workers 0 \\
+    --policies examples/my_policies.py:TurnerPolicy --seeds 0 --max-episode-steps 3 --workers 0 \\
     --image-scale 0.1 --eval-points 1 --eval-samples 2000 --checkpoint-samples 2000 \\
-    --eval-samples-per-m2 0 --no-plots --no-progress --out-dir runs/my_suite
+    --eval-samples-per-m2 0 --no-plots --no-progress --output-dir runs/my_suite
 grep -q "| TurnerPolicy |" runs/my_suite/statistics.md
 -->"""
 CURVES_PNG = "leaderboard_curves.png"
@@ -90,7 +90,7 @@ def _add_your_policy() -> list[str]:
         "It writes `runs/my_suite/statistics.md`, whose tables have this page's columns and "
         "intervals, so your rows compare with the ones below (`--size-class small` runs one "
         "class, `--suite-limit 1` one house per class, `--variant open` the open scans). "
-        "Where you hold the folder of the runs below, run into it instead (`--out-dir`): the "
+        "Where you hold the folder of the runs below, run into it instead (`--output-dir`): the "
         "episodes already there are kept, only yours run, and the command at the end of this "
         "page then puts your policy on it.",
         "",
