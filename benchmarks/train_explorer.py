@@ -2,7 +2,7 @@
 
 Stable-Baselines3 PPO on the batched env, a new generated scene every episode, the agents
 mixed over the closed and open variants of the suite's small and apartment classes
-(:data:`naruto_gym.rl.explorer_sb3.TRAIN_MIX`). The agent sees the egocentric map (occupied,
+(:data:`naruto_gym.rl.explorer_env.TRAIN_MIX`). The agent sees the egocentric map (occupied,
 free, seen surface, frontier and trail, near and far, :mod:`naruto_gym.rl.egocentric_map`),
 the depth panorama and its pose relative to the start; every ``steps_per_goal`` env steps it
 picks a goal on the far map (or a repeated discrete move), which a planner over its own map
@@ -45,7 +45,8 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from naruto_agent.rl.explorer_policy import save_settings
 from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.rl.egocentric_map import VectorEgocentricMapObservation
-from naruto_gym.rl.explorer_sb3 import EXPLORER_ENV, ExplorerFeaturesExtractor, train_mix
+from naruto_gym.rl.explorer_env import EXPLORER_ENV, train_mix
+from naruto_gym.rl.explorer_sb3 import ExplorerFeaturesExtractor
 from naruto_gym.rl.goal_actions import VectorGoalActions
 from naruto_gym.rl.sb3 import Sb3VecEnv
 from naruto_gym.vector.vector_env import NarutoReconVectorEnv

@@ -131,6 +131,11 @@ class EgocentricMapBuilder:
         self.start_poses = np.tile(np.eye(4), (self.num_envs, 1, 1))
         self.poses = np.tile(np.eye(4), (self.num_envs, 1, 1))
         self.steps = np.zeros(self.num_envs, np.int64)
+        #: Free space straight above and below each agent at its last observation (the
+        #: nearest hit of the panorama's top and bottom rows; 0 where a ray there hit
+        #: nothing, as nothing is known of it).
+        self.clearance_up = np.zeros(self.num_envs)
+        self.clearance_down = np.zeros(self.num_envs)
         self._started = np.zeros(self.num_envs, bool)
         self._intrinsics = np.array([camera.fx, camera.fy, camera.cx, camera.cy], np.float64)
         panorama = EquirectangularCamera(*panorama_shape)
@@ -215,6 +220,9 @@ class EgocentricMapBuilder:
             )
             self.poses[i] = poses[row]
             self.steps[i] += 1
+        top, bottom = panorama[:, 0], panorama[:, -1]
+        self.clearance_up[envs] = np.where((top > 0).all(axis=1), top.min(axis=1), 0.0)
+        self.clearance_down[envs] = np.where((bottom > 0).all(axis=1), bottom.min(axis=1), 0.0)
 
     def observe(
         self, observations: dict[str, np.ndarray], envs: np.ndarray | None = None

@@ -22,35 +22,12 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 
 from naruto_gym.rl.egocentric_map import VectorEgocentricMapObservation
+from naruto_gym.rl.explorer_env import EXPLORER_ENV, train_mix
 from naruto_gym.rl.goal_actions import VectorGoalActions
 from naruto_gym.rl.sb3 import Sb3VecEnv
-from naruto_gym.scenes.suite import scene_name
 from naruto_gym.vector.vector_env import NarutoReconVectorEnv
 
-__all__ = ["TRAIN_MIX", "ExplorerFeaturesExtractor", "make_explorer_vec_env", "train_mix"]
-
-#: The suite's train split the explorer learns on: closed and open variants of the small
-#: and apartment classes (scene streams: a new generated scene every episode).
-TRAIN_MIX = tuple(
-    scene_name(size_class, variant=variant, split="train")
-    for size_class in ("small", "apartment")
-    for variant in ("closed", "open")
-)
-
-#: The explorer's env settings: discrete moves, a small pinhole frame (it only feeds the
-#: seen-surface channel and the reward) and a (32, 64) depth panorama for the map.
-EXPLORER_ENV = {
-    "action_mode": "discrete",
-    "image_scale": 0.05,
-    "panorama_shape": (32, 64),
-    "coverage_samples": 5000,
-}
-
-
-def train_mix(num_envs: int, scenes: tuple[str, ...] = TRAIN_MIX) -> list[str]:
-    """One scene stream per agent, ``scenes`` in turn (``num_envs`` a multiple of their
-    number mixes them evenly)."""
-    return [scenes[i % len(scenes)] for i in range(num_envs)]
+__all__ = ["ExplorerFeaturesExtractor", "make_explorer_vec_env"]
 
 
 def make_explorer_vec_env(

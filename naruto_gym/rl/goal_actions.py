@@ -11,8 +11,9 @@ An action is one of
   and follows it with turns and forward moves for ``K`` steps, planning again when new
   obstacles block the path; at the goal it turns in place, looking around.
 * with ``primitive_actions``, the 10 discrete moves after them (index ``goal_grid**2 + m``),
-  each repeated for the ``K`` steps; a horizontal move the map does not know to be safe is
-  replaced by a turn in place.
+  each repeated for the ``K`` steps; a horizontal move the map does not know to be safe, or a
+  vertical one without a panorama hit at least ``step + VERTICAL_MARGIN_M`` above (below) the
+  agent, is replaced by a turn in place.
 
 The planner never plans into obstacles or unseen space, so the env refuses a goal's moves only
 when its map is wrong (rarely: see the tests). A macro-step's reward is the sum of its ``K``
@@ -48,6 +49,11 @@ from naruto_gym.rl.goal_planner import (
 )
 
 __all__ = ["GoalActions", "GoalWalker", "VectorGoalActions"]
+
+MOVE_UP = DISCRETE_ACTIONS.index("move_up")
+MOVE_DOWN = DISCRETE_ACTIONS.index("move_down")
+#: Free space kept above or below the agent after a vertical move (radius and margin).
+VERTICAL_MARGIN_M = 0.2
 
 
 class GoalWalker:
@@ -161,6 +167,15 @@ class GoalWalker:
         pose = self.map.poses[i]
         primitive = self.primitives[i]
         if primitive >= 0:
+            if primitive in (MOVE_UP, MOVE_DOWN):
+                clearance = (
+                    self.map.clearance_up if primitive == MOVE_UP else (self.map.clearance_down)
+                )
+                return (
+                    int(primitive)
+                    if clearance[i] > self.step_m + VERTICAL_MARGIN_M
+                    else (TURN_LEFT)
+                )
             if move_is_safe(grid, origin, cell_m, pose, primitive, self.step_m, self.inflate):
                 return int(primitive)
             return TURN_LEFT

@@ -100,8 +100,15 @@ def test_following_a_path_turns_towards_it_then_moves_forward():
     ) == (TURN_LEFT, REACHED)
 
 
-@pytest.mark.parametrize("scene", ["procedural:room", "procedural:small:train:no_ceiling+holes"])
-def test_random_goals_are_refused_under_once_per_100_steps(scene):
+@pytest.mark.parametrize(
+    ("scene", "primitive_actions"),
+    [
+        ("procedural:room", False),
+        ("procedural:small:train:no_ceiling+holes", False),
+        ("procedural:room", True),  # random goals and guarded discrete moves
+    ],
+)
+def test_random_goals_are_refused_under_once_per_100_steps(scene, primitive_actions):
     envs = VectorGoalActions(
         VectorEgocentricMapObservation(
             NarutoReconVectorEnv(
@@ -109,7 +116,7 @@ def test_random_goals_are_refused_under_once_per_100_steps(scene):
             )
         ),
         steps_per_goal=10,
-        primitive_actions=False,
+        primitive_actions=primitive_actions,
     )
     try:
         envs.reset(seed=3)
