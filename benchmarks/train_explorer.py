@@ -14,10 +14,12 @@ a ``--flag``). Writes under ``output_dir``: ``learning_curve.csv`` and ``.png`` 
 rollout (mean final coverage of the episodes finished, per training scene kind, refusals per
 100 steps, env steps per second), ``profile.json`` (where a step's time goes: the env, the map
 and goal wrappers, the policy's forward passes, the PPO update), checkpoints every
-``checkpoint_every`` env steps and ``final_model.zip``. ``--resume`` continues from the latest
-checkpoint of ``output_dir`` (the curve continues too).
+``checkpoint_every`` env steps, ``final_model.zip``, and ``explorer.zip`` (the final model
+without the optimiser's state, at most 5 MB: what ``naruto_agent/rl/checkpoints/`` ships), each
+with its settings beside it (``.json``, read by the policy). ``--resume`` continues from the
+latest checkpoint of ``output_dir`` (the curve continues too).
 
-    nice -n 19 python benchmarks/train_explorer.py --total-timesteps 20000000 --max-hours 2
+    nice -n 10 python benchmarks/train_explorer.py --total-timesteps 20000000 --max-hours 2
     python benchmarks/train_explorer.py --total-timesteps 16000 --num-envs 4  # smoke run
 
 Evaluate with ``naruto-benchmark --policies explorer`` (see
@@ -42,7 +44,7 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
-from naruto_agent.rl.explorer_policy import save_settings
+from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
 from naruto_gym.cli_args import parse_dataclass_args
 from naruto_gym.rl.egocentric_map import VectorEgocentricMapObservation
 from naruto_gym.rl.explorer_env import EXPLORER_ENV, train_mix
@@ -78,7 +80,7 @@ class Args:
     """discount per goal (0.95 over K=20 steps is about 0.9975 per env step)"""
     ent_coef: float = 0.01
     """entropy bonus"""
-    features_dim: int = 256
+    features_dim: int = 128
     """size of the features extractor's output"""
     seed: int = 0
     """seed of the envs and of PPO"""
@@ -379,6 +381,7 @@ def main(args: Args) -> dict[str, Any]:
     model.learn(remaining, callback=CallbackList(callbacks), reset_num_timesteps=checkpoint is None)
     model.save(output_dir / "final_model.zip")
     save_settings(output_dir / "final_model.zip", explorer_settings(args))
+    export_checkpoint(output_dir / "final_model.zip", output_dir / "explorer.zip")
     plot(output_dir / "learning_curve.csv")
     profile = curve.profile()
     summary = {

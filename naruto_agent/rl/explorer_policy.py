@@ -54,6 +54,41 @@ def save_settings(model_path: Path, settings: dict[str, Any]) -> Path:
     return path
 
 
+#: Largest checkpoint the package ships.
+MAX_PACKAGED_BYTES = 5 * 2**20
+
+
+def export_checkpoint(model_path: str | Path, out_path: str | Path) -> Path:
+    """Write a model for acting only: its weights and settings without the optimiser's
+    state (a third of a PPO zip's size; training resumed from it restarts Adam's moments).
+    ``out_path`` gets the ``.json`` settings beside it, as the policy reads them.
+
+    Raises:
+        ValueError: the exported model is larger than :data:`MAX_PACKAGED_BYTES` (make the
+            features smaller, e.g. ``--features-dim``).
+    """
+    from stable_baselines3 import PPO
+
+    model_path, out_path = Path(model_path), Path(out_path)
+    model = PPO.load(model_path, device="cpu")
+    policy = model.policy
+    policy.optimizer = policy.optimizer_class(
+        policy.parameters(), lr=model.lr_schedule(1.0), **policy.optimizer_kwargs
+    )
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    model.save(out_path)
+    stored = settings_path(model_path)
+    settings = json.loads(stored.read_text()) if stored.exists() else {}
+    save_settings(out_path, settings)
+    size = out_path.stat().st_size
+    if size > MAX_PACKAGED_BYTES:
+        raise ValueError(
+            f"{out_path} is {size / 2**20:.1f} MB, more than the package's "
+            f"{MAX_PACKAGED_BYTES / 2**20:.0f} MB: train with smaller features (--features-dim)"
+        )
+    return out_path
+
+
 @register_policy("explorer")
 class MapGoalExplorer(Policy):
     """A PPO model over the egocentric map that picks goals walked by a planner.

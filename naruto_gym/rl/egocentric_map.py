@@ -76,7 +76,9 @@ class EgocentricMapBuilder:
         world_m: side of the world grid around the start (the agent's map ends there).
         band_m: height band around the camera in which hits are obstacles.
         horizon_deg: panorama rows within this elevation of the horizon carve free space.
-        depth_stride, panorama_stride: every n-th pixel (column) is read.
+        depth_stride: every n-th pixel of the depth frame is projected.
+        panorama_stride: every n-th panorama column is read at a step (in turn, so
+            successive steps read them all).
 
     Raises:
         ValueError: a size or distance that is not positive, or no panorama.

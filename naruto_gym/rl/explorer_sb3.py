@@ -81,7 +81,7 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
         features_dim: output size.
     """
 
-    def __init__(self, observation_space: spaces.Dict, features_dim: int = 256) -> None:
+    def __init__(self, observation_space: spaces.Dict, features_dim: int = 128) -> None:
         super().__init__(observation_space, features_dim)
         missing = {"map", "panorama", "pose"} - set(observation_space.spaces)
         if missing:
@@ -90,12 +90,13 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
                 f"(map, panorama, pose); {sorted(missing)} missing from {observation_space}"
             )
         channels, height, width = _channels_first(observation_space["map"])
+        # Small on purpose: a trained model ships inside the package (at most 5 MB).
         self.map = torch.nn.Sequential(
             torch.nn.Conv2d(channels, 32, 3, 1, 1),
             torch.nn.ReLU(),
-            torch.nn.Conv2d(32, 64, 4, 2, 1),
+            torch.nn.Conv2d(32, 32, 4, 2, 1),
             torch.nn.ReLU(),
-            torch.nn.Conv2d(64, 64, 4, 2, 1),
+            torch.nn.Conv2d(32, 32, 4, 2, 1),
             torch.nn.ReLU(),
             torch.nn.Flatten(),
         )
@@ -103,7 +104,7 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
         self.panorama = torch.nn.Sequential(
             torch.nn.Conv2d(pano_channels, 16, 4, 2, 1),
             torch.nn.ReLU(),
-            torch.nn.Conv2d(16, 32, 4, 2, 1),
+            torch.nn.Conv2d(16, 16, 4, 2, 1),
             torch.nn.ReLU(),
             torch.nn.Flatten(),
         )

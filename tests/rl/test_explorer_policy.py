@@ -18,6 +18,7 @@ from naruto_agent.policies.registry import policy_class  # noqa: E402
 from naruto_agent.rl.explorer_policy import (  # noqa: E402
     PACKAGED_MODEL,
     MapGoalExplorer,
+    export_checkpoint,
     save_settings,
 )
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation  # noqa: E402
@@ -139,3 +140,17 @@ def test_without_a_path_it_loads_the_packaged_checkpoint_or_says_how_to_train():
     else:
         with pytest.raises(FileNotFoundError, match="train_explorer.py"):
             MapGoalExplorer()
+
+
+def test_an_exported_checkpoint_has_no_optimiser_state_and_acts_the_same(model_path, tmp_path):
+    exported = export_checkpoint(model_path, tmp_path / "explorer.zip")
+    assert PPO.load(exported, device="cpu").policy.optimizer.state_dict()["state"] == {}
+    assert json.loads((tmp_path / "explorer.json").read_text())["goal_grid"] == 4
+    original, small = MapGoalExplorer(str(model_path)), MapGoalExplorer(str(exported))
+    observation = {
+        key: np.asarray(v)[None] for key, v in small.model.observation_space.sample().items()
+    }
+    np.testing.assert_array_equal(
+        original.model.predict(observation, deterministic=True)[0],
+        small.model.predict(observation, deterministic=True)[0],
+    )
