@@ -8,8 +8,8 @@ An action is one of
   by default, index ``row * goal_grid + column``, row 0 ahead). The planner
   (:mod:`naruto_gym.rl.goal_planner`) searches a path over the cells the agent's rays crossed
   at its height, away from every obstacle it has seen, to the reachable cell nearest the goal,
-  and follows it with turns and forward moves for ``K`` steps, planning again when new
-  obstacles block the path; at the goal it turns in place, looking around.
+  and follows it with turns and forward moves for ``K`` steps (levelling the camera first),
+  planning again when new obstacles block the path; at the goal it turns in place.
 * with ``primitive_actions``, the 10 discrete moves after them (index ``goal_grid**2 + m``),
   each repeated for the ``K`` steps; a horizontal move the map does not know to be safe, or a
   vertical one without a panorama hit at least ``step + VERTICAL_MARGIN_M`` above (below) the
@@ -51,6 +51,8 @@ from naruto_gym.rl.goal_planner import (
 __all__ = ["GoalActions", "GoalWalker", "VectorGoalActions"]
 
 MOVE_UP = DISCRETE_ACTIONS.index("move_up")
+LOOK_UP = DISCRETE_ACTIONS.index("look_up")
+LOOK_DOWN = DISCRETE_ACTIONS.index("look_down")
 MOVE_DOWN = DISCRETE_ACTIONS.index("move_down")
 #: Free space kept above or below the agent after a vertical move (radius and margin).
 VERTICAL_MARGIN_M = 0.2
@@ -179,6 +181,10 @@ class GoalWalker:
             if move_is_safe(grid, origin, cell_m, pose, primitive, self.step_m, self.inflate):
                 return int(primitive)
             return TURN_LEFT
+        pitch = float(np.arcsin(np.clip(pose[2, 2], -1.0, 1.0)))
+        if abs(pitch) > 0.5 * self.turn_rad + 1e-6:
+            # Walk with the camera level: a pitched one sees floor or ceiling only.
+            return LOOK_DOWN if pitch > 0 else LOOK_UP
         move, status = follow_path(
             grid,
             origin,

@@ -178,3 +178,18 @@ def test_goal_actions_refuse_envs_they_cannot_walk():
             ),
             steps_per_goal=10,
         )
+
+
+def test_a_goal_is_walked_with_the_camera_level():
+    env = GoalActions(
+        EgocentricMapObservation(gym.make("NarutoRecon-v0", scene="procedural:room:5", **ENV)),
+        steps_per_goal=3,
+    )
+    try:
+        env.reset(seed=0)
+        env.step(64 + 8)  # look_up, three times: the camera pitched up 60 degrees
+        assert env.unwrapped.pose[2, 2] > 0.8
+        env.step(3 * 8 + 4)  # a goal: the walker levels the camera before it walks
+        assert abs(env.unwrapped.pose[2, 2]) < 0.2
+    finally:
+        env.close()
