@@ -35,7 +35,10 @@ PolicyT = TypeVar("PolicyT", bound=type[Policy])
 POLICIES: dict[str, type[Policy]] = {}
 """Registered policy classes by name."""
 
-LAZY_POLICIES: dict[str, str] = {"naruto": "naruto_agent.naruto:NarutoPolicy"}
+LAZY_POLICIES: dict[str, str] = {
+    "naruto": "naruto_agent.naruto:NarutoPolicy",
+    "explorer": "naruto_agent.rl.explorer_policy:MapGoalExplorer",
+}
 """Registered names resolved by import path on first lookup (their modules are costly to
 import)."""
 

@@ -1,0 +1,400 @@
+"""PPO over the egocentric map with goal actions. Results: docs/benchmarks/explorer.md
+
+Stable-Baselines3 PPO on the batched env, a new generated scene every episode, the agents
+mixed over the closed and open variants of the suite's small and apartment classes
+(:data:`naruto_gym.rl.explorer_env.TRAIN_MIX`). The agent sees the egocentric map (occupied,
+free, seen surface, frontier and trail, near and far, :mod:`naruto_gym.rl.egocentric_map`),
+the depth panorama and its pose relative to the start; every ``steps_per_goal`` env steps it
+picks a goal on the far map (or a repeated discrete move), which a planner over its own map
+walks (:mod:`naruto_gym.rl.goal_actions`). The reward is the env's: coverage gain in
+percentage points minus the collision penalty, summed over the macro-step.
+
+One readable file in the manner of CleanRL: the arguments are the dataclass below (each field
+a ``--flag``). Writes under ``output_dir``: ``learning_curve.csv`` and ``.png`` after every
+rollout (mean final coverage of the episodes finished, per training scene kind, refusals per
+100 steps, env steps per second), ``profile.json`` (where a step's time goes: the env, the map
+and goal wrappers, the policy's forward passes, the PPO update), checkpoints every
+``checkpoint_every`` env steps, ``final_model.zip``, and ``explorer.zip`` (the final model
+without the optimiser's state, at most 5 MB: what ``naruto_agent/rl/checkpoints/`` ships), each
+with its settings beside it (``.json``, read by the policy). ``--resume`` continues from the
+latest checkpoint of ``output_dir`` (the curve continues too).
+
+    nice -n 10 python benchmarks/train_explorer.py --total-timesteps 20000000 --max-hours 2
+    python benchmarks/train_explorer.py --total-timesteps 16000 --num-envs 4  # smoke run
+
+Evaluate with ``naruto-benchmark --policies explorer`` (see
+:mod:`naruto_agent.rl.explorer_policy`).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium.vector import AutoresetMode
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+
+from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
+from naruto_agent.cli_args import parse_dataclass_args
+from naruto_gym.rl.egocentric_map import VectorEgocentricMapObservation
+from naruto_gym.rl.explorer_env import EXPLORER_ENV, train_mix
+from naruto_gym.rl.explorer_sb3 import ExplorerFeaturesExtractor
+from naruto_gym.rl.goal_actions import VectorGoalActions
+from naruto_gym.rl.sb3 import Sb3VecEnv
+from naruto_gym.vector.vector_env import NarutoReconVectorEnv
+
+
+@dataclass
+class Args:
+    total_timesteps: int = 2_000_000
+    """env steps to train for (all agents together; one PPO step is steps_per_goal of them)"""
+    num_envs: int = 16
+    """agents stepped together by the batched env (a multiple of 4 mixes the train scenes)"""
+    max_episode_steps: int = 400
+    """episode length in env steps (the small class's budget; a multiple of steps_per_goal)"""
+    steps_per_goal: int = 20
+    """env steps walked per goal (K)"""
+    goal_grid: int = 8
+    """goals per side of the far map (goal_grid**2 goals)"""
+    primitive_actions: bool = True
+    """the 10 discrete moves are actions too (repeated for the K steps, guarded by the map)"""
+    n_steps: int = 32
+    """PPO steps (goals) per agent per rollout"""
+    batch_size: int = 128
+    """minibatch size"""
+    n_epochs: int = 4
+    """optimisation epochs per rollout"""
+    learning_rate: float = 3e-4
+    """Adam learning rate"""
+    gamma: float = 0.95
+    """discount per goal (0.95 over K=20 steps is about 0.9975 per env step)"""
+    ent_coef: float = 0.01
+    """entropy bonus"""
+    features_dim: int = 128
+    """size of the features extractor's output"""
+    seed: int = 0
+    """seed of the envs and of PPO"""
+    torch_threads: int = 1
+    """torch threads (the env uses the other core)"""
+    env_threads: int = 1
+    """threads of the env's compiled loops"""
+    checkpoint_every: int = 200_000
+    """env steps between checkpoints"""
+    max_hours: float | None = None
+    """stop after this much wall-clock time (checked every PPO step), whatever the steps"""
+    resume: bool = False
+    """continue from the latest checkpoint in output_dir"""
+    output_dir: str = "runs/explorer"
+    """output folder"""
+
+
+class Timed(gym.vector.VectorWrapper):
+    """Adds the seconds spent in the wrapped env's ``step`` and ``reset`` to ``seconds``."""
+
+    def __init__(self, env: gym.vector.VectorEnv) -> None:
+        super().__init__(env)
+        self.seconds = 0.0
+
+    def reset(self, **kwargs: Any):
+        started = time.perf_counter()
+        try:
+            return self.env.reset(**kwargs)
+        finally:
+            self.seconds += time.perf_counter() - started
+
+    def step(self, actions: Any):
+        started = time.perf_counter()
+        try:
+            return self.env.step(actions)
+        finally:
+            self.seconds += time.perf_counter() - started
+
+
+def make_env(args: Args) -> tuple[Sb3VecEnv, Timed, Timed]:
+    """The training env, with timers around the bare env and around the whole chain."""
+    settings = {**EXPLORER_ENV, "threads": args.env_threads}
+    env = NarutoReconVectorEnv(
+        args.num_envs,
+        scene=train_mix(args.num_envs),
+        max_episode_steps=args.max_episode_steps,
+        autoreset_mode=AutoresetMode.SAME_STEP,
+        **settings,
+    )
+    bare = Timed(env)
+    chain = Timed(
+        VectorGoalActions(
+            VectorEgocentricMapObservation(bare),
+            args.steps_per_goal,
+            goal_grid=args.goal_grid,
+            primitive_actions=args.primitive_actions,
+        )
+    )
+    return Sb3VecEnv(chain), bare, chain
+
+
+class LearningCurve(BaseCallback):
+    """Per rollout: mean final coverage of the finished episodes (all, and per train scene),
+    refusals per 100 env steps, env steps per second; appended to a CSV, plotted at the end;
+    and the time split of ``profile.json``."""
+
+    def __init__(self, args: Args, bare: Timed, chain: Timed, first_row: int) -> None:
+        super().__init__()
+        self.args = args
+        self.path = Path(args.output_dir) / "learning_curve.csv"
+        self.bare, self.chain = bare, chain
+        self.kinds = train_mix(args.num_envs)
+        self.finished: list[tuple[str, float]] = []
+        self.refusals = 0
+        self.rollouts = first_row
+        self.forward_seconds = 0.0  # in a rollout, outside the env chain
+        self.chain_mark = 0.0
+        self.update_seconds = 0.0
+        self.mark = time.perf_counter()
+        self.started = time.perf_counter()
+        self.steps_at_start: int | None = None
+
+    def _on_training_start(self) -> None:
+        self.steps_at_start = self.num_timesteps
+
+    def _on_rollout_start(self) -> None:
+        now = time.perf_counter()
+        if self.rollouts:
+            self.update_seconds += now - self.mark
+        self.mark = now
+        self.chain_mark = self.chain.seconds
+
+    def _on_step(self) -> bool:
+        for i, (info, done) in enumerate(
+            zip(self.locals["infos"], self.locals["dones"], strict=True)
+        ):
+            self.refusals += int(info.get("refusals", 0))
+            if done and "final_info" in info:
+                self.finished.append((self.kinds[i], float(info["final_info"]["coverage"])))
+        return True
+
+    def env_steps(self) -> int:
+        return self.num_timesteps * self.args.steps_per_goal
+
+    def _on_rollout_end(self) -> None:
+        now = time.perf_counter()
+        self.forward_seconds += now - self.mark - (self.chain.seconds - self.chain_mark)
+        self.mark = now
+        self.rollouts += 1
+        hours = (now - self.started) / 3600
+        steps = (self.num_timesteps - (self.steps_at_start or 0)) * self.args.steps_per_goal
+        row: dict[str, Any] = {
+            "env_steps": self.env_steps(),
+            "hours": round(hours, 4),
+            "env_steps_per_s": round(steps / max(now - self.started, 1e-9), 1),
+            "episodes": len(self.finished),
+            "final_coverage": (
+                float(np.mean([c for _, c in self.finished])) if self.finished else ""
+            ),
+            "refusals_per_100_steps": round(
+                100
+                * self.refusals
+                / max(self.args.num_envs * self.args.n_steps * self.args.steps_per_goal, 1),
+                3,
+            ),
+        }
+        for kind in sorted(set(self.kinds)):
+            values = [c for k, c in self.finished if k == kind]
+            row[kind] = float(np.mean(values)) if values else ""
+        self.finished, self.refusals = [], 0
+        new = not self.path.exists()
+        with self.path.open("a", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=list(row))
+            if new:
+                writer.writeheader()
+            writer.writerow(row)
+        if row["final_coverage"] != "":
+            self.logger.record("rollout/final_coverage", row["final_coverage"])
+
+    def profile(self) -> dict[str, Any]:
+        """Where the time went: seconds and shares of the env, the wrappers, the policy's
+        forward passes and the PPO update, and env steps per second end to end."""
+        total = time.perf_counter() - self.started
+        wrappers = self.chain.seconds - self.bare.seconds
+        forward = self.forward_seconds
+        parts = {
+            "env": self.bare.seconds,
+            "map_and_goal_wrappers": wrappers,
+            "policy_forward_and_sb3": forward,
+            "ppo_update": self.update_seconds,
+        }
+        steps = (self.num_timesteps - (self.steps_at_start or 0)) * self.args.steps_per_goal
+        return {
+            "seconds": {k: round(v, 2) for k, v in parts.items()},
+            "shares": {k: round(v / max(total, 1e-9), 3) for k, v in parts.items()},
+            "env_steps": steps,
+            "wall_seconds": round(total, 1),
+            "env_steps_per_s": round(steps / max(total, 1e-9), 1),
+            "wrapper_cost_per_env_step_over_env": round(wrappers / max(self.bare.seconds, 1e-9), 3),
+            "load_end": os.getloadavg(),
+        }
+
+
+def explorer_settings(args: Args) -> dict[str, Any]:
+    """What the explorer policy needs to act as in training (saved beside every model)."""
+    return {
+        "steps_per_goal": args.steps_per_goal,
+        "goal_grid": args.goal_grid,
+        "primitive_actions": args.primitive_actions,
+        "map_options": {},
+        "panorama_shape": list(EXPLORER_ENV["panorama_shape"]),
+    }
+
+
+class Checkpoints(BaseCallback):
+    """Saves ``checkpoints/explorer_<env steps>_steps.zip`` (and its settings) every ``every``
+    env steps."""
+
+    def __init__(self, folder: Path, every: int, args: Args) -> None:
+        super().__init__()
+        self.folder, self.every, self.steps_per_goal = folder, every, args.steps_per_goal
+        self.settings = explorer_settings(args)
+        self.next = 0
+
+    def _on_training_start(self) -> None:
+        self.next = (self.num_timesteps * self.steps_per_goal // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        steps = self.num_timesteps * self.steps_per_goal
+        if steps >= self.next:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            path = self.folder / f"explorer_{steps}_steps.zip"
+            self.model.save(path)
+            save_settings(path, self.settings)
+            self.next += self.every
+        return True
+
+
+class WallClockBudget(BaseCallback):
+    """Stops training once ``hours`` of wall-clock time have passed."""
+
+    def __init__(self, hours: float) -> None:
+        super().__init__()
+        self.deadline = time.perf_counter() + hours * 3600
+
+    def _on_step(self) -> bool:
+        return time.perf_counter() < self.deadline
+
+
+def latest_checkpoint(output_dir: Path) -> Path | None:
+    """The checkpoint of ``output_dir`` with the most env steps, None when there is none."""
+    found = [
+        (int(m.group(1)), path)
+        for path in (output_dir / "checkpoints").glob("*.zip")
+        if (m := re.search(r"_(\d+)_steps\.zip$", path.name))
+    ]
+    return max(found)[1] if found else None
+
+
+def plot(path: Path) -> None:
+    """learning_curve.png from learning_curve.csv."""
+    with path.open() as handle:
+        rows = [row for row in csv.DictReader(handle) if row["final_coverage"]]
+    if not rows:
+        return
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(6.5, 3.8))
+    steps = [int(row["env_steps"]) for row in rows]
+    axis.plot(steps, [100 * float(row["final_coverage"]) for row in rows], label="all", lw=2)
+    for kind in [key for key in rows[0] if key.startswith("procedural:")]:
+        points = [
+            (s, 100 * float(row[kind])) for s, row in zip(steps, rows, strict=True) if row[kind]
+        ]
+        if points:
+            axis.plot(*zip(*points, strict=True), lw=0.8, label=kind.split(":", 1)[1])
+    axis.set_xlabel("env steps")
+    axis.set_ylabel("final coverage of training episodes (%)")
+    axis.legend(fontsize=7)
+    axis.set_title("explorer (map + goal actions) on the suite's train split")
+    figure.tight_layout()
+    figure.savefig(path.with_suffix(".png"), dpi=120)
+
+
+def main(args: Args) -> dict[str, Any]:
+    output_dir = Path(args.output_dir)
+    output_dir.mkdir(parents=True, exist_ok=True)
+    if args.max_episode_steps % args.steps_per_goal:
+        raise SystemExit(
+            f"--max-episode-steps ({args.max_episode_steps}) must be a multiple "
+            f"of --steps-per-goal ({args.steps_per_goal})"
+        )
+    torch.set_num_threads(args.torch_threads)
+    venv, bare, chain = make_env(args)
+    venv.seed(args.seed)
+    checkpoint = latest_checkpoint(output_dir) if args.resume else None
+    if args.resume and checkpoint is None:
+        raise SystemExit(
+            f"--resume: no checkpoint in {output_dir / 'checkpoints'}; train without --resume first"
+        )
+    if checkpoint is not None:
+        model = PPO.load(checkpoint, env=venv, device="cpu")
+        print(f"resuming from {checkpoint} ({model.num_timesteps * args.steps_per_goal} steps)")
+    else:
+        model = PPO(
+            "MultiInputPolicy",
+            venv,
+            n_steps=args.n_steps,
+            batch_size=args.batch_size,
+            n_epochs=args.n_epochs,
+            learning_rate=args.learning_rate,
+            gamma=args.gamma,
+            ent_coef=args.ent_coef,
+            seed=args.seed,
+            device="cpu",
+            policy_kwargs={
+                "features_extractor_class": ExplorerFeaturesExtractor,
+                "features_extractor_kwargs": {"features_dim": args.features_dim},
+            },
+        )
+    rows = 0
+    if (output_dir / "learning_curve.csv").exists():
+        rows = sum(1 for _ in (output_dir / "learning_curve.csv").open()) - 1
+        if checkpoint is None:
+            (output_dir / "learning_curve.csv").unlink()  # a fresh run: a fresh curve
+            rows = 0
+    curve = LearningCurve(args, bare, chain, rows)
+    callbacks: list[BaseCallback] = [
+        curve,
+        Checkpoints(output_dir / "checkpoints", args.checkpoint_every, args),
+    ]
+    if args.max_hours is not None:
+        callbacks.append(WallClockBudget(args.max_hours))
+    remaining = max(args.total_timesteps // args.steps_per_goal - model.num_timesteps, 0)
+    model.learn(remaining, callback=CallbackList(callbacks), reset_num_timesteps=checkpoint is None)
+    model.save(output_dir / "final_model.zip")
+    save_settings(output_dir / "final_model.zip", explorer_settings(args))
+    export_checkpoint(output_dir / "final_model.zip", output_dir / "explorer.zip")
+    plot(output_dir / "learning_curve.csv")
+    profile = curve.profile()
+    summary = {
+        "args": asdict(args),
+        "env_steps": model.num_timesteps * args.steps_per_goal,
+        "resumed_from": str(checkpoint) if checkpoint else None,
+        "profile": profile,
+    }
+    (output_dir / "profile.json").write_text(json.dumps(summary, indent=1))
+    print(json.dumps(profile, indent=1))
+    venv.close()
+    return summary
+
+
+if __name__ == "__main__":
+    main(parse_dataclass_args(Args))

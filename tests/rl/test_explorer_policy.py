@@ -1,0 +1,156 @@
+"""The registered explorer policy: it acts as the training wrappers do, and loads a model with
+the settings saved beside it."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from stable_baselines3 import PPO  # noqa: E402
+
+from naruto_agent.policies.base import EnvContext  # noqa: E402
+from naruto_agent.policies.registry import policy_class  # noqa: E402
+from naruto_agent.rl.explorer_policy import (  # noqa: E402
+    PACKAGED_MODEL,
+    MapGoalExplorer,
+    export_checkpoint,
+    save_settings,
+)
+from naruto_gym.rl.egocentric_map import EgocentricMapObservation  # noqa: E402
+from naruto_gym.rl.explorer_sb3 import (  # noqa: E402
+    ExplorerFeaturesExtractor,
+    make_explorer_vec_env,
+)
+from naruto_gym.rl.goal_actions import GoalActions  # noqa: E402
+from naruto_gym.sensors.pinhole import PinholeCamera  # noqa: E402
+
+CAMERA = PinholeCamera(16, 16, 8, 8, 7.5, 7.5)
+ENV = {
+    "action_mode": "discrete",
+    "camera": CAMERA,
+    "panorama_shape": (32, 64),
+    "coverage_samples": 1000,
+    "scene": "procedural:room:7",
+}
+SETTINGS = {
+    "steps_per_goal": 5,
+    "goal_grid": 4,
+    "primitive_actions": True,
+    "panorama_shape": [32, 64],
+}
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory):
+    """An untrained PPO model of the explorer's spaces (goal_grid 4, K = 5), saved."""
+    venv = make_explorer_vec_env(
+        1,
+        steps_per_goal=5,
+        goal_grid=4,
+        max_episode_steps=20,
+        scene="procedural:room",
+        camera=CAMERA,
+        image_scale=1.0,
+        coverage_samples=1000,
+    )
+    model = PPO(
+        "MultiInputPolicy",
+        venv,
+        n_steps=8,
+        batch_size=8,
+        device="cpu",
+        seed=0,
+        policy_kwargs={
+            "features_extractor_class": ExplorerFeaturesExtractor,
+            "features_extractor_kwargs": {"features_dim": 32},
+        },
+    )
+    path = tmp_path_factory.mktemp("explorer") / "model.zip"
+    model.save(path)
+    save_settings(path, SETTINGS)
+    venv.close()
+    return path
+
+
+def test_the_name_explorer_is_registered():
+    assert policy_class("explorer") is MapGoalExplorer
+
+
+def test_the_policy_walks_as_the_training_wrappers_do(model_path):
+    model = PPO.load(model_path, device="cpu")
+    wrapped = GoalActions(
+        EgocentricMapObservation(gym.make("NarutoRecon-v0", **ENV)), steps_per_goal=5, goal_grid=4
+    )
+    observation, _ = wrapped.reset(seed=2)
+    for _ in range(6):
+        action, _ = model.predict(observation, deterministic=True)
+        observation, *_ = wrapped.step(int(action))
+    wrapped_pose = wrapped.unwrapped.pose.copy()
+    wrapped.close()
+
+    env = gym.make("NarutoRecon-v0", **ENV)
+    policy = MapGoalExplorer(str(model_path), deterministic=True)
+    policy.bind(EnvContext.from_env(env))
+    observation, info = env.reset(seed=2)
+    policy.reset(observation, info)
+    refusals = 0
+    for _ in range(30):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+        refusals += int(info["collided"])
+    np.testing.assert_allclose(env.unwrapped.pose, wrapped_pose, atol=1e-6)
+    assert refusals <= 1
+    env.close()
+
+
+def test_a_full_size_panorama_is_subsampled_to_the_trained_one(model_path):
+    env = gym.make("NarutoRecon-v0", **{**ENV, "panorama_shape": (64, 128)})
+    policy = MapGoalExplorer(str(model_path))
+    policy.bind(EnvContext.from_env(env))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    assert env.action_space.contains(policy.act(observation, info))
+    odd = gym.make("NarutoRecon-v0", **{**ENV, "panorama_shape": (48, 64)})
+    policy.bind(EnvContext.from_env(odd))
+    observation, info = odd.reset(seed=0)
+    with pytest.raises(ValueError, match="panorama_shape"):
+        policy.reset(observation, info)
+    env.close()
+    odd.close()
+
+
+def test_a_model_and_settings_that_disagree_are_refused(model_path, tmp_path):
+    with pytest.raises(FileNotFoundError, match="train_explorer.py"):
+        MapGoalExplorer(str(tmp_path / "missing.zip"))
+    other = tmp_path / "model.zip"
+    other.write_bytes(model_path.read_bytes())
+    (tmp_path / "model.json").write_text(json.dumps({**SETTINGS, "goal_grid": 8}))
+    with pytest.raises(ValueError, match="74"):
+        MapGoalExplorer(str(other))
+
+
+def test_without_a_path_it_loads_the_packaged_checkpoint_or_says_how_to_train():
+    if PACKAGED_MODEL.exists():
+        assert MapGoalExplorer().steps_per_goal > 0
+        assert PACKAGED_MODEL.stat().st_size <= 5 * 2**20
+    else:
+        with pytest.raises(FileNotFoundError, match="train_explorer.py"):
+            MapGoalExplorer()
+
+
+def test_an_exported_checkpoint_has_no_optimiser_state_and_acts_the_same(model_path, tmp_path):
+    exported = export_checkpoint(model_path, tmp_path / "explorer.zip")
+    assert PPO.load(exported, device="cpu").policy.optimizer.state_dict()["state"] == {}
+    assert json.loads((tmp_path / "explorer.json").read_text())["goal_grid"] == 4
+    original, small = MapGoalExplorer(str(model_path)), MapGoalExplorer(str(exported))
+    observation = {
+        key: np.asarray(v)[None] for key, v in small.model.observation_space.sample().items()
+    }
+    np.testing.assert_array_equal(
+        original.model.predict(observation, deterministic=True)[0],
+        small.model.predict(observation, deterministic=True)[0],
+    )

@@ -1,0 +1,195 @@
+"""Goal actions: the planner over the agent's own map, and the wrappers that walk its paths
+(refused moves under 1 per 100 steps on generated rooms with random goals)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from naruto_gym.rl.egocentric_map import EgocentricMapObservation, VectorEgocentricMapObservation
+from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED
+from naruto_gym.rl.goal_actions import GoalActions, VectorGoalActions
+from naruto_gym.rl.goal_planner import (
+    MOVE_FORWARD,
+    REACHED,
+    TURN_LEFT,
+    WALKING,
+    follow_path,
+    plan_path,
+    traversable,
+)
+from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.vector import NarutoReconVectorEnv
+
+CAMERA = PinholeCamera(16, 16, 8, 8, 7.5, 7.5)
+ENV = {
+    "action_mode": "discrete",
+    "camera": CAMERA,
+    "panorama_shape": (32, 64),
+    "coverage_samples": 1000,
+}
+ORIGIN = np.zeros(2)
+
+
+def _room_with_wall() -> np.ndarray:
+    """A 40 x 40 grid of 0.1 m cells: free inside a border, a wall across x = 2 m with a gap
+    at y in [3.0, 3.5) m; the cells beyond y = 3.8 m unknown."""
+    grid = np.zeros((4, 40, 40), np.uint8)
+    grid[FREE, 1:39, 1:38] = 255
+    grid[OCCUPIED, 20, :] = 255
+    grid[OCCUPIED, 20, 30:35] = 0
+    grid[FREE, 20, :] = 0
+    grid[FREE, 20, 30:35] = 255
+    return grid
+
+
+def test_the_path_goes_through_the_gap_and_never_near_an_obstacle():
+    grid = _room_with_wall()
+    path = np.zeros((256, 2), np.int64)
+    length = plan_path(
+        grid, ORIGIN, 0.1, np.array([0.55, 0.55]), np.array([3.55, 0.55]), 40, 1, path
+    )
+    cells = path[:length]
+    assert tuple(cells[0]) == (5, 5) and tuple(cells[-1]) == (35, 5)
+    assert all(traversable(grid, i, j, 1) for i, j in cells[1:])
+    crossing = cells[cells[:, 0] == 20]
+    assert len(crossing) and np.all((crossing[:, 1] >= 31) & (crossing[:, 1] <= 33))
+    assert np.all(np.abs(np.diff(cells, axis=0)).max(axis=1) == 1)  # one cell per move
+
+
+def test_an_unreachable_goal_leads_to_the_nearest_reachable_cell():
+    grid = _room_with_wall()
+    grid[OCCUPIED, 20, 30:35] = 255  # close the gap
+    path = np.zeros((256, 2), np.int64)
+    length = plan_path(
+        grid, ORIGIN, 0.1, np.array([0.55, 0.55]), np.array([3.55, 0.55]), 40, 1, path
+    )
+    assert path[length - 1, 0] == 18  # beside the (inflated) wall, on the start's side
+    unknown = plan_path(
+        grid, ORIGIN, 0.1, np.array([0.55, 0.55]), np.array([0.55, 3.95]), 40, 1, path
+    )
+    assert path[unknown - 1, 1] == 37  # the last free cell: never into the unknown ones
+
+
+def test_following_a_path_turns_towards_it_then_moves_forward():
+    grid = _room_with_wall()
+    path = np.zeros((256, 2), np.int64)
+    length = plan_path(
+        grid, ORIGIN, 0.1, np.array([0.55, 0.55]), np.array([1.55, 0.55]), 40, 1, path
+    )
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # optical axis +x
+    pose[:2, 3] = [0.55, 0.55]
+    cursor = np.zeros(1, np.int64)
+    assert follow_path(grid, ORIGIN, 0.1, pose, path, length, cursor, 0.1, np.deg2rad(20), 1) == (
+        MOVE_FORWARD,
+        WALKING,
+    )
+    facing_away = pose.copy()
+    facing_away[:3, :3] = [[0, 0, -1], [1, 0, 0], [0, -1, 0]]  # optical axis -x
+    move, status = follow_path(
+        grid, ORIGIN, 0.1, facing_away, path, length, cursor, 0.1, np.deg2rad(20), 1
+    )
+    assert status == WALKING and move != MOVE_FORWARD
+    at_goal = pose.copy()
+    at_goal[:2, 3] = [1.55, 0.55]
+    walked = np.array([length - 3])  # the path index reached while walking there
+    assert follow_path(
+        grid, ORIGIN, 0.1, at_goal, path, length, walked, 0.1, np.deg2rad(20), 1
+    ) == (TURN_LEFT, REACHED)
+
+
+@pytest.mark.parametrize(
+    ("scene", "primitive_actions"),
+    [
+        ("procedural:room", False),
+        ("procedural:small:train:no_ceiling+holes", False),
+        ("procedural:room", True),  # random goals and guarded discrete moves
+    ],
+)
+def test_random_goals_are_refused_under_once_per_100_steps(scene, primitive_actions):
+    envs = VectorGoalActions(
+        VectorEgocentricMapObservation(
+            NarutoReconVectorEnv(
+                4, scene=scene, max_episode_steps=100, autoreset_mode="SameStep", **ENV
+            )
+        ),
+        steps_per_goal=10,
+        primitive_actions=primitive_actions,
+    )
+    try:
+        envs.reset(seed=3)
+        rng = np.random.default_rng(0)
+        refusals = 0
+        for _ in range(15):  # 150 steps per agent, a new episode after 100
+            _, _, _, _, infos = envs.step(rng.integers(0, envs.single_action_space.n, 4))
+            refusals += int(infos["refusals"].sum())
+        path_m = infos["path_length_m"]
+        assert refusals / (4 * 150) < 0.01
+        assert path_m.mean() > 1.0  # the agents walked (the last 50 steps of the episode)
+    finally:
+        envs.close()
+
+
+def test_single_env_goal_actions_take_k_steps_and_sum_the_rewards():
+    env = GoalActions(
+        EgocentricMapObservation(
+            gym.make("NarutoRecon-v0", scene="procedural:room:5", max_episode_steps=25, **ENV)
+        ),
+        steps_per_goal=10,
+    )
+    try:
+        env.reset(seed=0)
+        assert env.action_space.n == 64 + 10
+        _, reward, _, truncated, info = env.step(3 * 8 + 4)
+        assert info["primitive_steps"] == 10 and info["refusals"] == 0 and not truncated
+        assert reward > 0  # walking and looking finds new surface
+        env.step(64 + 6)  # turn_left, repeated
+        _, _, _, truncated, info = env.step(0)
+        assert truncated and info["primitive_steps"] == 5  # the episode ends first
+        with pytest.raises(ValueError, match="goal actions are 0..73"):
+            env.step(74)
+    finally:
+        env.close()
+
+
+def test_goal_actions_refuse_envs_they_cannot_walk():
+    with pytest.raises(ValueError, match="action_mode='discrete'"):
+        GoalActions(
+            EgocentricMapObservation(
+                gym.make(
+                    "NarutoRecon-v0", scene="procedural:room:5", **{**ENV, "action_mode": "delta"}
+                )
+            )
+        )
+    with pytest.raises(ValueError, match="EgocentricMapObservation"):
+        GoalActions(gym.make("NarutoRecon-v0", scene="procedural:room:5", **ENV))
+    with pytest.raises(ValueError, match="multiple of steps_per_goal"):
+        VectorGoalActions(
+            VectorEgocentricMapObservation(
+                NarutoReconVectorEnv(
+                    1,
+                    scene="procedural:room:5",
+                    max_episode_steps=25,
+                    autoreset_mode="SameStep",
+                    **ENV,
+                )
+            ),
+            steps_per_goal=10,
+        )
+
+
+def test_a_goal_is_walked_with_the_camera_level():
+    env = GoalActions(
+        EgocentricMapObservation(gym.make("NarutoRecon-v0", scene="procedural:room:5", **ENV)),
+        steps_per_goal=3,
+    )
+    try:
+        env.reset(seed=0)
+        env.step(64 + 8)  # look_up, three times: the camera pitched up 60 degrees
+        assert env.unwrapped.pose[2, 2] > 0.8
+        env.step(3 * 8 + 4)  # a goal: the walker levels the camera before it walks
+        assert abs(env.unwrapped.pose[2, 2]) < 0.2
+    finally:
+        env.close()
