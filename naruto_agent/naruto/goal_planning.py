@@ -184,7 +184,10 @@ class GoalPlanner:
 
     def _recover(self, position: np.ndarray, record: dict[str, Any], frame: int) -> Plan:
         """The next recovery step (look around, wander, retreat) as a plan."""
+        requested, self.monitor.requested = self.monitor.requested, False
         kind, plan = self.recovery.next_plan(position)
+        if requested:
+            plan.info["move_at_once"] = True  # a stall: no turn towards the target first
         self.recoveries.append((frame, kind.value))
         record.update(recovery=kind.value, outcome=f"recovery: {plan.info['recovery']}",
                       path_nodes=int(len(plan.path)))
