@@ -179,6 +179,8 @@ def run_episode(
             "path_length_m": float(info.get("path_length_m", 0.0)),
             "collisions": int(sum(reasons.values())),
             "collision_reasons": dict(reasons),
+            "stalled_steps": int(policy.stalled_steps),
+            "stall_recoveries": [event.as_dict() for event in policy.stall_events],
             "wall_time_s": time.perf_counter() - started,
             "reset_s": reset_s,
             "evaluation_s": evaluation_s,

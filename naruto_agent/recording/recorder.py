@@ -9,6 +9,8 @@ Entity paths (timeline ``step``; ``rerun FILE.rrd`` opens the file):
 * ``world/ground_truth``: the scene, once (static), when given;
 * ``world/policy/<name>``: the 3D layers the policy shows of its thinking
   (:meth:`~naruto_agent.policies.Policy.view_layers`: targets, goals, planned paths);
+* ``events/stalls``: every trigger of the policy's stall watchdog (step, kind, recovery),
+  as a text log, and ``world/stalls``: where they happened;
 * ``metrics/coverage (%)``, ``metrics/completion ratio (%)``,
   ``metrics/observable completion ratio (%)`` and ``policy/<name>``: time series.
 
@@ -114,6 +116,7 @@ class EpisodeRecorder:
         self.positions: list[np.ndarray] = []
         self.steps_logged = 0
         self._shown_layers: set[str] = set()
+        self._stalls_logged = 0
         self.stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
 
     def _at(self, step: int) -> None:
@@ -224,6 +227,23 @@ class EpisodeRecorder:
         if callable(view_layers):
             self.log_layers(step, list(view_layers()))
 
+    def log_stalls(self, step: int, policy: Any) -> None:
+        """The stall watchdog's triggers ``policy.stall_events`` holds that are not logged
+        yet: a text line each, and their places (nothing when the policy has none)."""
+        events = list(getattr(policy, "stall_events", []) or [])
+        if len(events) < self._stalls_logged:
+            self._stalls_logged = 0  # a new episode
+        if len(events) == self._stalls_logged:
+            return
+        rr = self._rr
+        self._at(step)
+        for event in events[self._stalls_logged:]:
+            self.stream.log("events/stalls", rr.TextLog(
+                f"step {event.step}: stall ({event.kind}) -> {event.recovery}", level="WARN"))
+        places = np.array([event.position for event in events], np.float32)
+        self.stream.log("world/stalls", rr.Points3D(places, colors=[[255, 140, 0]], radii=0.06))
+        self._stalls_logged = len(events)
+
     def observe(self, step: int, observation: dict[str, Any], info: dict[str, Any],
                 policy: Any = None, map_mesh: Callable[[], trimesh.Trimesh] | None = None,
                 map_every: int = 50, last: bool = False) -> None:
@@ -232,6 +252,7 @@ class EpisodeRecorder:
         self.log_step(step, observation, info)
         if policy is not None:
             self.log_policy(step, policy)
+            self.log_stalls(step, policy)
         if map_mesh is not None and (last or (map_every > 0 and step % map_every == 0)):
             self.log_map(step, map_mesh())
 
