@@ -20,8 +20,8 @@
   follows that one. A stall the follower's own rules miss (spinning in a small cluttered
   room, a refused sink repeated) is caught by the stall watchdog
   (:mod:`naruto_agent.policies.watchdog`): the follower then walks off towards the most open
-  heading for a while, without steering and with a smaller clearance, and every second time
-  also changes its height inside the scan. Only the bounds, the observations and the step
+  heading for a while, without steering and with a smaller clearance, after a height change
+  inside the scan. Only the bounds, the observations and the step
   info are used, never the mesh.
 """
 
@@ -49,7 +49,7 @@ HOLD_HEIGHT_STEPS = 20
 """Steps the wall follower keeps its height after a refused move that changed it."""
 FORCED_STEPS = 12
 """Steps a stall recovery walks towards the most open heading without steering."""
-FORCED_CLEARANCE_M = 0.12
+FORCED_CLEARANCE_M = 0.0
 """Clearance ahead a stall recovery's walk needs (the follower's own is 0.25 m + a step)."""
 STALL_HEIGHT_CHANGE_M = 0.25
 """Height change of every second stall recovery."""
@@ -138,6 +138,8 @@ class PassivePolicy(Policy):
         self._profile: np.ndarray | None = None
         self._forced_steps = 0
         self._height_offset = 0.0
+        self._height_first = False
+        self._height_first = False
         self.use_stall_watchdog()
 
     @property
@@ -264,15 +266,16 @@ class PassivePolicy(Policy):
 
     def recover_from_stall(self, event: StallEvent) -> str:
         """Replaying: skip to the next pose. Scripted: walk towards the most open heading for
-        :data:`FORCED_STEPS` steps, leaving the wall; every second stall also moves the scan
-        height by :data:`STALL_HEIGHT_CHANGE_M`, towards the middle of the bounds' height."""
+        :data:`FORCED_STEPS` steps, leaving the wall, after moving the scan height by
+        :data:`STALL_HEIGHT_CHANGE_M` towards the middle of the bounds' height (a stall is
+        often a height where every way is blocked)."""
         if self.poses is not None:
             self._index += 1
             self._blocked = 0
             return "skipped to the next pose"
         if self._profile is not None:
             headings = self._heading + np.deg2rad(np.arange(0.0, 360.0, 15.0))
-            clearance = [profile_clearance(self._profile, yaw, np.deg2rad(10.0))
+            clearance = [profile_clearance(self._profile, yaw, np.deg2rad(20.0))
                          for yaw in headings]
             self._heading = float(headings[int(np.argmax(clearance))])
         self._found_wall = False
@@ -281,12 +284,12 @@ class PassivePolicy(Policy):
         self._forced_steps = FORCED_STEPS
         self._hold_height = 0
         words = f"walk towards heading {np.rad2deg(self._heading) % 360.0:.0f} deg"
-        if len(self.stall_events) % 2 == 0:
-            bounds = self.context.bounds
-            middle = 0.5 * (bounds[0, 2] + bounds[1, 2])
-            self._height_offset += STALL_HEIGHT_CHANGE_M * (
-                1.0 if event.position[2] < middle else -1.0)
-            words += f", scan height {self._height_offset:+.2f} m"
+        bounds = self.context.bounds
+        middle = 0.5 * (bounds[0, 2] + bounds[1, 2])
+        self._height_offset += STALL_HEIGHT_CHANGE_M * (
+            1.0 if event.position[2] < middle else -1.0)
+        words += f", scan height {self._height_offset:+.2f} m first"
+        self._height_first = True
         return words
 
     def _act_scripted(self, observation: Observation, info: Info | None) -> np.ndarray:
@@ -318,8 +321,13 @@ class PassivePolicy(Policy):
         direction = np.array([np.cos(self._heading), np.sin(self._heading)])
         next_position = position.copy()
         # Move only when the way is clear (the turn above may need a few steps).
-        needed = FORCED_CLEARANCE_M if self._forced_steps > 0 else 0.25
-        if profile_clearance(profile, self._heading, np.deg2rad(20.0)) > needed + step:
+        # A stall recovery's walk goes on while the panorama shows any room ahead; the env
+        # refuses a move that touches a surface, and a refusal ends the walk.
+        needed = FORCED_CLEARANCE_M if self._forced_steps > 0 else 0.25 + step
+        if self._height_first and abs(height - position[2]) > 0.02 and not collided:
+            pass  # a stall recovery changes height first, then walks
+        elif profile_clearance(profile, self._heading, np.deg2rad(20.0)) > needed:
+            self._height_first = False
             next_position[:2] += direction * step
         # A refused move that also climbed or sank (onto a tall cabinet's top, under a
         # shelf) is tried again at the height the agent has, until it walks clear.

@@ -56,7 +56,8 @@ class StallWatchdogConfig:
         refused_share: the stall counts as ``"refused"`` when at least this share of the
             window's moves were refused by the env.
         min_progress_gain: with a ``progress`` measure, a window that raised it by at least
-            this share is no stall, however little the agent moved (0.02: 2 %) ...
+            this share is no stall, however little the agent moved (0.005: 0.5 %; late in
+            an episode a look-around adds little) ...
         max_stay_steps: ... unless the agent stayed within ``radius_m`` for this many steps
             (24: leaving 0.5 m after it takes 5-8 steps, within the 30 steps a stay may
             last; most of a full look-around of the frontier policy, 27 steps, fits).
@@ -67,7 +68,7 @@ class StallWatchdogConfig:
     max_places: int = 12
     place_size_m: float = 0.1
     refused_share: float = 0.5
-    min_progress_gain: float = 0.02
+    min_progress_gain: float = 0.005
     max_stay_steps: int = 24
 
     def __post_init__(self) -> None:
