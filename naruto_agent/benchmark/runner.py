@@ -137,6 +137,8 @@ def run_episode(
             "path_length_m": float(info.get("path_length_m", 0.0)),
             "collisions": int(sum(records.collisions.values())),
             "collision_reasons": dict(records.collisions),
+            "stalled_steps": int(policy.stalled_steps),
+            "stall_recoveries": [event.as_dict() for event in policy.stall_events],
             "wall_time_s": time.perf_counter() - started,
             "reset_s": seconds["reset_env"],
             "evaluation_s": evaluation_s,

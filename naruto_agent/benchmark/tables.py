@@ -28,6 +28,7 @@ COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("Own map MAD (cm)", "own_map_metrics.mad_cm", 2),
     ("Path (m)", "path_length_m", 1),
     ("Collisions", "collisions", 1),
+    ("Stalled steps", "stalled_steps", 1),
     ("Policy ms/step", "time_per_step_ms.policy", 1),
     ("Env ms/step", "time_per_step_ms.env", 1),
     ("Map ms/step", "time_per_step_ms.mapping", 1),

@@ -7,7 +7,7 @@ It lives in its own module so that both depend on it and neither on the other.
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -34,6 +34,8 @@ class Episode:
         camera_size: (height, width) of the frames, the order of the docs and of image
             arrays.
         policy_detail_s: the policy's own per-phase seconds, when it keeps them.
+        stalled_steps: steps spent in a stall (the policy's stall watchdog; 0 without one).
+        stall_recoveries: the watchdog's triggers (``StallEvent.as_dict()``), in order.
     """
 
     steps_run: int
@@ -49,3 +51,5 @@ class Episode:
     map_source: str
     camera_size: tuple[int, int]
     policy_detail_s: dict[str, float]
+    stalled_steps: int = 0
+    stall_recoveries: list[dict[str, Any]] = field(default_factory=list)

@@ -83,6 +83,8 @@ def metrics_record(
         "path_length_m": episode.path_length_m,
         "collisions": int(sum(episode.collisions.values())),
         "collision_reasons": dict(episode.collisions),
+        "stalled_steps": episode.stalled_steps,
+        "stall_recoveries": episode.stall_recoveries,
         "goals_chosen": len(episode.goals),
         "time_per_step_ms": per_step,
         "policy_time_per_step_ms": {

@@ -367,6 +367,8 @@ def run_episode(args: DemoArgs, env: Any, policy: Any, recorder: Any | None = No
         map_source=source.label,
         camera_size=(base.camera.height, base.camera.width),
         policy_detail_s=dict(getattr(policy, "timings", {}) or {}),
+        stalled_steps=policy.stalled_steps,
+        stall_recoveries=[event.as_dict() for event in policy.stall_events],
     )
 
 

@@ -184,7 +184,16 @@ class GoalPlanner:
 
     def _recover(self, position: np.ndarray, record: dict[str, Any], frame: int) -> Plan:
         """The next recovery step (look around, wander, retreat) as a plan."""
+        requested, self.monitor.requested = self.monitor.requested, False
         kind, plan = self.recovery.next_plan(position)
+        if requested:
+            # A stall: no turn towards the target first, and at the end one look on ahead
+            # instead of a turn all around (that turn, learning little late in an episode,
+            # was the next stall), then a normal plan.
+            plan.info["move_at_once"] = True
+            if len(plan.path) > 1:
+                ahead = plan.path[-1] + (plan.path[-1] - plan.path[0])
+                plan.views = ahead[None]
         self.recoveries.append((frame, kind.value))
         record.update(recovery=kind.value, outcome=f"recovery: {plan.info['recovery']}",
                       path_nodes=int(len(plan.path)))

@@ -23,10 +23,13 @@ Mappers (``mapper_kind=``; ``policy.mapper`` is the mapper object of the episode
 
 The agent never gets stuck for good: a move the env refuses (``collided`` /
 ``collision_reason`` in the step info) blocks its target in the agent's own map, and when
-plans keep failing it recovers (:mod:`naruto_agent.naruto.recovery`). On an open scan its
-open-scan guard (:class:`~naruto_agent.guards.ScanGuard`, shared with the baselines, read with
-its own map by :class:`~naruto_agent.naruto.scan_checks.NarutoScanChecks`) keeps it inside
-the scanned space.
+plans keep failing it recovers (:mod:`naruto_agent.naruto.recovery`); the stall watchdog
+shared with the baselines (:mod:`naruto_agent.policies.watchdog`) also cuts the plan in
+progress short when the agent stays on one spot, and starts a recovery that moves. On an
+open scan its open-scan guard (:class:`~naruto_agent.guards.ScanGuard`, shared with the
+baselines, read with its own map by
+:class:`~naruto_agent.naruto.scan_checks.NarutoScanChecks`) keeps it inside the scanned
+space.
 
 What the agent knows: the observations (RGB-D, pose, panorama), the env's step info and the
 scene's bounding box from the :class:`~naruto_agent.policies.EnvContext`; never the mesh.
@@ -64,6 +67,12 @@ from naruto_agent.policies.base import (
 )
 from naruto_agent.policies.layers import Layer
 from naruto_agent.policies.registry import register_policy
+from naruto_agent.policies.watchdog import StallEvent, StallWatchdogConfig
+
+#: The agent's stall watchdog: a look-around at a goal (up to 10 views at 10 degrees a step)
+#: takes up to about 40 steps and learns all along; a stay that learns nothing is still a
+#: stall after one window.
+STALL_WATCHDOG = StallWatchdogConfig(max_stay_steps=45)
 
 #: The phases whose seconds ``NarutoPolicy.timings`` holds.
 PHASES = ("mapping", "planner_view", "goal_search", "rrt", "control")
@@ -134,6 +143,8 @@ class NarutoPolicy(Policy):
         self._frame_index = 0
         self._new_map = False
         self._commanded: np.ndarray | None = None
+        self._stalled = False
+        self.use_stall_watchdog(STALL_WATCHDOG)
 
     # -- the episode's state, read-only ------------------------------------------------------
     @property
@@ -214,7 +225,17 @@ class NarutoPolicy(Policy):
         self._frame_index = 0
         self._new_map = False
         self._commanded = None
+        self._stalled = False
         self._integrate(observation)
+
+    def recover_from_stall(self, event: StallEvent) -> str:
+        """Cut the plan in progress short and plan a recovery that moves (a wander to
+        reachable space away from where the agent has been, or a retreat along its
+        trajectory) at once."""
+        self.machine.interrupt()
+        self.monitor.request_recovery()
+        self._stalled = True
+        return "plan cut short: recovery that moves"
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         if self.agent_map is None:
@@ -224,10 +245,13 @@ class NarutoPolicy(Policy):
         clock = time.perf_counter()
         position = np.asarray(observation["pose"], dtype=np.float64)[:3, 3]
         self._learn_from_refusal(position, info or {})
-        self.monitor.record(position, self.agent_map.observed_space.observed_fraction)
+        observed = self.agent_map.observed_space.observed_fraction
+        self.monitor.record(position, observed)
+        self.check_stall(observation, info, progress=observed)
         inner = ("goal_search", "rrt", "planner_view")
         before = sum(self.timings[name] for name in inner)
         new_map, self._new_map = self._new_map, False
+        new_map, self._stalled = new_map or self._stalled, False
         pose = self.machine.step(
             np.asarray(observation["pose"], dtype=np.float64),
             new_map=new_map,

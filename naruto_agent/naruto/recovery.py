@@ -105,6 +105,8 @@ class ProgressMonitor:
         self.escalation = 0
         self.last_recovery_frame = -(10**9)
         self._recovery_position: np.ndarray | None = None
+        #: The pending recovery was asked for by :meth:`request_recovery`.
+        self.requested = False
 
     def record(self, position: np.ndarray, observed_fraction: float) -> None:
         """One frame: where the agent is and how much of space its map has measured."""
@@ -144,6 +146,15 @@ class ProgressMonitor:
         self._recovery_position = self._positions[-1].copy() if self._positions else None
         self.failed_plans = 0
         return kind
+
+    def request_recovery(self) -> None:
+        """A stall noticed from outside (the policy's stall watchdog): the next plan is a
+        recovery, and one that moves (a wander or a retreat; a turn in place is what the
+        agent was doing)."""
+        self.failed_plans = self.config.max_failed_plans
+        self.requested = True
+        if self.escalation % len(RecoveryKind) == 0:
+            self.escalation += 1
 
     def progress_made(self, position: np.ndarray) -> None:
         """A normal plan went through: the escalation starts over, once the agent has moved

@@ -46,12 +46,13 @@ class State(str, Enum):
 TRANSITIONS: dict[State, frozenset[State]] = {
     State.STAYING: frozenset({State.STAYING, State.PLANNING}),
     State.PLANNING: frozenset({State.ROTATING_AT_START, State.STAYING}),
-    State.ROTATING_AT_START: frozenset({State.ROTATING_AT_START, State.MOVING}),
+    State.ROTATING_AT_START: frozenset({State.ROTATING_AT_START, State.MOVING, State.STAYING}),
     State.MOVING: frozenset({State.MOVING, State.ROTATING_AT_GOAL, State.STAYING}),
-    State.ROTATING_AT_GOAL: frozenset({State.ROTATING_AT_GOAL, State.PLANNING}),
+    State.ROTATING_AT_GOAL: frozenset({State.ROTATING_AT_GOAL, State.PLANNING, State.STAYING}),
 }
 """Allowed successors of every state (staying in a state is a successor too, where a state
-lasts several frames)."""
+lasts several frames). Every state may also go to staying when a stall watchdog cuts the
+plan short (:meth:`NarutoStateMachine.interrupt`)."""
 
 # Closer than this to target 0, a node keeps the camera's rotation (looking at a point from
 # on top of it is undefined).
@@ -67,7 +68,8 @@ class Plan:
             step (0.1 m) apart, the last the goal.
         views: (V, 3) targets to look at at the goal (V >= 1); target 0 is watched on the way.
         goal: (3,) the goal.
-        info: diagnostics (scores, timings) for logs.
+        info: diagnostics (scores, timings) for logs; ``move_at_once`` skips the turn
+            towards target 0 before the first move (it turns on the way).
     """
 
     path: np.ndarray
@@ -131,6 +133,14 @@ class NarutoStateMachine:
         self._path: deque[np.ndarray] = deque()
         self._commanded: np.ndarray | None = None
 
+    def interrupt(self) -> None:
+        """Drop the plan being carried out and stay (a stall watchdog's recovery): the next
+        :meth:`step` with a new map plans again."""
+        self._path.clear()
+        self._rotations.clear()
+        self._commanded = None
+        self._go(State.STAYING)
+
     def _go(self, state: State) -> None:
         if state not in TRANSITIONS[self.state]:  # pragma: no cover - guards the table
             raise RuntimeError(f"illegal transition {self.state.value} -> {state.value}")
@@ -186,7 +196,7 @@ class NarutoStateMachine:
                 self._rotations = deque(
                     slerp_rotations(rotation, self._look_at(position, rotation),
                                     self.max_rotation_step_deg)
-                )
+                ) if not found.info.get("move_at_once") else deque()
                 self._go(State.ROTATING_AT_START)
             elif self.state == State.ROTATING_AT_START:
                 if self._rotations:

@@ -48,6 +48,7 @@ from naruto_agent.policies.registry import (
     register_lazy_policy,
     register_policy,
 )
+from naruto_agent.policies.watchdog import StallEvent, StallWatchdog, StallWatchdogConfig
 
 __all__ = [
     "LAZY_POLICIES",
@@ -70,6 +71,9 @@ __all__ = [
     "ScalarLayer",
     "ScanGuard",
     "ScanGuardConfig",
+    "StallEvent",
+    "StallWatchdog",
+    "StallWatchdogConfig",
     "action_mode_of_space",
     "as_policy",
     "load_trajectory",

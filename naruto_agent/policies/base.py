@@ -26,6 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from naruto_agent.policies.layers import Layer
+from naruto_agent.policies.watchdog import StallEvent, StallWatchdog, StallWatchdogConfig
 from naruto_gym.geometry.transforms import quaternion_from_pose
 from naruto_gym.sensors.pinhole import PinholeCamera
 
@@ -109,6 +110,13 @@ class Policy(ABC):
     Subclasses set :attr:`action_modes` (the env action modes they can act in, preferred
     first) and implement :meth:`act`; they override :meth:`reset` to clear per-episode state
     and :meth:`reset_options` to ask for a start pose.
+
+    A stall watchdog (:mod:`naruto_agent.policies.watchdog`) is opt-in: a policy calls
+    :meth:`use_stall_watchdog` (every shipped policy does), calls :meth:`check_stall` at the
+    start of its ``act``, and implements :meth:`recover_from_stall`.
+
+    Attributes:
+        stall_watchdog: the watchdog in use, or None (off, the default).
     """
 
     #: Action modes this policy can act in; the first is the one a runner builds the env with.
@@ -118,6 +126,7 @@ class Policy(ABC):
 
     def __init__(self) -> None:
         self._context: EnvContext | None = None
+        self.stall_watchdog: StallWatchdog | None = None
 
     @property
     def context(self) -> EnvContext:
@@ -165,6 +174,53 @@ class Policy(ABC):
             seed: reseeds the policy's own randomness when given.
         """
         self.check_observation(observation)
+        if self.stall_watchdog is not None:
+            self.stall_watchdog.reset()
+
+    # -- stall watchdog (opt-in) -----------------------------------------------------------
+    def use_stall_watchdog(self, config: StallWatchdogConfig | None = None,
+                           enabled: bool = True) -> None:
+        """Watch this policy for stalls from now on (``enabled=False``: stop watching).
+
+        Args:
+            config: the watchdog's settings (default :class:`StallWatchdogConfig`).
+            enabled: False turns the watchdog off.
+        """
+        self.stall_watchdog = StallWatchdog(config) if enabled else None
+
+    def check_stall(self, observation: Observation, info: Info | None,
+                    progress: float | None = None) -> StallEvent | None:
+        """Feed the watchdog this step's position and refusal (and ``progress``, a measure
+        of what the policy knows, e.g. its observed voxels, when it has one); on a stall, run
+        :meth:`recover_from_stall` and return the event (with what the recovery did), else
+        None. Call it at the start of ``act``; it does nothing without a watchdog."""
+        if self.stall_watchdog is None:
+            return None
+        position = np.asarray(observation["pose"], np.float64)[:3, 3]
+        refused = bool(info.get("collided", False)) if info else False
+        event = self.stall_watchdog.observe(position, refused, progress)
+        if event is not None:
+            event.recovery = self.recover_from_stall(event)
+        return event
+
+    def recover_from_stall(self, event: StallEvent) -> str:
+        """Get going again after a stall (a new goal, a new direction, a height change
+        inside the scanned space); returns what it did, in a few words, for the record.
+        Policies that use a watchdog must implement it."""
+        raise NotImplementedError(
+            f"{type(self).__name__} uses a stall watchdog but does not implement "
+            "recover_from_stall(event); implement it, or call use_stall_watchdog(enabled=False)"
+        )
+
+    @property
+    def stall_events(self) -> list[StallEvent]:
+        """The watchdog's triggers this episode (none without a watchdog)."""
+        return [] if self.stall_watchdog is None else list(self.stall_watchdog.events)
+
+    @property
+    def stalled_steps(self) -> int:
+        """Steps of this episode spent in a stall (0 without a watchdog)."""
+        return 0 if self.stall_watchdog is None else self.stall_watchdog.stalled_steps
 
     @abstractmethod
     def act(self, observation: Observation, info: Info | None = None) -> Any:

@@ -8,7 +8,11 @@ paths to where the env's scanned-space test passes on its map, and learns the sc
 from the moves the env refuses; before every move the shared open-scan guard
 (:class:`~naruto_agent.guards.ScanGuard`) reads the move's way from the depth panorama. The
 loop, and why each rule is there, is in docs/policies.md; the settings are
-:class:`~naruto_agent.policies.config.FrontierConfig`.
+:class:`~naruto_agent.policies.config.FrontierConfig`. A stall the loop's own rules miss
+(turning on the spot with no frontier it can reach, a goal refused one step at a time) is
+caught by the stall watchdog (:mod:`naruto_agent.policies.watchdog`): the policy gives the
+spot up, walks to a reachable place 1-3 m away (the farthest from where it stalled; with
+none, straight along the clearest heading) and looks around and plans from there.
 """
 
 from __future__ import annotations
@@ -33,9 +37,12 @@ from naruto_agent.policies.base import (
 from naruto_agent.policies.config import FrontierConfig, build_config
 from naruto_agent.policies.layers import Layer, LinesLayer, PointsLayer, subsample
 from naruto_agent.policies.registry import register_policy
+from naruto_agent.policies.watchdog import StallEvent
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, rotation_angle_between
 
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
+#: Path lengths (metres) of the places a stall recovery may walk to when no frontier is left.
+WANDER_RANGE_M = (1.0, 3.0)
 
 
 @register_policy("frontier")
@@ -81,6 +88,9 @@ class FrontierPolicy(Policy):
         self._traversable_cache: np.ndarray | None = None
         self.refused = RefusedMoves()
         self._last_target: np.ndarray | None = None
+        self._wandering = False  # on a stall recovery's walk: the env, not the probes, decides
+        self._wander_failed: list[np.ndarray] = []  # where refused walks of this episode led
+        self.use_stall_watchdog()
 
     @property
     def scan_open(self) -> bool:
@@ -120,6 +130,8 @@ class FrontierPolicy(Policy):
         self._pitch_index = 0
         self.refused.reset()
         self._last_target = None
+        self._wandering = False
+        self._wander_failed = []
         self.guard.reset()
         self._closed_scan_held_done = False
         pose = np.asarray(observation["pose"], np.float64)
@@ -303,6 +315,7 @@ class FrontierPolicy(Policy):
         assert self.grid is not None
         self.plans += 1
         self._steps_since_plan = 0
+        self._wandering = False
         labels, kept = self._frontier_clusters(position)
         if not kept.any():
             return self._release_closed_scan() and self._plan(position)
@@ -359,6 +372,92 @@ class FrontierPolicy(Policy):
         low = np.maximum(self._goal_cell - radius, 0)
         high = self._goal_cell + radius + 1
         return bool(kept[low[0] : high[0], low[1] : high[1], low[2] : high[2]].any())
+
+    # -- stall recovery --------------------------------------------------------------------
+    def recover_from_stall(self, event: StallEvent) -> str:
+        """Give the stalled spot and the goal up and walk to a reachable place
+        :data:`WANDER_RANGE_M` away (the farthest from the stall), to look around and plan
+        there; with none, plan anew."""
+        assert self.grid is not None
+        position = np.asarray(event.position, np.float64)
+        if self._goal_cell is not None:
+            self._mark_visited(self.grid.cell_to_world(self._goal_cell[None])[0])
+        self._mark_visited(position)
+        self._views.clear()
+        self._stuck = 0
+        self._release_closed_scan()
+        if self._wander(position):
+            return "walk to a reachable place away from the stall"
+        if self._plan(position):
+            return "new frontier goal"
+        self.state = "done"
+        return "nothing reachable: look around"
+
+    def _wander(self, position: np.ndarray) -> bool:
+        """Set a path to the reachable place farthest from ``position`` among those
+        :data:`WANDER_RANGE_M` of path away (without inflation); False when there is none."""
+        assert self.grid is not None
+        traversable = self._traversable(position, 0, self._held_to_scan)
+        start = np.clip(self.grid.world_to_cell(position[None])[0], 0,
+                        np.array(self.grid.shape) - 1)
+        plan = self.grid.plan_from(start, traversable)
+        low, high = WANDER_RANGE_M
+        cells = np.argwhere(traversable & (plan.costs >= low) & (plan.costs <= high))
+        if len(cells) == 0:  # a small space: anywhere reachable a few voxels away
+            cells = np.argwhere(traversable & np.isfinite(plan.costs)
+                                & (plan.costs >= 3.0 * self.config.voxel_size_m))
+        points = self.grid.cell_to_world(cells)
+        for failed in self._wander_failed:  # not towards where a walk was refused
+            keep = np.linalg.norm(points - failed, axis=1) > 0.5
+            cells, points = cells[keep], points[keep]
+        # Farthest across the floor (a walk that only changes height stays on the spot).
+        distance = np.linalg.norm(points[:, :2] - position[:2], axis=1)
+        if len(cells) == 0 or distance.max() < 0.6:
+            return self._walk_straight(position)
+        goal = cells[int(np.argmax(distance))]
+        self._goal_cell = goal
+        # Arrived, it looks on ahead (a short look, not a full turn: that stalled).
+        self._goal_focus = points[int(np.argmax(distance))] + np.append(
+            points[int(np.argmax(distance)), :2] - position[:2], 0.0)
+        self._path = self.grid.cell_to_world(self.grid.trace_path(plan, goal))
+        self._path[0] = position
+        self._traversable_cache = traversable
+        self._steps_since_plan = 0
+        self.state = "move"
+        self._wandering = True
+        return True
+
+    def _walk_straight(self, position: np.ndarray) -> bool:
+        """With no traversable voxel around (the height band the map allows is empty, e.g.
+        low walls in tight bounds): a straight walk of 1 m, level, along the heading whose
+        line the map shows clearest of occupied voxels; False when none is clear."""
+        assert self.grid is not None
+        occupied = self.grid.occupied
+        headings = np.deg2rad(np.arange(0.0, 360.0, 22.5))
+        reach = np.arange(1, 11) * 0.1
+        best, best_free = None, 0
+        for heading in headings:
+            points = position + np.outer(reach, [np.cos(heading), np.sin(heading), 0.0])
+            cells = self.grid.world_to_cell(points)
+            inside = self.grid.in_grid(cells)
+            blocked = ~inside
+            blocked[inside] = occupied[tuple(cells[inside].T)]
+            free = int(np.argmax(blocked)) if blocked.any() else len(reach)
+            if any(np.linalg.norm(points[max(free - 1, 0)] - failed) <= 0.5
+                   for failed in self._wander_failed):
+                continue
+            if free > best_free:
+                best, best_free = points[:free], free
+        if best is None or best_free < 3:
+            return False
+        self._goal_cell = self.grid.world_to_cell(best[-1:])[0]
+        self._goal_focus = best[-1] + (best[-1] - position)
+        self._path = np.concatenate([position[None], best])
+        self._traversable_cache = ~occupied
+        self._steps_since_plan = 0
+        self.state = "move"
+        self._wandering = True
+        return True
 
     # -- acting --------------------------------------------------------------------------
     def _look_action(self, pose: np.ndarray) -> np.ndarray | None:
@@ -448,7 +547,8 @@ class FrontierPolicy(Policy):
         if length > self.context.max_translation_m:
             target = position + step * (self.context.max_translation_m / length)
         self._last_target = np.asarray(target, np.float64).copy()
-        if self._panorama_shows_surface(position, self._last_target, panorama):
+        if not self._wandering and self._panorama_shows_surface(
+                position, self._last_target, panorama):
             self.state = "plan"  # the goal stays; the marked surface reroutes the path
             return None
         if self.guard.surface_holds_spent(panorama):
@@ -458,6 +558,8 @@ class FrontierPolicy(Policy):
             if part is not None:
                 self._last_target = position + part
                 target = self._last_target
+        if self._wandering:
+            return pose_action(make_pose(rotation, target))
         if self._probes_edges and self._probe_refuses(position, self._last_target, panorama):
             # Refused as the env would: learn the edge; close to the goal, arrive here (the
             # caller looks around), else give the goal up and plan.
@@ -479,6 +581,10 @@ class FrontierPolicy(Policy):
         pose = np.asarray(observation["pose"], np.float64)
         position = pose[:3, 3]
         self._integrate(observation["depth"], pose)
+        known = float(np.count_nonzero(self.grid.observed))
+        if self.check_stall(observation, info, progress=known) is not None:
+            self._last_position = position.copy()
+            info = {}  # the recovery has dealt with this step's refusal
         self._steps_since_plan += 1
         collided = bool(info.get("collided", False)) if info else False
 
@@ -503,13 +609,19 @@ class FrontierPolicy(Policy):
                         self.context.agent_radius_m + 0.5 * self.config.voxel_size_m
                     )
                     self.grid.mark_occupied(bump[None])
-            if self._stuck >= 3 or (collided and self._stuck >= 1):
+            if self._wandering and collided:
+                # A stall recovery's walk refused: plan; the next recovery walks elsewhere.
+                self._wander_failed.append(np.asarray(self._path[-1], np.float64).copy())
+                if self._last_target is not None:
+                    self._wander_failed.append(self._last_target.copy())
+                self.state = "plan"
+            elif self._stuck >= 3 or (collided and self._stuck >= 1):
                 self._mark_visited(self.grid.cell_to_world(self._goal_cell[None])[0])
                 self._stuck = 0
                 self.state = "plan"
             elif collided:
                 self.state = "plan"
-            elif self._steps_since_plan >= self.config.replan_every:
+            elif self._steps_since_plan >= self.config.replan_every and not self._wandering:
                 self._steps_since_plan = 0
                 if not self._goal_still_frontier(position):
                     self.state = "plan"

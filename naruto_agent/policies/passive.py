@@ -17,8 +17,12 @@
   follows from then on. A wall followed all the way round without adding coverage (an island
   of furniture, a room circled again and again, the low edge of a partial scan) is left:
   the agent crosses the room towards its most open side until it meets another wall, and
-  follows that one. Only the bounds, the observations and the step info are used, never the
-  mesh.
+  follows that one. A stall the follower's own rules miss (spinning in a small cluttered
+  room, a refused sink repeated) is caught by the stall watchdog
+  (:mod:`naruto_agent.policies.watchdog`): the follower then walks off towards the most open
+  heading for a while, without steering and with a smaller clearance, after a height change
+  inside the scan. Only the bounds, the observations and the step
+  info are used, never the mesh.
 """
 
 from __future__ import annotations
@@ -38,10 +42,17 @@ from naruto_agent.guards.refused_moves import RefusedMoves
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
 from naruto_agent.policies.config import PassiveConfig, build_config
 from naruto_agent.policies.registry import register_policy
+from naruto_agent.policies.watchdog import StallEvent
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, validate_pose
 
 HOLD_HEIGHT_STEPS = 20
 """Steps the wall follower keeps its height after a refused move that changed it."""
+FORCED_STEPS = 12
+"""Steps a stall recovery walks towards the most open heading without steering."""
+FORCED_CLEARANCE_M = 0.0
+"""Clearance ahead a stall recovery's walk needs (the follower's own is 0.25 m + a step)."""
+STALL_HEIGHT_CHANGE_M = 0.25
+"""Height change of every second stall recovery."""
 
 
 def load_trajectory(path: str | Path) -> np.ndarray:
@@ -124,6 +135,12 @@ class PassivePolicy(Policy):
         self._refused = RefusedMoves()
         self._last_target: np.ndarray | None = None
         self._visits: list[tuple[np.ndarray, float]] = []
+        self._profile: np.ndarray | None = None
+        self._forced_steps = 0
+        self._height_offset = 0.0
+        self._height_first = False
+        self._height_first = False
+        self.use_stall_watchdog()
 
     @property
     def replays(self) -> bool:
@@ -162,6 +179,9 @@ class PassivePolicy(Policy):
         self._last_target = None
         self._visits = []
         self._hold_height = 0
+        self._profile = None
+        self._forced_steps = 0
+        self._height_offset = 0.0
 
     # -- replay ------------------------------------------------------------------------
     def _reached(self, pose: np.ndarray, target: np.ndarray) -> bool:
@@ -244,6 +264,34 @@ class PassivePolicy(Policy):
         self._visits = []
         self._recent = []
 
+    def recover_from_stall(self, event: StallEvent) -> str:
+        """Replaying: skip to the next pose. Scripted: walk towards the most open heading for
+        :data:`FORCED_STEPS` steps, leaving the wall, after moving the scan height by
+        :data:`STALL_HEIGHT_CHANGE_M` towards the middle of the bounds' height (a stall is
+        often a height where every way is blocked)."""
+        if self.poses is not None:
+            self._index += 1
+            self._blocked = 0
+            return "skipped to the next pose"
+        if self._profile is not None:
+            headings = self._heading + np.deg2rad(np.arange(0.0, 360.0, 15.0))
+            clearance = [profile_clearance(self._profile, yaw, np.deg2rad(20.0))
+                         for yaw in headings]
+            self._heading = float(headings[int(np.argmax(clearance))])
+        self._found_wall = False
+        self._visits = []
+        self._recent = []
+        self._forced_steps = FORCED_STEPS
+        self._hold_height = 0
+        words = f"walk towards heading {np.rad2deg(self._heading) % 360.0:.0f} deg"
+        bounds = self.context.bounds
+        middle = 0.5 * (bounds[0, 2] + bounds[1, 2])
+        self._height_offset += STALL_HEIGHT_CHANGE_M * (
+            1.0 if event.position[2] < middle else -1.0)
+        words += f", scan height {self._height_offset:+.2f} m first"
+        self._height_first = True
+        return words
+
     def _act_scripted(self, observation: Observation, info: Info | None) -> np.ndarray:
         pose = np.asarray(observation["pose"], np.float64)
         position = pose[:3, 3]
@@ -256,17 +304,30 @@ class PassivePolicy(Policy):
         panorama = observation["panorama"]
         profile = np.minimum(horizontal_profile(panorama), floor_edge_profile(panorama))
         profile = self._refused.overlay(profile, position)
+        self._profile = profile
         coverage = info.get("coverage") if info else None
-        if self._loop_without_news(position, coverage):
-            self._leave_the_wall(profile)
-        self._steer(profile, collided)
+        if collided:
+            self._forced_steps = 0
+        if self._forced_steps > 0:
+            self._forced_steps -= 1  # a stall recovery's walk: no steering
+        else:
+            if self._loop_without_news(position, coverage):
+                self._leave_the_wall(profile)
+            self._steer(profile, collided)
         bounds = self.context.bounds
         height = bounds[0, 2] + self.config.scan_height_fraction * (bounds[1, 2] - bounds[0, 2])
+        height = float(np.clip(height + self._height_offset, bounds[0, 2], bounds[1, 2]))
         step = self.context.max_translation_m
         direction = np.array([np.cos(self._heading), np.sin(self._heading)])
         next_position = position.copy()
         # Move only when the way is clear (the turn above may need a few steps).
-        if profile_clearance(profile, self._heading, np.deg2rad(20.0)) > 0.25 + step:
+        # A stall recovery's walk goes on while the panorama shows any room ahead; the env
+        # refuses a move that touches a surface, and a refusal ends the walk.
+        needed = FORCED_CLEARANCE_M if self._forced_steps > 0 else 0.25 + step
+        if self._height_first and abs(height - position[2]) > 0.02 and not collided:
+            pass  # a stall recovery changes height first, then walks
+        elif profile_clearance(profile, self._heading, np.deg2rad(20.0)) > needed:
+            self._height_first = False
             next_position[:2] += direction * step
         # A refused move that also climbed or sank (onto a tall cabinet's top, under a
         # shelf) is tried again at the height the agent has, until it walks clear.
@@ -290,6 +351,7 @@ class PassivePolicy(Policy):
         return clip_pose_action(action, self.context.action_space)
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
+        self.check_stall(observation, info)
         if self.poses is not None:
             return self._act_replay(observation)
         return self._act_scripted(observation, info)

@@ -17,7 +17,9 @@ a new random run instead of being sent, so the walk is refused far less often. I
 spot where every redrawn run looks blocked, the walk sweeps the headings all around it for
 a clear way; where none is, it turns in place for up to ``max_held_moves`` steps, then sends
 the part of the move the panorama shows clear, or the move itself, and the env decides: it
-never stays put for good.
+never stays put for good. A stall all that misses (runs redrawn in one corner, one refused
+move repeated) is caught by the stall watchdog (:mod:`naruto_agent.policies.watchdog`): a new
+run away from the stall, level or, every second time, climbing or sinking.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from naruto_agent.policies.base import (
 )
 from naruto_agent.policies.config import RandomConfig, build_config
 from naruto_agent.policies.registry import register_policy
+from naruto_agent.policies.watchdog import StallEvent
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 
 
@@ -76,6 +79,8 @@ class RandomPolicy(Policy):
         self.turns_after_block = 0
         self.turns_before_block = 0
         self.refused = RefusedMoves()
+        self._stall_panorama: np.ndarray | None = None
+        self.use_stall_watchdog()
 
     @property
     def held_steps(self) -> int:
@@ -126,9 +131,36 @@ class RandomPolicy(Policy):
         self.pitch = self.rng.uniform(-max_pitch, max_pitch)
         self.steps_left = int(self.rng.integers(config.min_run_steps, config.max_run_steps + 1))
 
+    def recover_from_stall(self, event: StallEvent) -> str:
+        """A long new run, the first of a sweep of headings the panorama shows clear (from a
+        random one), or a random one; every second stall it climbs or sinks (away from the
+        floor or the top, as every run does)."""
+        pose = np.eye(4)
+        pose[:3, 3] = event.position
+        self.guard.holds.reset()
+        climb = len(self.stall_events) % 2 == 0
+        direction = None
+        if self._stall_panorama is not None and not climb:
+            direction = self._clear_direction(pose, self._stall_panorama)
+        if direction is None:
+            self._new_run(pose, blocked=self.direction)
+            if climb:
+                near_floor, near_top = self._near_floor_and_top(pose[2, 3])
+                sign = 1.0 if near_floor or (not near_top and self.rng.random() < 0.5) else -1.0
+                heading = float(np.arctan2(self.direction[1], self.direction[0]))
+                self.direction = run_direction(heading, sign * self.config.max_climb)
+        else:
+            self.direction = direction
+        self.steps_left = self.config.max_run_steps
+        return "new run" + (" with a climb" if climb and self.direction[2] > 0 else
+                            " with a sink" if climb else "")
+
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         pose = np.asarray(observation["pose"], np.float64)
         panorama = self.guard.panorama(observation)
+        self._stall_panorama = panorama
+        if self.check_stall(observation, info) is not None:
+            info = None  # the recovery chose the run
         if info is not None and info.get("collided", False):
             if info.get("collision_reason") == "escape":
                 # The panorama tells a refused climb at the open top from the floor's edge.

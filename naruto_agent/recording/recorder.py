@@ -9,6 +9,8 @@ Entity paths (timeline ``step``; ``rerun FILE.rrd`` opens the file):
 * ``world/ground_truth``: the scene, once (static), when given;
 * ``world/policy/<name>``: the 3D layers the policy shows of its thinking
   (:meth:`~naruto_agent.policies.Policy.view_layers`: targets, goals, planned paths);
+* ``events/stalls``: every trigger of the policy's stall watchdog (step, kind, recovery),
+  as a text log, and ``world/stalls``: where they happened;
 * ``metrics/coverage (%)``, ``metrics/completion ratio (%)``,
   ``metrics/observable completion ratio (%)`` and ``policy/<name>``: time series.
 
@@ -182,6 +184,7 @@ class EpisodeRecorder:
         self._layer_digests: dict[str, str] = {}
         self._trajectory_logged = 0
         self._last_step = 0
+        self._stalls_logged = 0
         self.stream.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         # The intrinsics do not change over the episode: the frustum is logged once.
         self.stream.log(
@@ -319,6 +322,23 @@ class EpisodeRecorder:
             if isinstance(layer, ScalarLayer):
                 self.stream.log(entity_path(f"policy/{layer.name}"), self._rr.Scalars(layer.value))
 
+    def log_stalls(self, step: int, policy: Any) -> None:
+        """The stall watchdog's triggers ``policy.stall_events`` holds that are not logged
+        yet: a text line each, and their places (nothing when the policy has none)."""
+        events = list(getattr(policy, "stall_events", []) or [])
+        if len(events) < self._stalls_logged:
+            self._stalls_logged = 0  # a new episode
+        if len(events) == self._stalls_logged:
+            return
+        rr = self._rr
+        self._at(step)
+        for event in events[self._stalls_logged:]:
+            self.stream.log("events/stalls", rr.TextLog(
+                f"step {event.step}: stall ({event.kind}) -> {event.recovery}", level="WARN"))
+        places = np.array([event.position for event in events], np.float32)
+        self.stream.log("world/stalls", rr.Points3D(places, colors=[[255, 140, 0]], radii=0.06))
+        self._stalls_logged = len(events)
+
     def observe(
         self,
         step: int,
@@ -334,6 +354,7 @@ class EpisodeRecorder:
         self.log_step(step, observation, info)
         if policy is not None:
             self.log_policy(step, policy, last)
+            self.log_stalls(step, policy)
         if map_mesh is not None and (last or (map_every > 0 and step % map_every == 0)):
             self.log_map(step, map_mesh())
 

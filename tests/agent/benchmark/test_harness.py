@@ -105,6 +105,7 @@ def _fake_record(policy: str, seed: int, coverage: float, status: str = "ok") ->
         "metrics": {"completion_ratio_pct": 50.0 + seed, "accuracy_cm": 1.0, "mad_cm": 2.0 + seed},
         "path_length_m": 1.0,
         "collisions": seed,
+        "stalled_steps": 10 * seed,
         "time_per_step_ms": {"policy": 1.0, "env": 2.0, "mapping": 3.0},
     }
 
@@ -123,6 +124,8 @@ def test_summary_table_and_curve_plot(tmp_path):
     assert "30.0 ± 10.0" in table and "MAD (cm)" in table and "3.00 ± 1.00" in table
     header, _, line_a, line_b = table.strip().split("\n")
     failed_column = header.split(" | ").index("Failed")
+    stalled_column = header.split(" | ").index("Stalled steps")
+    assert line_a.split(" | ")[stalled_column] == "10.0 ± 10.0"
     assert line_a.split(" | ")[failed_column] == "0" and line_b.split(" | ")[failed_column] == "1"
     path = plot_curves(records, tmp_path / "curves.png")
     assert path is not None and path.stat().st_size > 1000
@@ -161,6 +164,7 @@ def test_local_run_records_failures_resumes_and_reports(tmp_path):
     assert [point["step"] for point in good["completion_curve"]] == [3, 6]
     assert set(good["time_per_step_ms"]) == {"policy", "env", "mapping"}
     assert good["own_map_metrics"] is None  # frontier builds no map of surfaces
+    assert good["stalled_steps"] >= 0 and isinstance(good["stall_recoveries"], list)
 
     # A rerun only retries the failed episode; finished records stay untouched.
     paths = {spec.episode_id: spec.record_path(tmp_path) for spec in specs}

@@ -212,3 +212,33 @@ def test_benchmark_records_every_episode(tmp_path):
     assert contents.steps["world/map"][-1] == 4 and len(contents.map_faces) > 0
     record = json.loads(next((out / "records").rglob("*.json")).read_text())
     assert record["steps_run"] == 4
+
+
+def test_stall_watchdog_triggers_show_in_the_recording(tmp_path):
+    """A policy that stands still: the watchdog's trigger at step 20 is logged as a text line
+    and a point, once."""
+    from naruto_agent.policies import Policy, pose_action
+
+    class StandStill(Policy):
+        def __init__(self):
+            super().__init__()
+            self.use_stall_watchdog()
+
+        def act(self, observation, info=None):
+            self.check_stall(observation, info)
+            return pose_action(observation["pose"])
+
+        def recover_from_stall(self, event):
+            return "none (a test)"
+
+    policy = StandStill()
+    camera = PinholeCamera().scaled(0.05)
+    recorder = EpisodeRecorder(tmp_path / "stall.rrd", camera)
+    observation = {"pose": np.eye(4)}
+    for step in range(1, 26):
+        policy.act(observation, {})
+        recorder.log_stalls(step, policy)
+    recorder.close()
+    contents = read_recording(tmp_path / "stall.rrd")
+    assert contents.steps["events/stalls"] == [20]
+    assert contents.steps["world/stalls"] == [20]

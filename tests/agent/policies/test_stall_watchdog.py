@@ -1,0 +1,168 @@
+"""The stall watchdog (naruto_agent.policies.watchdog) and every shipped policy's recovery:
+held on one spot, each policy notices the stall, recovers, and moves on."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import naruto_gym  # noqa: F401
+from naruto_agent.policies import (
+    EnvContext,
+    Policy,
+    StallWatchdog,
+    StallWatchdogConfig,
+    make_policy,
+    pose_action,
+)
+
+
+def _feed(watchdog: StallWatchdog, positions, refused=False, progress=None):
+    return [
+        watchdog.observe(p, refused, None if progress is None else progress(i))
+        for i, p in enumerate(positions)
+    ]
+
+
+def test_spinning_in_place_is_a_stall_after_one_window():
+    watchdog = StallWatchdog(StallWatchdogConfig(window_steps=20))
+    events = _feed(watchdog, [np.zeros(3)] * 45)
+    fired = [i for i, event in enumerate(events) if event is not None]
+    assert fired == [19, 39]
+    assert watchdog.events[0].kind == "spin" and watchdog.events[0].step == 20
+    assert watchdog.stalled_steps == 26  # every step from the 20th on
+
+
+def test_walking_is_no_stall():
+    watchdog = StallWatchdog()
+    line = [np.array([0.1 * i, 0.0, 1.0]) for i in range(100)]
+    assert not any(_feed(watchdog, line)) and watchdog.stalled_steps == 0
+
+
+def test_repeating_a_refused_move_is_a_refused_stall():
+    watchdog = StallWatchdog()
+    events = _feed(watchdog, [np.ones(3)] * 20, refused=True)
+    assert events[-1] is not None and events[-1].kind == "refused"
+
+
+def test_oscillating_between_two_poses_is_a_stall():
+    """Back and forth along 1 m (farther than the stay radius)."""
+    watchdog = StallWatchdog()
+    swing = [np.array([0.1 * k, 0.0, 1.0]) for k in (*range(11), *range(9, 0, -1))]
+    events = _feed(watchdog, swing * 3)
+    kinds = [event.kind for event in events if event is not None]
+    assert kinds and kinds[0] == "oscillation"
+
+
+def test_a_look_around_that_learns_is_no_stall_until_it_lingers():
+    config = StallWatchdogConfig(window_steps=20, max_stay_steps=24)
+    watchdog = StallWatchdog(config)
+    events = _feed(watchdog, [np.zeros(3)] * 30, progress=lambda i: 100.0 * 1.05**i)
+    fired = [(i, event.kind) for i, event in enumerate(events) if event is not None]
+    assert fired == [(23, "lingering")]
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(window_steps=1),
+        dict(radius_m=0.0),
+        dict(refused_share=1.5),
+        dict(max_stay_steps=5),
+        dict(min_progress_gain=-1.0),
+    ],
+)
+def test_bad_settings_are_refused_with_the_field_named(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        StallWatchdogConfig(**bad)
+
+
+class _StandStill(Policy):
+    """A user's policy that never moves, with the watchdog switched on."""
+
+    def __init__(self, recovers: bool) -> None:
+        super().__init__()
+        self.recovers = recovers
+        self.use_stall_watchdog()
+
+    def act(self, observation, info=None):
+        self.check_stall(observation, info)
+        return pose_action(observation["pose"])
+
+
+class _Recovering(_StandStill):
+    def recover_from_stall(self, event):
+        return "asked to recover"
+
+
+def _context(env):
+    return EnvContext.from_env(env, step_budget=50)
+
+
+def test_a_users_policy_opts_in_and_its_recovery_is_logged():
+    env = gym.make(
+        "NarutoRecon-v0", scene="replica_like_room", image_scale=0.05, panorama_shape=None
+    )
+    policy = _Recovering(recovers=True)
+    policy.bind(_context(env))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info)
+    for _ in range(25):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+    assert [e.recovery for e in policy.stall_events] == ["asked to recover"]
+    assert policy.stall_events[0].as_dict()["step"] == 20
+    policy.reset(observation, info)
+    assert policy.stall_events == [] and policy.stalled_steps == 0
+    env.close()
+
+
+def test_a_watchdog_without_a_recovery_says_what_to_implement():
+    env = gym.make(
+        "NarutoRecon-v0", scene="replica_like_room", image_scale=0.05, panorama_shape=None
+    )
+    policy = _StandStill(recovers=False)
+    policy.bind(_context(env))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info)
+    with pytest.raises(NotImplementedError, match="recover_from_stall"):
+        for _ in range(25):
+            observation, _, _, _, info = env.step(policy.act(observation, info))
+    env.close()
+
+
+@pytest.mark.parametrize("name", ["passive", "random", "frontier", "naruto"])
+def test_every_shipped_policy_recovers_from_a_stall_and_moves_again(name):
+    """The env is sent the agent's own pose, whatever the policy asks (as if each of its
+    moves were refused in place), until the watchdog fires (within 20 steps); the policy's
+    recovery then leaves the spot by more than 0.5 m within 15 steps."""
+    policy = make_policy(name)
+    env = gym.make(
+        "NarutoRecon-v0",
+        scene="replica_like_room",
+        image_scale=0.05,
+        coverage_samples=500,
+        panorama_shape=(32, 64),
+        action_mode=policy.preferred_action_mode,
+    )
+    policy.bind(EnvContext.from_env(env, step_budget=200))
+    observation, info = env.reset(seed=3, options=policy.reset_options())
+    policy.reset(observation, info, seed=3)
+    for _ in range(12):  # under way first
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+    before = len(policy.stall_events)
+    spot = observation["pose"][:3, 3].copy()
+    for _ in range(21):
+        action = policy.act(observation, info)
+        if len(policy.stall_events) > before:
+            break
+        observation, _, _, _, info = env.step(pose_action(observation["pose"]))
+    assert len(policy.stall_events) == before + 1, policy.stall_events
+    assert policy.stall_events[-1].recovery
+    farthest = 0.0
+    for _ in range(15):
+        observation, _, _, _, info = env.step(action)
+        farthest = max(farthest, float(np.linalg.norm(observation["pose"][:3, 3] - spot)))
+        action = policy.act(observation, info)
+    assert farthest > 0.5, (name, policy.stall_events[-1])
+    env.close()
