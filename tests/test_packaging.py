@@ -51,9 +51,10 @@ def built(tmp_path_factory: pytest.TempPathFactory) -> Path:
     pytest.importorskip("build")
     out = tmp_path_factory.mktemp("dist")
     result = subprocess.run(
-        [sys.executable, "-m", "build", "--no-isolation",
-         "--outdir", str(out), str(ROOT)],
-        capture_output=True, text=True, timeout=600,
+        [sys.executable, "-m", "build", "--no-isolation", "--outdir", str(out), str(ROOT)],
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     return out
@@ -72,9 +73,21 @@ def test_wheel_installs_and_steps_in_a_fresh_environment(built: Path, tmp_path: 
     venv.EnvBuilder(system_site_packages=True, with_pip=False).create(env_dir)
     python = env_dir / "bin" / "python"
     install = subprocess.run(
-        [sys.executable, "-m", "pip", "--python", str(python), "install", "--no-deps",
-         "--no-index", "--quiet", str(wheel)],
-        capture_output=True, text=True, timeout=600,
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "--python",
+            str(python),
+            "install",
+            "--no-deps",
+            "--no-index",
+            "--quiet",
+            str(wheel),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     if install.returncode != 0 and "no such option: --python" in install.stderr:
         pytest.skip("pip is too old for --python")
@@ -93,7 +106,11 @@ def test_wheel_installs_and_steps_in_a_fresh_environment(built: Path, tmp_path: 
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NARUTO_GYM_ASSETS_DIR")}
     env["NARUTO_GYM_CACHE_DIR"] = str(tmp_path / "cache")
     result = subprocess.run(
-        [str(python), "-c", script], cwd=work, env=env, capture_output=True, text=True,
+        [str(python), "-c", script],
+        cwd=work,
+        env=env,
+        capture_output=True,
+        text=True,
         timeout=900,
     )
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]

@@ -174,9 +174,13 @@ class RayCaster:
         rays = np.ascontiguousarray(rays, dtype=np.float32)
         if self.backend == "open3d":
             scene = self.native_scene  # built first: it imports Open3D
-            return scene.test_occlusions(
-                self._o3d.core.Tensor.from_numpy(rays), nthreads=default_thread_count()
-            ).numpy().astype(bool)
+            return (
+                scene.test_occlusions(
+                    self._o3d.core.Tensor.from_numpy(rays), nthreads=default_thread_count()
+                )
+                .numpy()
+                .astype(bool)
+            )
         return self.cast_packed(rays).hit_mask
 
     def cast_distance(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -187,9 +191,11 @@ class RayCaster:
         """Distance from each point to the closest surface point, (N,) float32 metres."""
         points = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
         # embreex has no closest-point query: both backends answer it with Open3D.
-        return self._open3d_scene().compute_distance(
-            self._o3d.core.Tensor(points), nthreads=default_thread_count()
-        ).numpy()
+        return (
+            self._open3d_scene()
+            .compute_distance(self._o3d.core.Tensor(points), nthreads=default_thread_count())
+            .numpy()
+        )
 
     def _open3d_scene(self):
         if self.backend == "open3d":
@@ -206,9 +212,7 @@ class RayCaster:
             )
         return self._distance_scene
 
-    def segment_is_free(
-        self, start: np.ndarray, end: np.ndarray, clearance: float
-    ) -> bool:
+    def segment_is_free(self, start: np.ndarray, end: np.ndarray, clearance: float) -> bool:
         """True when a sphere of radius ``clearance`` can sweep from start to end untouched.
 
         Exact for the sphere: the segment's distance to the mesh is checked by sampling it
@@ -230,9 +234,7 @@ class RayCaster:
         """
         return self.sweep(start, end, clearance)[0]
 
-    def sweep(
-        self, start: np.ndarray, end: np.ndarray, clearance: float
-    ) -> tuple[float, float]:
+    def sweep(self, start: np.ndarray, end: np.ndarray, clearance: float) -> tuple[float, float]:
         """:meth:`free_fraction_of_segment`, and the distance to the surface where the sweep
         stops (one of its samples, so it comes free; nan when it cannot leave the start)."""
         start = np.asarray(start, dtype=np.float64)
@@ -302,8 +304,12 @@ def free_fraction_from_distances(
     if not np.issubdtype(distance.dtype, np.floating):
         distance = distance.astype(np.float64)
     first_blocked = first_blocked_sample(
-        np.asarray(fractions, np.float64), float(length), distance, float(wall_distance),
-        float(clearance), distance.dtype.type(clearance),
+        np.asarray(fractions, np.float64),
+        float(length),
+        distance,
+        float(wall_distance),
+        float(clearance),
+        distance.dtype.type(clearance),
     )
     if first_blocked < 0:
         return 1.0

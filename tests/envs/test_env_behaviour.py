@@ -75,7 +75,7 @@ def test_pose_action_moves_at_most_the_limits(env):
     observation, _, _, _, info = env.step(action)
     pose = observation["pose"].astype(np.float64)
     assert np.linalg.norm(pose[:3, 3] - start[:3, 3]) <= env.settings.max_translation_m + 1e-6
-    angle = (Rotation.from_matrix(start[:3, :3]).inv() * Rotation.from_matrix(pose[:3, :3]))
+    angle = Rotation.from_matrix(start[:3, :3]).inv() * Rotation.from_matrix(pose[:3, :3])
     assert angle.magnitude() == pytest.approx(np.deg2rad(20.0), abs=1e-4)
 
 

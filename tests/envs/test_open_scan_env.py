@@ -76,8 +76,10 @@ def _approaches(env, layout, boxes: np.ndarray) -> list[tuple[np.ndarray, np.nda
         outward = np.zeros(3)
         outward[axis] = np.sign(centre[axis] - centre_of_room[axis])
         if axis == 2 and outward[2] > 0:  # the open top: from 0.5 m under it
-            candidates = [np.array([*centre_of_room[:2] + offset, low[2] - 0.5])
-                          for offset in (0.4, -0.6, 1.0)]
+            candidates = [
+                np.array([*centre_of_room[:2] + offset, low[2] - 0.5])
+                for offset in (0.4, -0.6, 1.0)
+            ]
         elif axis == 2:  # the floor hole: from 1.2 m above it
             candidates = [np.array([centre[0], centre[1], 1.2])]
         else:  # a wall hole or the missing wall: 0.5 m inside, along the opening
@@ -92,7 +94,8 @@ def _approaches(env, layout, boxes: np.ndarray) -> list[tuple[np.ndarray, np.nda
                     candidates.append(start)
         # A start from which the straight way out through the opening is free of furniture.
         clear = [
-            c for c in candidates
+            c
+            for c in candidates
             if env.raycaster.unsigned_distance(c[None])[0] >= 0.15
             and env.raycaster.free_fraction_of_segment(c, c + 1.2 * outward, 0.06) == 1.0
         ]
@@ -192,8 +195,14 @@ def test_published_rule_behaves_as_before_when_selected():
     for seed in (0, 3):
         env.reset(seed=seed)
         expected = sample_free_positions(
-            env.raycaster, env.scene.face_normals, env.bounds, 1, env.settings.start_clearance_m,
-            seeding.np_random(seed)[0], 0.5, max_candidates=START_CANDIDATES,
+            env.raycaster,
+            env.scene.face_normals,
+            env.bounds,
+            1,
+            env.settings.start_clearance_m,
+            seeding.np_random(seed)[0],
+            0.5,
+            max_candidates=START_CANDIDATES,
         )[0]
         np.testing.assert_allclose(env.pose[:3, 3], expected)
     camera = EquirectangularCamera(32, 64)

@@ -97,8 +97,9 @@ def _costs_time(keyword: str, value) -> bool:
 def test_a_camera_and_an_image_scale_together(width, height, focal, image_scale):
     """The observation has the scaled camera's size, or one clear error is raised."""
     try:
-        camera = PinholeCamera(width=width, height=height, fx=focal, fy=focal,
-                               cx=width / 2.0, cy=height / 2.0)
+        camera = PinholeCamera(
+            width=width, height=height, fx=focal, fy=focal, cx=width / 2.0, cy=height / 2.0
+        )
     except (ValueError, TypeError, OverflowError):
         return
     settings = {**FAST, "camera": camera, "image_scale": image_scale}
@@ -133,16 +134,18 @@ SHARED_VALID = {key: value for key, value in VALID.items() if key not in VECTOR_
 @settings(max_examples=6)  # per keyword
 @given(data=st.data())
 def test_every_vector_env_keyword_is_used_or_refused_by_name(keyword, data):
-    _check_vector_keyword(keyword, data.draw(st.one_of(odd_value, VECTOR_VALID[keyword]),
-                                             label=keyword))
+    _check_vector_keyword(
+        keyword, data.draw(st.one_of(odd_value, VECTOR_VALID[keyword]), label=keyword)
+    )
 
 
 @pytest.mark.parametrize("keyword", sorted(SHARED_VALID))
 @settings(max_examples=3)  # per keyword: the single env's test draws more of each
 @given(data=st.data())
 def test_every_shared_keyword_of_the_vector_env_is_used_or_refused_by_name(keyword, data):
-    _check_vector_keyword(keyword, data.draw(st.one_of(odd_value, SHARED_VALID[keyword]),
-                                             label=keyword))
+    _check_vector_keyword(
+        keyword, data.draw(st.one_of(odd_value, SHARED_VALID[keyword]), label=keyword)
+    )
 
 
 def _check_vector_keyword(keyword: str, value) -> None:
@@ -150,8 +153,10 @@ def _check_vector_keyword(keyword: str, value) -> None:
     refuses the value with a ``ValueError`` that names the keyword."""
     if keyword == "num_envs" and isinstance(value, (int, np.integer)) and value > 3:
         return  # valid, but many agents cost time, not correctness
-    if keyword == "panorama_shape" and isinstance(value, tuple) and (
-        all(isinstance(v, (int, np.integer)) for v in value) and max(value) > 48
+    if (
+        keyword == "panorama_shape"
+        and isinstance(value, tuple)
+        and (all(isinstance(v, (int, np.integer)) for v in value) and max(value) > 48)
     ):
         return
     settings = {**FAST, "num_envs": 2, keyword: value}
@@ -201,8 +206,9 @@ _VECTOR: list[NarutoReconVectorEnv] = []
 
 def _vector_env() -> NarutoReconVectorEnv:
     if not _VECTOR:
-        _VECTOR.append(NarutoReconVectorEnv(num_envs=2, scene=small_room(), action_mode="delta",
-                                            **FAST))
+        _VECTOR.append(
+            NarutoReconVectorEnv(num_envs=2, scene=small_room(), action_mode="delta", **FAST)
+        )
     return _VECTOR[0]
 
 

@@ -85,8 +85,11 @@ def test_faces_that_index_past_the_vertices_are_refused(tmp_path):
 
 @pytest.mark.parametrize(
     ("content", "expected"),
-    [(b"", "could not read"), (b"ply\nformat ascii 1.0\n", "could not read|no triangles"),
-     (b"\x00\x01garbage" * 10, "could not read")],
+    [
+        (b"", "could not read"),
+        (b"ply\nformat ascii 1.0\n", "could not read|no triangles"),
+        (b"\x00\x01garbage" * 10, "could not read"),
+    ],
 )
 def test_empty_and_garbled_files_are_refused(tmp_path, content, expected):
     path = tmp_path / "broken.ply"
@@ -106,8 +109,8 @@ def test_truncated_files_are_refused_or_read(tmp_path, suffix, keep):
     path.write_bytes(data[: int(len(data) * keep)])
     message = _runs_or_says_why(str(path))
     assert message == "ran" or any(
-        word in message for word in ("could not read", "no triangles", "face indices",
-                                     "NaN", "zero area")
+        word in message
+        for word in ("could not read", "no triangles", "face indices", "NaN", "zero area")
     ), message
 
 
@@ -174,8 +177,10 @@ def _defects(mesh: trimesh.Trimesh, defect: str, rng: np.random.Generator) -> Sc
         faces = faces[~top]
     elif defect == "disconnected":
         far = vertices + [np.ptp(vertices[:, 0]) * 3.0, 0.0, 0.0]
-        vertices, faces = np.concatenate([vertices, far]), np.concatenate(
-            [faces, faces + len(vertices)])
+        vertices, faces = (
+            np.concatenate([vertices, far]),
+            np.concatenate([faces, faces + len(vertices)]),
+        )
     elif defect == "single_triangle":
         vertices, faces = vertices[faces[0]], np.array([[0, 1, 2]])
     elif defect == "unused_vertices":
@@ -184,8 +189,17 @@ def _defects(mesh: trimesh.Trimesh, defect: str, rng: np.random.Generator) -> Sc
 
 
 @given(
-    defect=st.sampled_from(["none", "degenerate", "duplicate", "open_shell", "disconnected",
-                            "single_triangle", "unused_vertices"]),
+    defect=st.sampled_from(
+        [
+            "none",
+            "degenerate",
+            "duplicate",
+            "open_shell",
+            "disconnected",
+            "single_triangle",
+            "unused_vertices",
+        ]
+    ),
     log_scale=st.floats(-3.0, 3.6),  # a room of 3 mm to about 12 km
 )
 def test_odd_but_valid_meshes_at_any_scale_run(defect, log_scale):
