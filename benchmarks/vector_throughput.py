@@ -207,7 +207,7 @@ def time_goal_round(args: Args) -> dict[str, Any]:
                            **env_kwargs(64, False, **extra))
         row["async"][workers] = time_vector(env, args.seconds)["steps_per_s"]
         env.close()
-    env = NarutoReconVectorEnv(64, max_episode_steps=args.max_episode_steps,
+    env = make_vector_env(64, max_episode_steps=args.max_episode_steps,
                                **env_kwargs(64, False))
     row["batched_64"] = time_vector(env, args.seconds)["steps_per_s"]
     row["ratio"] = row["batched_64"] / max(row["async"].values())
@@ -388,7 +388,7 @@ def table(args: Args, results: dict[str, Any]) -> None:
     configs = [(size, panorama, count) for size in args.sizes for panorama in (False, True)
                for count in args.counts]
     for size, panorama, count in tqdm(configs, desc="batched env"):
-        env = NarutoReconVectorEnv(count, max_episode_steps=args.max_episode_steps,
+        env = make_vector_env(count, max_episode_steps=args.max_episode_steps,
                                    **env_kwargs(size, panorama))
         row = {"size": size, "panorama": panorama, "num_envs": count,
                **time_vector(env, args.seconds)}
@@ -399,7 +399,7 @@ def table(args: Args, results: dict[str, Any]) -> None:
     results["variants_64_envs_64_px"] = {}
     for name, extra in (("published_escape_rule", {"escape_rule": "published"}),
                         ("raycast_pinhole", {"pinhole_backend": "raycast"})):
-        env = NarutoReconVectorEnv(64, max_episode_steps=args.max_episode_steps,
+        env = make_vector_env(64, max_episode_steps=args.max_episode_steps,
                                    **env_kwargs(64, False, **extra))
         results["variants_64_envs_64_px"][name] = time_vector(env, args.seconds)
         row = results["variants_64_envs_64_px"][name]
@@ -409,7 +409,7 @@ def table(args: Args, results: dict[str, Any]) -> None:
     stream_steps = args.stream_episodes * args.stream_episode_steps
     for count in args.stream_counts:
         for name, scene in (("stream", "procedural:room"), ("one_scene", "procedural:room:3")):
-            env = NarutoReconVectorEnv(count, scene=scene,
+            env = make_vector_env(count, scene=scene,
                                        max_episode_steps=args.stream_episode_steps,
                                        **env_kwargs(64, False,
                                                     coverage_samples=args.stream_coverage_samples))

@@ -59,6 +59,8 @@ class DemoArgs:
     up_axis: str = "z"
     """up axis of a mesh path written without @AXIS: z, y, -y, x, -x, -z or auto (from a
     recognised dataset layout)"""
+    mesh_units: str = "m"
+    """length unit of a mesh file (m, cm or mm), rescaled to metres on loading"""
     max_episode_steps: int = DEFAULT_MAX_EPISODE_STEPS
     """length of the episode in steps"""
     seed: int = 0
@@ -385,7 +387,7 @@ def prepare(args: DemoArgs) -> tuple[Any, Any]:
         check_args(args)
         policy = build_policy(args)
         scene_spec = parse_scene(args.scene, args.up_axis)
-        scene = resolve_scene(scene_spec.scene, scene_spec.up_axis)
+        scene = resolve_scene(scene_spec.scene, scene_spec.up_axis, args.mesh_units)
     except (ValueError, FileNotFoundError) as error:
         raise DemoInputError(str(error)) from error
     return scene, policy

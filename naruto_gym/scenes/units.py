@@ -94,9 +94,10 @@ def check_metric_size(
         f"triangle edge of {edge:,.2f} m: an indoor scene in metres is at most "
         f"{MAX_SCENE_SIDE_M:g} m across, so the file is likely in {_UNIT_NAMES[unit]} "
         f"({rescaled:,.1f} m across in metres). Pass mesh_units={unit!r} (to the env, the "
-        "batched env, resolve_scene or load_scene) to rescale it, or rescale the file to "
-        "metres. For a space that really is this large in metres, load it with trimesh and "
-        "pass naruto_gym.scenes.scene_from_trimesh(mesh) as scene= (a Scene is not checked)"
+        "batched env, resolve_scene or load_scene; naruto-demo --mesh-units) to rescale it, "
+        "or rescale the file to metres. For a space that really is this large in metres, load "
+        "it with trimesh and pass naruto_gym.scenes.scene_from_trimesh(mesh) as scene= (a "
+        "Scene is not checked)"
     )
 
 

@@ -144,3 +144,21 @@ def test_real_scans_in_metres_load_and_read_as_millimetres_are_refused(tmp_path,
     mesh = trimesh.Trimesh(scene.vertices * 1000.0, scene.faces, process=False)
     with pytest.raises(ValueError, match="mesh_units='mm'"):
         load_scene(_write(tmp_path, mesh, f"{name}_mm"))
+
+
+def test_the_demo_refuses_a_millimetre_mesh_and_runs_it_with_mesh_units(tmp_path, capsys):
+    """``naruto-demo --scene room_mm.ply`` says what is wrong and which flag fixes it; with
+    that flag the same file runs."""
+    from naruto_agent.demo import main
+
+    path = _write(tmp_path, _room(ROOM_M, 1000.0), "room_mm")
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--scene", path, "--output-dir", str(tmp_path / "refused")])
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err
+    assert "likely in millimetres" in error and "--mesh-units" in error
+    assert not (tmp_path / "refused").exists()
+    flags = ["--policy", "random", "--max-episode-steps", "3", "--eval-points", "0",
+             "--gif-frames", "0", "--no-record", "--no-viewer", "--image-scale", "0.1"]
+    main(["--scene", path, "--mesh-units", "mm", *flags, "--output-dir", str(tmp_path / "ok")])
+    assert (tmp_path / "ok").is_dir()
