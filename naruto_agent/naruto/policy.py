@@ -144,7 +144,7 @@ class NarutoPolicy(Policy):
         self._new_map = False
         self._commanded: np.ndarray | None = None
         self._stalled = False
-        self.use_stall_watchdog(STALL_WATCHDOG)
+        self.use_stall_watchdog(STALL_WATCHDOG, enabled=self.config.stall_watchdog)
 
     # -- the episode's state, read-only ------------------------------------------------------
     @property

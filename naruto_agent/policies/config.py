@@ -86,6 +86,8 @@ class FrontierConfig:
         guard: the open-scan guard (surface, top and edge readings, held moves); frontier
             lets a move from the scan's margin through and, once ``max_held_moves`` were
             held at one spot, every move until the agent moves.
+        stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
+            recover from them; off by default until the scene suite is re-run with it on.
     """
 
     voxel_size_m: float = 0.1
@@ -111,6 +113,7 @@ class FrontierConfig:
     support_below_m: float = 3.0
     support_reach_m: float = 0.3
     guard: ScanGuardConfig = field(default_factory=_frontier_guard)
+    stall_watchdog: bool = False
 
     def __post_init__(self) -> None:
         check_integer("look_around_headings", self.look_around_headings, low=1)
@@ -139,6 +142,8 @@ class RandomConfig:
         guard: the open-scan guard; the walk also reads the open top from the panorama,
             probes the edge at a second, wider radius, and holds (turns in place) for
             ``max_held_moves`` steps before it sends the clear part of the move.
+        stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
+            recover from them; off by default until the scene suite is re-run with it on.
     """
 
     seed: int | None = None
@@ -151,6 +156,7 @@ class RandomConfig:
     max_redraws: int = 8
     sweep_headings: int = 16
     guard: ScanGuardConfig = field(default_factory=_random_guard)
+    stall_watchdog: bool = False
 
     def __post_init__(self) -> None:
         check_integer("min_run_steps", self.min_run_steps, low=1)
@@ -185,6 +191,8 @@ class PassiveConfig:
         loop_min_gain: when a closed loop added less coverage than this (a share, 0..1),
             the follower leaves that wall across the room to find another one (an island of
             furniture, or a room it would otherwise circle forever).
+        stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
+            recover from them (on: the wall follower's own rules miss spinning in place).
     """
 
     fit_to_budget: bool = True
@@ -201,6 +209,7 @@ class PassiveConfig:
     loop_min_steps: int = 80
     loop_close_m: float = 0.3
     loop_min_gain: float = 0.02
+    stall_watchdog: bool = True
 
     def __post_init__(self) -> None:
         check_number(

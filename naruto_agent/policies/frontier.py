@@ -90,7 +90,7 @@ class FrontierPolicy(Policy):
         self._last_target: np.ndarray | None = None
         self._wandering = False  # on a stall recovery's walk: the env, not the probes, decides
         self._wander_failed: list[np.ndarray] = []  # where refused walks of this episode led
-        self.use_stall_watchdog()
+        self.use_stall_watchdog(enabled=self.config.stall_watchdog)
 
     @property
     def scan_open(self) -> bool:

@@ -140,7 +140,7 @@ class PassivePolicy(Policy):
         self._height_offset = 0.0
         self._height_first = False
         self._height_first = False
-        self.use_stall_watchdog()
+        self.use_stall_watchdog(enabled=self.config.stall_watchdog)
 
     @property
     def replays(self) -> bool:

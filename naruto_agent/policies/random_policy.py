@@ -80,7 +80,7 @@ class RandomPolicy(Policy):
         self.turns_before_block = 0
         self.refused = RefusedMoves()
         self._stall_panorama: np.ndarray | None = None
-        self.use_stall_watchdog()
+        self.use_stall_watchdog(enabled=self.config.stall_watchdog)
 
     @property
     def held_steps(self) -> int:

@@ -38,7 +38,7 @@ def _episode(scene, name: str, seed: int, start_z: float | None = None, steps: i
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Path length, coverage and position after every step of one episode (started at height
     ``start_z`` when given, above the env's random start)."""
-    policy = make_policy(name)
+    policy = make_policy(name, stall_watchdog=True)
     env = gym.make("NarutoRecon-v0", scene=scene, image_scale=0.05, coverage_samples=1000,
                    panorama_shape=(32, 64), action_mode=policy.preferred_action_mode,
                    max_episode_steps=steps)

@@ -136,7 +136,7 @@ def test_every_shipped_policy_recovers_from_a_stall_and_moves_again(name):
     """The env is sent the agent's own pose, whatever the policy asks (as if each of its
     moves were refused in place), until the watchdog fires (within 20 steps); the policy's
     recovery then leaves the spot by more than 0.5 m within 15 steps."""
-    policy = make_policy(name)
+    policy = make_policy(name, stall_watchdog=True)
     env = gym.make(
         "NarutoRecon-v0",
         scene="replica_like_room",
@@ -166,3 +166,15 @@ def test_every_shipped_policy_recovers_from_a_stall_and_moves_again(name):
         action = policy.act(observation, info)
     assert farthest > 0.5, (name, policy.stall_events[-1])
     env.close()
+
+
+@pytest.mark.parametrize(
+    ("name", "default"),
+    [("passive", True), ("random", False), ("frontier", False), ("naruto", False)],
+)
+def test_the_watchdog_is_a_setting_of_every_shipped_policy(name, default):
+    """On by default for the wall follower (its own rules miss spinning in place), opt-in for
+    the others; ``stall_watchdog=`` turns it on or off either way."""
+    assert (make_policy(name).stall_watchdog is not None) is default
+    flipped = make_policy(name, stall_watchdog=not default)
+    assert (flipped.stall_watchdog is not None) is (not default)
