@@ -185,21 +185,8 @@ class GoalWalker:
         if abs(pitch) > 0.5 * self.turn_rad + 1e-6:
             # Walk with the camera level: a pitched one sees floor or ceiling only.
             return LOOK_DOWN if pitch > 0 else LOOK_UP
-        move, status = follow_path(
-            grid,
-            origin,
-            cell_m,
-            pose,
-            self.paths[i],
-            self.lengths[i],
-            self.cursors[i],
-            self.step_m,
-            self.turn_rad,
-            self.inflate,
-        )
-        if status == REPLAN:
-            self._plan(i)
-            move, status = follow_path(
+        def follow() -> tuple[int, int]:
+            return follow_path(
                 grid,
                 origin,
                 cell_m,
@@ -211,6 +198,11 @@ class GoalWalker:
                 self.turn_rad,
                 self.inflate,
             )
+
+        move, status = follow()
+        if status == REPLAN:
+            self._plan(i)  # the path ran into a newly seen obstacle: plan again, once
+            move, status = follow()
             if status == REPLAN:
                 move = TURN_LEFT
         if status == REACHED:
