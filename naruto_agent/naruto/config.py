@@ -86,8 +86,7 @@ class NarutoConfig:
     seed: int = 0
     """seed of the agent's randomness when ``reset`` gets none"""
     stall_watchdog: bool = False
-    """watch the agent for stalls (:mod:`naruto_agent.policies.watchdog`) and recover from
-    them; off by default until the scene suite is re-run with it on"""
+    """the stall watchdog of every shipped policy (off until the suite is re-run with it)"""
     guard: ScanGuardConfig = field(default_factory=ScanGuardConfig)
     """the open-scan guard: the panorama check, held moves, the scan's edge, the open sky"""
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
