@@ -7,8 +7,8 @@ the docs page (3 seeds, shipped scenes and the Replica sample beside the reposit
 
     python benchmarks/compare_policies.py \\
         --scenes replica_like_room apartment ../shared/scenes/replica_office0/mesh.ply \\
-        --policies passive random frontier naruto --seeds 0 1 2 --max-episode-steps 400 --workers 2 \\
-        --eval-points 1 --output-dir benchmarks/results/compare_policies
+        --policies passive random frontier naruto --seeds 0 1 2 --max-episode-steps 400 \\
+        --workers 2 --eval-points 1 --output-dir benchmarks/results/compare_policies
 
 Add ``--ray-address auto`` (or ``HOST:PORT``, or ``local``) to run the episodes as Ray tasks.
 Interrupt it at any time: finished episodes are kept and a rerun skips them.

@@ -44,8 +44,8 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
-from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
 from naruto_agent.cli_args import parse_dataclass_args
+from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
 from naruto_gym.rl.egocentric_map import VectorEgocentricMapObservation
 from naruto_gym.rl.explorer_env import EXPLORER_ENV, train_mix
 from naruto_gym.rl.explorer_sb3 import ExplorerFeaturesExtractor
