@@ -37,7 +37,7 @@ def test_a_remote_env_runner_steps_the_batched_env_and_ppo_trains(monkeypatch):
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
         [str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])]))
     example = _example()
-    args = example.Args(iterations=1, size=8, episode_steps=10, train_batch_size=64,
+    args = example.Args(iterations=1, size=8, max_episode_steps=10, train_batch_size=64,
                         minibatch_size=32, num_env_runners=1, num_envs_per_env_runner=4,
                         num_cpus=2, seed=0)
     ray, PPOConfig, register_env = example.import_rllib()  # noqa: N806
@@ -62,7 +62,7 @@ def test_a_remote_env_runner_steps_the_batched_env_and_ppo_trains(monkeypatch):
 @pytest.mark.slow
 def test_main_trains_in_the_driver_with_the_batched_env(capsys):
     example = _example()
-    results = example.main(example.Args(iterations=1, size=8, episode_steps=10,
+    results = example.main(example.Args(iterations=1, size=8, max_episode_steps=10,
                                         train_batch_size=40, minibatch_size=20,
                                         num_envs_per_env_runner=2, num_cpus=2))
     assert results[0]["env_runners"]["num_env_steps_sampled_lifetime"] >= 40
