@@ -41,6 +41,6 @@ echo "RLlib environment: $REQUIREMENT, $("$VENV_PYTHON" -c \
     'import gymnasium; print("gymnasium", gymnasium.__version__)')"
 # The RLlib tests, then the env, vector-env and learning-wrapper tests on the older Gymnasium.
 "$VENV_PYTHON" -m pytest -q -p no:cacheprovider \
-    tests/rl/test_rllib_example.py tests/rl/test_rllib_env.py \
+    tests/rl/test_rllib_example.py tests/rl/test_rllib_env.py tests/rl/test_rllib_explorer.py \
     tests/rl/test_learning_wrappers.py tests/envs/test_registered_envs.py \
     tests/vector/test_vector_env.py -k "not test_vector_env.py or autoreset or delta"
