@@ -11,6 +11,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from naruto_gym.geometry.egocentric import crop_cell, heading_axes
+
 #: Layers of the world grids: obstacles at the agent's height, space the rays crossed at the
 #: agent's height, surface the camera has seen (any height), cells the agent stood in.
 LAYERS = ("occupied", "free", "seen_surface", "trail")
@@ -157,21 +159,11 @@ def crop_scale(
     """Resample ``grid`` (cells of ``cell_m``) around the agent into ``out`` (5, c, c), the
     :data:`MAP_CHANNELS`: row 0 ahead, the agent at the centre, its heading up the image."""
     cells = out.shape[1]
-    fx, fy = pose[0, 2], pose[1, 2]
-    norm = np.sqrt(fx * fx + fy * fy)
-    if norm < 1e-6:
-        fx, fy = -pose[0, 1], -pose[1, 1]
-        norm = np.sqrt(fx * fx + fy * fy)
-    fx, fy = fx / norm, fy / norm
-    rx, ry = fy, -fx  # image right: the heading turned clockwise, seen from above
-    half = cells / 2.0
+    axes = heading_axes(pose)
     rows, columns = grid.shape[1], grid.shape[2]
     for r in range(cells):
-        ahead = (half - r - 0.5) * cell_m
         for c in range(cells):
-            right = (c + 0.5 - half) * cell_m
-            i = int(np.floor((pose[0, 3] + ahead * fx + right * rx - origin[0]) / cell_m))
-            j = int(np.floor((pose[1, 3] + ahead * fy + right * ry - origin[1]) / cell_m))
+            i, j = crop_cell(pose, axes, origin[0], origin[1], cell_m, cells, r, c)
             if i < 0 or j < 0 or i >= rows or j >= columns:
                 for channel in range(5):
                     out[channel, r, c] = 0

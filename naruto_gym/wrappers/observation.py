@@ -14,6 +14,8 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from naruto_gym.geometry.egocentric import crop_cell, heading_axes
+
 __all__ = [
     "MAP_OCCUPIED",
     "MAP_SEEN",
@@ -233,24 +235,11 @@ def _egocentric_crop(
     """Resample the world grid around the agent: row 0 ahead of it, the agent at the centre,
     its heading (optical axis in the horizontal plane) pointing up the image."""
     cells = out.shape[0]
-    fx, fy = pose[0, 2], pose[1, 2]
-    norm = np.sqrt(fx * fx + fy * fy)
-    if norm < 1e-6:
-        fx, fy = -pose[0, 1], -pose[1, 1]
-        norm = np.sqrt(fx * fx + fy * fy)
-    fx, fy = fx / norm, fy / norm
-    # Image right = heading turned clockwise (x right, viewed from above).
-    rx, ry = fy, -fx
-    half = cells / 2.0
+    axes = heading_axes(pose)
     rows, columns = grid.shape[1], grid.shape[2]
     for r in range(cells):
-        ahead = (half - r - 0.5) * cell_m
         for c in range(cells):
-            right = (c + 0.5 - half) * cell_m
-            wx = pose[0, 3] + ahead * fx + right * rx
-            wy = pose[1, 3] + ahead * fy + right * ry
-            i = int(np.floor((wx - origin_x) / cell_m))
-            j = int(np.floor((wy - origin_y) / cell_m))
+            i, j = crop_cell(pose, axes, origin_x, origin_y, cell_m, cells, r, c)
             if i < 0 or j < 0 or i >= rows or j >= columns:
                 out[r, c, 0] = 0
                 out[r, c, 1] = 0
