@@ -20,6 +20,20 @@ SETTINGS = {
 }
 
 
+def save_tiny_model(venv, path) -> None:
+    """An untrained PPO model over the package's features extractor, saved at ``path``."""
+    PPO(
+        "MultiInputPolicy",
+        venv,
+        n_steps=8,
+        batch_size=16,
+        policy_kwargs={
+            "features_extractor_class": NarutoFeaturesExtractor,
+            "features_extractor_kwargs": {"features_dim": 32},
+        },
+    ).save(path)
+
+
 def test_adapter_steps_like_sb3_expects():
     venv = make_sb3_vec_env(3, size=32, top_down_map=True, **SETTINGS)
     observations = venv.reset()
@@ -72,16 +86,7 @@ def test_saved_model_acts_as_a_harness_policy(tmp_path):
 
     camera = PinholeCamera().scaled(0.05)
     venv = make_sb3_vec_env(2, size=32, camera=camera, coverage_samples=2000, max_episode_steps=5)
-    PPO(
-        "MultiInputPolicy",
-        venv,
-        n_steps=8,
-        batch_size=16,
-        policy_kwargs={
-            "features_extractor_class": NarutoFeaturesExtractor,
-            "features_extractor_kwargs": {"features_dim": 32},
-        },
-    ).save(tmp_path / "m")
+    save_tiny_model(venv, tmp_path / "m")
     env = gym.make(
         "NarutoRecon-v0",
         action_mode="discrete",
@@ -110,16 +115,7 @@ def test_a_model_trained_with_the_map_acts_with_the_map_it_builds(tmp_path):
     venv = make_sb3_vec_env(
         2, size=32, top_down_map=True, camera=camera, coverage_samples=2000, max_episode_steps=5
     )
-    PPO(
-        "MultiInputPolicy",
-        venv,
-        n_steps=8,
-        batch_size=16,
-        policy_kwargs={
-            "features_extractor_class": NarutoFeaturesExtractor,
-            "features_extractor_kwargs": {"features_dim": 32},
-        },
-    ).save(tmp_path / "m")
+    save_tiny_model(venv, tmp_path / "m")
     settings = {
         "action_mode": "discrete",
         "camera": camera,
