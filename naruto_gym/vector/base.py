@@ -223,8 +223,7 @@ class BatchedEnvBase(gym.vector.VectorEnv):
     def panorama_camera(self) -> EquirectangularCamera | None:
         """One agent's observation panorama camera (None when the panorama is off; made
         once)."""
-        shape = self.settings.panorama_shape
-        return EquirectangularCamera(*shape) if shape is not None else None
+        return self.settings.panorama_camera
 
     @property
     def num_workers(self) -> int:
