@@ -78,6 +78,15 @@ class EquirectangularCamera:
         start, stop = self.cast_rows
         return self.ray_directions[start * self.width : stop * self.width]
 
+    def keep_cast_rows(self, panorama: np.ndarray) -> np.ndarray:
+        """``panorama`` (``(..., H, W)``, e.g. a full one) as this camera gives it: a copy with
+        the rows it does not cast set to 0. A user trained on the band (a policy) sees the
+        same input from an env that casts every row."""
+        start, stop = self.cast_rows
+        kept = np.zeros_like(np.asarray(panorama))
+        kept[..., start:stop, :] = np.asarray(panorama)[..., start:stop, :]
+        return kept
+
     @cached_property
     def ray_directions(self) -> np.ndarray:
         """(H * W, 3) float32 unit world directions, row-major over (v, u)."""

@@ -48,6 +48,10 @@ def test_batched_band_panorama_equals_the_full_panoramas_rows_and_casts_fewer_ra
         assert whole["panorama"][:, :start].any()  # the full one does see above the band
         assert np.array_equal(whole["depth"], cut["depth"])
         assert np.array_equal(whole["pose"], cut["pose"])
+        # What a policy trained on the band makes of the full env's panorama.
+        np.testing.assert_array_equal(
+            band.panorama_camera.keep_cast_rows(whole["panorama"]), cut["panorama"]
+        )
         if step < len(moves):
             observed = [full.step(moves[step])[0], band.step(moves[step])[0]]
     assert band.rays_cast < full.rays_cast
