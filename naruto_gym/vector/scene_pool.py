@@ -32,8 +32,8 @@ from naruto_gym.vector.shared_scenes import SharedSceneStreams, group_generator,
 @dataclass
 class _Group:
     """A :class:`SharedSceneStreams` group's state: its stream, its agents, the episodes
-    started in a scene before the next, its scene generator, its current scene's key and
-    the episodes started in it."""
+    started in a scene before the next, its scene generator, its current scene's key, the
+    episodes started in it, and the runtime it holds."""
 
     stream: ProceduralSceneSpec
     agents: range
@@ -41,6 +41,9 @@ class _Group:
     generator: np.random.Generator | None = None
     key: tuple | None = None
     started: int = 0
+    #: The runtime of the scene it last gave an agent, and that scene's key.
+    held: SceneRuntime | None = None
+    held_key: tuple | None = None
 
 
 class ScenePool:
@@ -215,7 +218,7 @@ class ScenePool:
         missing = {
             key: self._streams[agent]
             for agent, key in zip(agents, keys, strict=True)
-            if key is not None and key not in self._cache
+            if key is not None and key not in self._cache and self._held(agent, key) is None
         }
         built: dict[tuple, SceneRuntime] = {}
         if len(missing) > 1 and threads > 1:
@@ -227,8 +230,21 @@ class ScenePool:
 
             run_parallel(build, min(threads, len(missing)))
         for agent, key in zip(agents, keys, strict=True):
-            if key is not None:
-                self._runtimes[agent] = self._cached(key, self._streams[agent], built)
+            if key is None:
+                continue
+            runtime = self._held(agent, key) or self._cached(key, self._streams[agent], built)
+            group = self._group_of[agent]
+            if group is not None:
+                group.held, group.held_key = runtime, key
+            self._runtimes[agent] = runtime
+
+    def _held(self, agent: int, key: tuple) -> SceneRuntime | None:
+        """The runtime of scene ``key`` held by ``agent``'s group (it keeps its scene's
+        runtime whatever the cache lets go), None when it holds another."""
+        group = self._group_of[agent]
+        if group is None or group.held_key != key:
+            return None
+        return group.held
 
     def _reseed_groups(self, agents: np.ndarray, seeds: list[int | None]) -> None:
         """Seed the generator of each group whose agents all reset with seeds, from its first
@@ -257,8 +273,11 @@ class ScenePool:
         return group.key
 
     def clear(self) -> None:
-        """Let go of every agent's runtime."""
+        """Let go of every agent's runtime (and every group's)."""
         self._runtimes = [None] * len(self._runtimes)
+        for group in self._group_of:
+            if group is not None:
+                group.held = group.held_key = None
 
     def _cached(
         self,

@@ -90,7 +90,7 @@ class NarutoReconVectorEnv(BatchedEnvBase):
       ``AutoresetMode.SAME_STEP`` (the final observation and info go in ``info["final_obs"]``
       / ``info["final_info"]``, as Stable-Baselines3 expects).
     * ``scene_cache_size``: generated scenes kept in memory for reuse (stream scenes only;
-      with ``SharedSceneStreams`` at least one per group keeps every group's scene).
+      a ``SharedSceneStreams`` group holds its current scene besides).
     * ``pinhole_backend``: as for ``NarutoReconEnv``, but ``"auto"`` by default: the
       rasterizer up to ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED`` triangles per pixel (a
       higher limit than for one frame, as drawing many frames at once pays off on denser

@@ -73,6 +73,16 @@ def test_a_group_keeps_its_scene_for_its_episodes_then_draws_the_next():
     env.close()
 
 
+def test_an_agent_reset_alone_joins_its_groups_scene_whatever_the_cache_keeps():
+    env = NarutoReconVectorEnv(4, scene=rooms(), scene_cache_size=0, **TINY)
+    env.reset(seed=2)
+    before = env.scene_runtimes
+    env.reset(options={"reset_mask": np.array([False, True, False, False])})
+    after = env.scene_runtimes
+    assert after[1] is after[0] is before[0]  # the same runtime, not a second build
+    env.close()
+
+
 def test_the_reset_seed_gives_the_same_scenes_and_episodes():
     runs = []
     for seed in (3, 3, 4):
