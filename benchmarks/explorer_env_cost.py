@@ -11,15 +11,18 @@ three configurations:
 * after: shared scenes, and only the panorama rows within ``panorama_horizon_deg`` of the
   horizon (the rows the explorer's map reads).
 
-For each it times the bare batched env (random forward / turn moves, no wrapper, no learner)
-over ``max_episode_steps + 20`` steps per agent after a warm-up, crossing one episode end with
-its new scenes; for the first and last it also times training end to end: Stable-Baselines3
-PPO through the map and goal wrappers for one rollout that crosses an episode end, and its
-update (``train_explorer.main``, whose ``profile`` splits the time). It writes env steps per
-second of wall-clock time and per CPU second of this process, their ratios to the bare
-"before" env, and each training run's ratio to its own bare env. On a machine shared with
-other work the wall-clock rates follow the load from one part of the run to the next; the
-rates per CPU second do not, and their ratios are the ones to read.
+The machine this runs on is shared with other work whose load changes from minute to minute,
+so the configurations are timed interleaved, each seeing the same load:
+
+* the bare batched env (random forward / turn moves, no wrapper, no learner): one env per
+  configuration, stepped in turn ``chunk_steps`` steps at a time, ``max_episode_steps + 20``
+  steps per agent after a warm-up, so that each crosses one episode end with its new scenes;
+* training end to end, for "before" and "after": Stable-Baselines3 PPO through the map and
+  goal wrappers (``train_explorer.main``) for one rollout that crosses an episode end and its
+  update, in the order before, after, after, before; its profile splits the time (the env's
+  share of it is how far training falls below its own env, measured under one load).
+
+It writes env steps per second, their ratios to "before", and the profiles.
 
     nice -n 10 python benchmarks/explorer_env_cost.py
 """
@@ -54,6 +57,8 @@ class Args:
     timed run crosses, the dearest case (training's default of 4 builds a quarter as often)"""
     panorama_horizon_deg: float = EXPLORER_PANORAMA_HORIZON_DEG
     """the panorama band of the "after" configuration (the rows the explorer's map reads)"""
+    chunk_steps: int = 10
+    """bare env steps of one configuration before the next takes its turn"""
     train: bool = True
     """also time PPO training end to end in the before and after configurations"""
     output_file: str = "benchmarks/results/explorer_short/env_configs.json"
@@ -96,69 +101,76 @@ def training_args(args: Args, options: dict[str, Any], output_dir: str) -> train
     )
 
 
-def bare_rate(settings: train_explorer.Args) -> tuple[float, float]:
-    """Env steps per second of wall-clock time and per CPU second of the bare batched env
-    over one episode end."""
-    env = train_explorer.make_batched_env(settings)
-    env.reset(seed=0)
-    steps = settings.max_episode_steps
-    moves = np.random.default_rng(0).choice([0, 6, 7], size=(steps + 40, settings.num_envs))
-    for step in range(20):  # warm-up: compiled loops
-        env.step(moves[step])
-    started, cpu_started = time.perf_counter(), time.process_time()
-    for step in range(20, steps + 40):
-        env.step(moves[step])
-    wall, cpu = time.perf_counter() - started, time.process_time() - cpu_started
-    env.close()
-    return settings.num_envs * (steps + 20) / wall, settings.num_envs * (steps + 20) / cpu
+def bare_rates(args: Args, scratch: str) -> dict[str, float]:
+    """Env steps per second of each configuration's bare batched env over one episode end,
+    the envs stepped in turn ``chunk_steps`` steps at a time."""
+    envs = {
+        name: train_explorer.make_batched_env(training_args(args, options, scratch))
+        for name, options in configurations(args).items()
+    }
+    steps = args.max_episode_steps + 20
+    moves = np.random.default_rng(0).choice([0, 6, 7], size=(steps + 20, args.num_envs))
+    for env in envs.values():
+        env.reset(seed=0)
+        for step in range(20):  # warm-up: compiled loops
+            env.step(moves[step])
+    seconds = dict.fromkeys(envs, 0.0)
+    for first in range(20, steps + 20, args.chunk_steps):
+        for name, env in envs.items():
+            started = time.perf_counter()
+            for step in range(first, min(first + args.chunk_steps, steps + 20)):
+                env.step(moves[step])
+            seconds[name] += time.perf_counter() - started
+    for env in envs.values():
+        env.close()
+    return {name: args.num_envs * steps / seconds[name] for name in envs}
+
+
+def training_profiles(args: Args, scratch: str) -> dict[str, list[dict[str, Any]]]:
+    """The profiles of one-rollout training runs of "before" and "after", in the order
+    before, after, after, before."""
+    names = list(configurations(args))
+    ends = [names[0], names[-1]]
+    profiles: dict[str, list[dict[str, Any]]] = {name: [] for name in ends}
+    for name in [*ends, *reversed(ends)]:
+        options = configurations(args)[name]
+        profile = train_explorer.main(training_args(args, options, scratch))["profile"]
+        profiles[name].append(profile)
+        print(f"{name}: training {profile['env_steps_per_s']} env steps/s", flush=True)
+    return profiles
 
 
 def ratios(rates: dict[str, float], base: float) -> dict[str, float]:
-    return {name: round(rate / base, 3) for name, rate in rates.items()}
+    return {name: round(rate / base, 2) for name, rate in rates.items()}
 
 
 def main(args: Args) -> dict:
-    bare_wall: dict[str, float] = {}
-    bare_cpu: dict[str, float] = {}
-    trained: dict[str, dict[str, Any]] = {}
     names = list(configurations(args))
     with tempfile.TemporaryDirectory() as scratch:
-        for name, options in configurations(args).items():
-            settings = training_args(args, options, scratch)
-            bare_wall[name], bare_cpu[name] = bare_rate(settings)
-            print(
-                f"{name}: bare env {bare_wall[name]:.1f} env steps/s, "
-                f"{bare_cpu[name]:.1f} per CPU second",
-                flush=True,
-            )
-            if args.train and name in (names[0], names[-1]):
-                trained[name] = train_explorer.main(settings)["profile"]
-                print(
-                    f"{name}: training {trained[name]['env_steps_per_s']} env steps/s, "
-                    f"{trained[name]['env_steps_per_cpu_s']} per CPU second",
-                    flush=True,
-                )
+        bare = bare_rates(args, scratch)
+        for name, rate in bare.items():
+            print(f"{name}: bare env {rate:.1f} env steps/s", flush=True)
+        trained = training_profiles(args, scratch) if args.train else {}
     summary: dict[str, Any] = {
         "args": asdict(args),
         "load_end": os.getloadavg(),
-        "bare_env_steps_per_cpu_s": {k: round(v, 1) for k, v in bare_cpu.items()},
-        "bare_env_steps_per_s": {k: round(v, 1) for k, v in bare_wall.items()},
-        "bare_ratio_to_before_cpu": ratios(bare_cpu, bare_cpu[names[0]]),
-        "bare_ratio_to_before_wall": ratios(bare_wall, bare_wall[names[0]]),
+        "bare_env_steps_per_s": {k: round(v, 1) for k, v in bare.items()},
+        "bare_ratio_to_before": ratios(bare, bare[names[0]]),
     }
     if trained:
-        cpu = {k: p["env_steps_per_cpu_s"] for k, p in trained.items()}
-        wall = {k: p["env_steps_per_s"] for k, p in trained.items()}
-        summary["training_env_steps_per_cpu_s"] = cpu
-        summary["training_env_steps_per_s"] = wall
-        summary["training_ratio_to_own_bare_env_cpu"] = {
-            k: round(v / bare_cpu[k], 3) for k, v in cpu.items()
+        # Both runs of a configuration together: their steps over their seconds.
+        rates = {
+            name: sum(p["env_steps"] for p in runs) / sum(p["wall_seconds"] for p in runs)
+            for name, runs in trained.items()
         }
-        summary["training_ratio_to_own_bare_env_wall"] = {
-            k: round(v / bare_wall[k], 3) for k, v in wall.items()
+        summary["training_env_steps_per_s"] = {k: round(v, 1) for k, v in rates.items()}
+        summary["training_ratio_to_before"] = ratios(rates, rates[names[0]])
+        summary["training_env_share"] = {
+            name: round(
+                sum(p["seconds"]["env"] for p in runs) / sum(p["wall_seconds"] for p in runs), 3
+            )
+            for name, runs in trained.items()
         }
-        summary["training_ratio_after_to_before_cpu"] = round(cpu[names[-1]] / cpu[names[0]], 2)
-        summary["training_ratio_after_to_before_wall"] = round(wall[names[-1]] / wall[names[0]], 2)
         summary["training_profiles"] = trained
     Path(args.output_file).parent.mkdir(parents=True, exist_ok=True)
     Path(args.output_file).write_text(json.dumps(summary, indent=1) + "\n")

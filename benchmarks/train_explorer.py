@@ -207,6 +207,8 @@ class LearningCurve(BaseCallback):
         self.mark = time.perf_counter()
         self.started = time.perf_counter()
         self.ended: float | None = None
+        self.env_seconds_at_start = 0.0
+        self.chain_seconds_at_start = 0.0
         # This process's CPU time too: on a machine shared with other work, rates per CPU
         # second compare runs where wall-clock rates follow the load.
         self.cpu_started = time.process_time()
@@ -215,7 +217,13 @@ class LearningCurve(BaseCallback):
         self.steps_at_start: int | None = None
 
     def _on_training_start(self) -> None:
+        # The clocks start after the first reset (its scenes built once per run, not per
+        # step); the profile counts the env's and the wrappers' seconds from here too.
         self.steps_at_start = self.num_timesteps
+        self.started = self.mark = time.perf_counter()
+        self.cpu_started = time.process_time()
+        self.env_seconds_at_start = self.bare.seconds
+        self.chain_seconds_at_start = self.chain.seconds
 
     def _on_training_end(self) -> None:
         self.ended = time.perf_counter()
@@ -284,10 +292,11 @@ class LearningCurve(BaseCallback):
         forward passes and the PPO update, and env steps per second end to end."""
         total = (self.ended or time.perf_counter()) - self.started
         cpu = (self.cpu_ended or time.process_time()) - self.cpu_started
-        wrappers = self.chain.seconds - self.bare.seconds
+        env = self.bare.seconds - self.env_seconds_at_start
+        wrappers = self.chain.seconds - self.chain_seconds_at_start - env
         forward = self.forward_seconds
         parts = {
-            "env": self.bare.seconds,
+            "env": env,
             "map_and_goal_wrappers": wrappers,
             "policy_forward_and_sb3": forward,
             "ppo_update": self.update_seconds,
@@ -301,7 +310,7 @@ class LearningCurve(BaseCallback):
             "env_steps_per_s": round(steps / max(total, 1e-9), 1),
             "cpu_seconds": round(cpu, 1),
             "env_steps_per_cpu_s": round(steps / max(cpu, 1e-9), 1),
-            "wrapper_cost_per_env_step_over_env": round(wrappers / max(self.bare.seconds, 1e-9), 3),
+            "wrapper_cost_per_env_step_over_env": round(wrappers / max(env, 1e-9), 3),
             "load_end": os.getloadavg(),
         }
 
