@@ -31,13 +31,14 @@ from naruto_gym.vector.shared_scenes import SharedSceneStreams, group_generator,
 
 @dataclass
 class _Group:
-    """A :class:`SharedSceneStreams` group's state: its stream, its agents, the episodes
-    started in a scene before the next, its scene generator, its current scene's key, the
-    episodes started in it, and the runtime it holds."""
+    """A :class:`SharedSceneStreams` group's state: its stream, its agents, the episodes its
+    agents start in a scene before the next (agents times ``episodes_per_scene``), its scene
+    generator, its current scene's key, the episodes started in it, and the runtime it
+    holds."""
 
     stream: ProceduralSceneSpec
     agents: range
-    episodes_per_scene: int
+    starts_per_scene: int
     generator: np.random.Generator | None = None
     key: tuple | None = None
     started: int = 0
@@ -128,11 +129,6 @@ class ScenePool:
     def has_streams(self) -> bool:
         """Whether some agent draws new generated scenes (every episode, or with its group)."""
         return any(self._streams)
-
-    @property
-    def shares_scenes(self) -> bool:
-        """Whether the agents are in :class:`SharedSceneStreams` groups."""
-        return any(group is not None for group in self._group_of)
 
     @property
     def cached(self) -> int:
@@ -265,7 +261,7 @@ class ScenePool:
     def _group_key(self, group: _Group) -> tuple:
         """The key of the scene the next agent of ``group`` to reset starts in: the group's
         scene, or the next of its stream once the group has had its episodes there."""
-        if group.key is None or group.started >= group.episodes_per_scene:
+        if group.key is None or group.started >= group.starts_per_scene:
             stream = group.stream
             group.key = (stream.kind, stream.draw_seed(group.generator), stream.openings)
             group.started = 0
