@@ -1,8 +1,15 @@
 """PPO over the egocentric map with goal actions. Results: docs/benchmarks/explorer.md
 
-Stable-Baselines3 PPO on the batched env, a new generated scene every episode, the agents
-mixed over the closed and open variants of the suite's small and apartment classes
-(:data:`naruto_gym.rl.explorer_env.TRAIN_MIX`). The agent sees the egocentric map (occupied,
+Stable-Baselines3 PPO on the batched env, on generated scenes of the closed and open variants
+of the suite's small and apartment classes (:data:`naruto_gym.rl.explorer_env.TRAIN_MIX`):
+the agents in groups of ``agents_per_scene`` that share a scene for ``episodes_per_scene``
+episodes, then the next of their stream (:func:`naruto_gym.rl.explorer_env.shared_train_mix`;
+``--no-shared-scenes``: every agent draws and builds a scene of its own every episode, the
+dearer way). ``--panorama-horizon-deg 30`` casts only the panorama rows the map reads (a
+third of the rays); it is saved with the model's settings, and the policy must then be shown
+the same band at evaluation (``EquirectangularCamera.keep_cast_rows``).
+
+The agent sees the egocentric map (occupied,
 free, seen surface, frontier and trail, near and far, :mod:`naruto_gym.rl.egocentric_map`),
 the depth panorama and its pose relative to the start; every ``steps_per_goal`` env steps it
 picks a goal on the far map (or a repeated discrete move), which a planner over its own map
@@ -47,11 +54,11 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
 from naruto_gym.rl.egocentric_map import VectorEgocentricMapObservation
-from naruto_gym.rl.explorer_env import EXPLORER_ENV, train_mix
+from naruto_gym.rl.explorer_env import EXPLORER_ENV, shared_train_mix, train_mix
 from naruto_gym.rl.explorer_sb3 import ExplorerFeaturesExtractor
 from naruto_gym.rl.goal_actions import VectorGoalActions
 from naruto_gym.rl.sb3 import Sb3VecEnv
-from naruto_gym.vector.vector_env import NarutoReconVectorEnv
+from naruto_gym.vector import make_vector_env
 
 
 @dataclass
@@ -88,6 +95,17 @@ class Args:
     """torch threads (the env uses the other core)"""
     env_threads: int = 1
     """threads of the env's compiled loops"""
+    shared_scenes: bool = True
+    """agents in groups on shared scenes, each kept for episodes_per_scene episodes (a scene
+    built once for many episodes, a group's rays cast in one call); --no-shared-scenes: every
+    agent draws and builds its own scene every episode"""
+    agents_per_scene: int = 4
+    """agents sharing a scene (num_envs = 4 * agents_per_scene gives each train stream a group)"""
+    episodes_per_scene: int = 4
+    """episodes each agent plays in a shared scene before its group draws the next"""
+    panorama_horizon_deg: float | None = None
+    """cast only the panorama rows within this elevation of the horizon (30: the rows the map
+    reads, a third of the rays; None: every row); the policy must see the same band"""
     checkpoint_every: int = 200_000
     """env steps between checkpoints"""
     max_hours: float | None = None
@@ -120,17 +138,22 @@ class Timed(gym.vector.VectorWrapper):
             self.seconds += time.perf_counter() - started
 
 
-def make_env(args: Args) -> tuple[Sb3VecEnv, Timed, Timed]:
-    """The training env, with timers around the bare env and around the whole chain."""
-    settings = {**EXPLORER_ENV, "threads": args.env_threads}
-    env = NarutoReconVectorEnv(
+def make_batched_env(args: Args) -> gym.vector.VectorEnv:
+    """The bare batched env the explorer trains in (in this process: the learner takes the
+    other core)."""
+    return make_vector_env(
         args.num_envs,
-        scene=train_mix(args.num_envs),
+        workers=1,
+        scene=training_scenes(args),
         max_episode_steps=args.max_episode_steps,
         autoreset_mode=AutoresetMode.SAME_STEP,
-        **settings,
+        **env_settings(args),
     )
-    bare = Timed(env)
+
+
+def make_env(args: Args) -> tuple[Sb3VecEnv, Timed, Timed]:
+    """The training env, with timers around the bare env and around the whole chain."""
+    bare = Timed(make_batched_env(args))
     chain = Timed(
         VectorGoalActions(
             VectorEgocentricMapObservation(bare),
@@ -140,6 +163,28 @@ def make_env(args: Args) -> tuple[Sb3VecEnv, Timed, Timed]:
         )
     )
     return Sb3VecEnv(chain), bare, chain
+
+
+def training_scenes(args: Args) -> Any:
+    """The batched env's ``scene``: the train mix on shared scenes, or one stream per agent."""
+    if args.shared_scenes:
+        return shared_train_mix(args.agents_per_scene, args.episodes_per_scene)
+    return train_mix(args.num_envs)
+
+
+def agent_streams(args: Args) -> list[str]:
+    """Each agent's train stream (for the learning curve's per-kind columns)."""
+    scenes = training_scenes(args)
+    return scenes.agent_streams(args.num_envs) if args.shared_scenes else scenes
+
+
+def env_settings(args: Args) -> dict[str, Any]:
+    """The batched env's settings: the explorer's, the threads and the panorama band."""
+    return {
+        **EXPLORER_ENV,
+        "threads": args.env_threads,
+        "panorama_horizon_deg": args.panorama_horizon_deg,
+    }
 
 
 class LearningCurve(BaseCallback):
@@ -152,7 +197,7 @@ class LearningCurve(BaseCallback):
         self.args = args
         self.path = Path(args.output_dir) / "learning_curve.csv"
         self.bare, self.chain = bare, chain
-        self.kinds = train_mix(args.num_envs)
+        self.kinds = agent_streams(args)
         self.finished: list[tuple[str, float]] = []
         self.refusals = 0
         self.rollouts = first_row
@@ -161,10 +206,30 @@ class LearningCurve(BaseCallback):
         self.update_seconds = 0.0
         self.mark = time.perf_counter()
         self.started = time.perf_counter()
+        self.ended: float | None = None
+        self.env_seconds_at_start = 0.0
+        self.chain_seconds_at_start = 0.0
+        # This process's CPU time too: on a machine shared with other work, rates per CPU
+        # second compare runs where wall-clock rates follow the load.
+        self.cpu_started = time.process_time()
+        self.cpu_ended: float | None = None
+        self.in_rollout = False
         self.steps_at_start: int | None = None
 
     def _on_training_start(self) -> None:
+        # The clocks start after the first reset (its scenes built once per run, not per
+        # step); the profile counts the env's and the wrappers' seconds from here too.
         self.steps_at_start = self.num_timesteps
+        self.started = self.mark = time.perf_counter()
+        self.cpu_started = time.process_time()
+        self.env_seconds_at_start = self.bare.seconds
+        self.chain_seconds_at_start = self.chain.seconds
+
+    def _on_training_end(self) -> None:
+        self.ended = time.perf_counter()
+        self.cpu_ended = time.process_time()
+        if not self.in_rollout:  # the last update (none when stopped inside a rollout)
+            self.update_seconds += self.ended - self.mark
 
     def _on_rollout_start(self) -> None:
         now = time.perf_counter()
@@ -172,6 +237,7 @@ class LearningCurve(BaseCallback):
             self.update_seconds += now - self.mark
         self.mark = now
         self.chain_mark = self.chain.seconds
+        self.in_rollout = True
 
     def _on_step(self) -> bool:
         for i, (info, done) in enumerate(
@@ -189,6 +255,7 @@ class LearningCurve(BaseCallback):
         now = time.perf_counter()
         self.forward_seconds += now - self.mark - (self.chain.seconds - self.chain_mark)
         self.mark = now
+        self.in_rollout = False
         self.rollouts += 1
         hours = (now - self.started) / 3600
         steps = (self.num_timesteps - (self.steps_at_start or 0)) * self.args.steps_per_goal
@@ -223,11 +290,13 @@ class LearningCurve(BaseCallback):
     def profile(self) -> dict[str, Any]:
         """Where the time went: seconds and shares of the env, the wrappers, the policy's
         forward passes and the PPO update, and env steps per second end to end."""
-        total = time.perf_counter() - self.started
-        wrappers = self.chain.seconds - self.bare.seconds
+        total = (self.ended or time.perf_counter()) - self.started
+        cpu = (self.cpu_ended or time.process_time()) - self.cpu_started
+        env = self.bare.seconds - self.env_seconds_at_start
+        wrappers = self.chain.seconds - self.chain_seconds_at_start - env
         forward = self.forward_seconds
         parts = {
-            "env": self.bare.seconds,
+            "env": env,
             "map_and_goal_wrappers": wrappers,
             "policy_forward_and_sb3": forward,
             "ppo_update": self.update_seconds,
@@ -239,7 +308,9 @@ class LearningCurve(BaseCallback):
             "env_steps": steps,
             "wall_seconds": round(total, 1),
             "env_steps_per_s": round(steps / max(total, 1e-9), 1),
-            "wrapper_cost_per_env_step_over_env": round(wrappers / max(self.bare.seconds, 1e-9), 3),
+            "cpu_seconds": round(cpu, 1),
+            "env_steps_per_cpu_s": round(steps / max(cpu, 1e-9), 1),
+            "wrapper_cost_per_env_step_over_env": round(wrappers / max(env, 1e-9), 3),
             "load_end": os.getloadavg(),
         }
 
@@ -252,6 +323,7 @@ def explorer_settings(args: Args) -> dict[str, Any]:
         "primitive_actions": args.primitive_actions,
         "map_options": {},
         "panorama_shape": list(EXPLORER_ENV["panorama_shape"]),
+        "panorama_horizon_deg": args.panorama_horizon_deg,
     }
 
 

@@ -117,6 +117,10 @@ class NarutoReconEnv(gym.Env):
     * ``image_scale``: resolution factor applied to ``camera`` (0.25 gives 170 x 300).
     * ``max_depth_m``: sensor range (10 m).
     * ``panorama_shape``: ``(h, w)`` of the panorama observation, None to switch it off.
+    * ``panorama_horizon_deg``: cast only the panorama rows within this many degrees of
+      elevation of the horizon, for a user that reads only those (such as a top-down map at
+      the agent's height; a third of the rays at 30 degrees); the other rows read 0 and
+      ``panorama_no_hit_share`` counts the rows cast. None (default): every row.
     * ``agent_radius_m``, ``max_translation_m``, ``max_rotation_deg``: body and step limits
       (0.05 m, 0.1 m, 20 degrees).
     * ``escape_rule``: how a move that would leave the scanned space is told apart
@@ -182,6 +186,7 @@ class NarutoReconEnv(gym.Env):
         image_scale: float = 1.0,
         max_depth_m: float = 10.0,
         panorama_shape: tuple[int, int] | None = (64, 128),
+        panorama_horizon_deg: float | None = None,
         agent_radius_m: float = 0.05,
         max_translation_m: float = 0.1,
         max_rotation_deg: float = 20.0,
@@ -207,6 +212,7 @@ class NarutoReconEnv(gym.Env):
             image_scale=image_scale,
             max_depth_m=max_depth_m,
             panorama_shape=panorama_shape,
+            panorama_horizon_deg=panorama_horizon_deg,
             agent_radius_m=agent_radius_m,
             max_translation_m=max_translation_m,
             max_rotation_deg=max_rotation_deg,
@@ -482,5 +488,6 @@ class NarutoReconEnv(gym.Env):
             "step": self._step_count,
         }
         if self._panorama is not None:
-            info["panorama_no_hit_share"] = no_hit_share(self._panorama)
+            start, stop = self.panorama_camera.cast_rows  # the rows not cast say nothing
+            info["panorama_no_hit_share"] = no_hit_share(self._panorama[start:stop])
         return info

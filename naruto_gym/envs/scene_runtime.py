@@ -24,7 +24,6 @@ from naruto_gym.motion.collision import CollisionChecker
 from naruto_gym.observability import ObservableSurface, sample_free_positions
 from naruto_gym.rendering.topdown import TopDownMap
 from naruto_gym.scenes.mesh_scene import Scene, check_mesh_area
-from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.pinhole import RgbdRenderer
 from naruto_gym.sensors.raycaster import RayCaster
 
@@ -43,8 +42,8 @@ def observation_space(settings: EnvSettings) -> spaces.Dict:
         ),
         "pose": spaces.Box(-np.inf, np.inf, (4, 4), np.float32),
     }
-    if settings.panorama_shape is not None:
-        panorama = EquirectangularCamera(*settings.panorama_shape)
+    panorama = settings.panorama_camera
+    if panorama is not None:
         observation_spaces["panorama"] = spaces.Box(
             0.0, np.inf, (panorama.height, panorama.width), np.float32
         )
@@ -95,8 +94,7 @@ class SceneRuntime:
         )
         if auto_max_triangles_per_pixel is not None:
             self.renderer.auto_max_triangles_per_pixel = auto_max_triangles_per_pixel
-        shape = settings.panorama_shape
-        self.panorama_camera = EquirectangularCamera(*shape) if shape is not None else None
+        self.panorama_camera = settings.panorama_camera
         self.collision = CollisionChecker(
             self.raycaster,
             self.bounds,

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from naruto_gym.envs.validation import check_settings
+from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import resolve_threads
 
@@ -44,6 +45,7 @@ class EnvSettings:
     image_scale: float = 1.0
     max_depth_m: float = 10.0
     panorama_shape: tuple[int, int] | None = (64, 128)
+    panorama_horizon_deg: float | None = None
     agent_radius_m: float = 0.05
     max_translation_m: float = 0.1
     max_rotation_deg: float = 20.0
@@ -69,6 +71,14 @@ class EnvSettings:
         """The camera at ``image_scale`` times its resolution (the default camera if None)."""
         camera = self.camera or PinholeCamera()
         return camera.scaled(self.image_scale) if self.image_scale != 1.0 else camera
+
+    @property
+    def panorama_camera(self) -> EquirectangularCamera | None:
+        """The observation panorama's camera: ``panorama_shape``, the rows cast by
+        ``panorama_horizon_deg`` (None when the panorama is off)."""
+        if self.panorama_shape is None:
+            return None
+        return EquirectangularCamera(*self.panorama_shape, horizon_deg=self.panorama_horizon_deg)
 
     @property
     def max_rotation_rad(self) -> float:

@@ -15,6 +15,7 @@ from naruto_gym.motion.actions import ACTION_MODES
 from naruto_gym.motion.collision import ESCAPE_RULES
 from naruto_gym.scenes.mesh_scene import UP_AXES
 from naruto_gym.scenes.units import MESH_UNITS
+from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.pinhole import PINHOLE_BACKENDS, PinholeCamera
 from naruto_gym.sensors.raycaster import RAYCASTER_BACKENDS
 from naruto_gym.utils.checks import (
@@ -88,6 +89,19 @@ def check_settings(settings: Any) -> None:
         )
     check_number("max_depth_m", settings.max_depth_m, low=0.0, high=MAX_LENGTH_M)
     check_panorama_shape(settings.panorama_shape)
+    if settings.panorama_horizon_deg is not None:
+        if settings.panorama_shape is None:
+            raise ValueError(
+                "panorama_horizon_deg limits the rows of the panorama, which panorama_shape=None "
+                "switches off: pass a panorama_shape or panorama_horizon_deg=None"
+            )
+        check_number("panorama_horizon_deg", settings.panorama_horizon_deg, low=0.0, high=90.0)
+        try:
+            EquirectangularCamera(*settings.panorama_shape, settings.panorama_horizon_deg)
+        except ValueError as error:
+            raise ValueError(
+                f"panorama_horizon_deg with panorama_shape={settings.panorama_shape}: {error}"
+            ) from None
     check_number("agent_radius_m", settings.agent_radius_m, low=0.0, high=MAX_LENGTH_M)
     check_number("max_translation_m", settings.max_translation_m, low=0.0, high=MAX_LENGTH_M)
     check_number("max_rotation_deg", settings.max_rotation_deg, low=0.0, high=180.0)

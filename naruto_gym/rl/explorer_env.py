@@ -1,5 +1,6 @@
-"""The map-and-goal explorer's env settings, its training mix, and its env creator for RLlib
-(no learning library is imported here).
+"""The map-and-goal explorer's env settings, its training mix (with the agents grouped on
+shared scenes, :func:`shared_train_mix`), and its env creator for RLlib (no learning library
+is imported here).
 
     from ray.tune.registry import register_env
     from naruto_gym.rl.explorer_env import make_rllib_explorer_env
@@ -21,8 +22,16 @@ import numpy as np
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation
 from naruto_gym.rl.goal_actions import GoalActions
 from naruto_gym.scenes.suite import scene_name
+from naruto_gym.vector.shared_scenes import SharedSceneStreams
 
-__all__ = ["EXPLORER_ENV", "TRAIN_MIX", "make_rllib_explorer_env", "train_mix"]
+__all__ = [
+    "EXPLORER_ENV",
+    "EXPLORER_PANORAMA_HORIZON_DEG",
+    "TRAIN_MIX",
+    "make_rllib_explorer_env",
+    "shared_train_mix",
+    "train_mix",
+]
 
 #: The suite's train split the explorer learns on: closed and open variants of the small
 #: and apartment classes (scene streams: a new generated scene every episode).
@@ -42,10 +51,32 @@ EXPLORER_ENV: dict[str, Any] = {
 }
 
 
+#: The elevation band of the panorama rows the explorer's map reads (its ``horizon_deg``):
+#: ``panorama_horizon_deg`` at this value casts only those rows (the others read 0), a
+#: third of the panorama's rays. The policy must then see the same band at evaluation.
+EXPLORER_PANORAMA_HORIZON_DEG = 30.0
+
+
 def train_mix(num_envs: int, scenes: tuple[str, ...] = TRAIN_MIX) -> list[str]:
     """One scene stream per agent, ``scenes`` in turn (``num_envs`` a multiple of their
-    number mixes them evenly)."""
+    number mixes them evenly): every agent draws and builds a scene of its own every
+    episode."""
     return [scenes[i % len(scenes)] for i in range(num_envs)]
+
+
+def shared_train_mix(
+    agents_per_scene: int = 4, episodes_per_scene: int = 4, scenes: tuple[str, ...] = TRAIN_MIX
+) -> SharedSceneStreams:
+    """The training mix with the agents in groups of ``agents_per_scene`` on shared scenes,
+    each group's scene kept for ``episodes_per_scene`` episodes of each of its agents (the
+    batched env's ``scene``; see :class:`~naruto_gym.vector.shared_scenes.SharedSceneStreams`).
+    A scene is built once for many episodes and a group's rays are cast in one call; with
+    ``num_envs = agents_per_scene * len(scenes)`` (16 by default) each stream has one group.
+
+    Raises:
+        ValueError: a count that is not a positive integer.
+    """
+    return SharedSceneStreams(scenes, agents_per_scene, episodes_per_scene)
 
 
 def make_rllib_explorer_env(config: Mapping[str, Any]) -> gym.Env:

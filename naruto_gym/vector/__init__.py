@@ -1,10 +1,18 @@
 """Batched vector envs: many agents stepped together, in this process
 (:class:`NarutoReconVectorEnv`) or sharded over worker processes (:class:`ShardedVectorEnv`);
-:func:`make_vector_env` picks one from ``workers``."""
+:func:`make_vector_env` picks one from ``workers``. :class:`SharedSceneStreams` puts agents in
+groups on shared generated scenes, for training on many scenes."""
 
 from naruto_gym.vector.base import BatchedEnvBase
 from naruto_gym.vector.factory import make_vector_env
 from naruto_gym.vector.sharded_env import ShardedVectorEnv
+from naruto_gym.vector.shared_scenes import SharedSceneStreams
 from naruto_gym.vector.vector_env import NarutoReconVectorEnv
 
-__all__ = ["BatchedEnvBase", "NarutoReconVectorEnv", "ShardedVectorEnv", "make_vector_env"]
+__all__ = [
+    "BatchedEnvBase",
+    "NarutoReconVectorEnv",
+    "ShardedVectorEnv",
+    "SharedSceneStreams",
+    "make_vector_env",
+]

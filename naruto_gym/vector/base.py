@@ -26,6 +26,7 @@ from naruto_gym.geometry.transforms import validate_pose
 from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import resolve_threads
+from naruto_gym.vector.shared_scenes import SharedSceneStreams
 
 #: The batched envs' own keywords (every other one is ``EnvSettings``').
 VECTOR_KEYWORDS = frozenset(
@@ -110,8 +111,11 @@ class BatchedEnvBase(gym.vector.VectorEnv):
         self._started = False
 
     # -- construction helpers ----------------------------------------------------------------
-    def _agent_scenes(self, scene: Any) -> list[Any]:
-        """Each agent's scene: ``scene`` for all, or one entry of a list per agent."""
+    def _agent_scenes(self, scene: Any) -> list[Any] | SharedSceneStreams:
+        """Each agent's scene: ``scene`` for all, or one entry of a list per agent (a
+        :class:`SharedSceneStreams` as it is: it places the agents itself)."""
+        if isinstance(scene, SharedSceneStreams):
+            return scene
         scenes = scene if isinstance(scene, (list, tuple)) else [scene] * self.num_envs
         if len(scenes) != self.num_envs:
             raise ValueError(f"scene list has {len(scenes)} entries for num_envs={self.num_envs}")
@@ -223,8 +227,7 @@ class BatchedEnvBase(gym.vector.VectorEnv):
     def panorama_camera(self) -> EquirectangularCamera | None:
         """One agent's observation panorama camera (None when the panorama is off; made
         once)."""
-        shape = self.settings.panorama_shape
-        return EquirectangularCamera(*shape) if shape is not None else None
+        return self.settings.panorama_camera
 
     @property
     def num_workers(self) -> int:

@@ -112,8 +112,9 @@ class FrameDrawer:
             self.panorama = fresh[2]
 
     def panorama_no_hit_shares(self) -> np.ndarray:
-        """(N,) each agent's share of panorama pixels that hit nothing."""
-        return np.mean(self.panorama <= 0.0, axis=(1, 2))
+        """(N,) each agent's share of the panorama pixels cast that hit nothing."""
+        start, stop = self.panorama_camera.cast_rows
+        return np.mean(self.panorama[:, start:stop] <= 0.0, axis=(1, 2))
 
     def _count_rays(self, count: int) -> None:
         with self._rays_lock:  # the shares of a step count from their threads
@@ -156,7 +157,7 @@ class FrameDrawer:
         escapers = members[escape]
         first, order = escape_ray_plan(checker) if len(escapers) else (0, None)
         panorama = self.panorama_camera
-        panorama_rays = panorama.height * panorama.width if panorama is not None else 0
+        panorama_rays = len(panorama.cast_directions) if panorama is not None else 0
         escape_offset = count * (cast_pixels + panorama_rays)
         rays = np.empty((escape_offset + len(escapers) * first, 6), np.float32)
         if not raster:
@@ -168,7 +169,7 @@ class FrameDrawer:
 
             in_threads(fill, count, threads)
         if panorama is not None:
-            fill_panorama_rays(panorama.ray_directions, positions32, rays, count * cast_pixels)
+            fill_panorama_rays(panorama.cast_directions, positions32, rays, count * cast_pixels)
         if len(escapers):
             fill_panorama_rays(
                 order[:first], np.ascontiguousarray(positions32[escape]), rays, escape_offset
@@ -217,11 +218,18 @@ class FrameDrawer:
             self.rgb[members] = rgb.reshape(count, camera.height, camera.width, 3)
         if panorama is not None:
             distance = hits.distance[count * cast_pixels : escape_offset]
-            self.panorama[members] = (
+            start, stop = panorama.cast_rows
+            cast = (
                 np.where(np.isfinite(distance), distance, 0.0)
                 .astype(np.float32)
-                .reshape(count, panorama.height, panorama.width)
+                .reshape(count, stop - start, panorama.width)
             )
+            if (start, stop) == (0, panorama.height):
+                self.panorama[members] = cast
+            else:  # the rows not cast read 0, as the single env's
+                band = np.zeros((count, panorama.height, panorama.width), np.float32)
+                band[:, start:stop] = cast
+                self.panorama[members] = band
         if not len(escapers):
             return []
         total = len(order)

@@ -33,6 +33,7 @@ from naruto_gym.utils.threads import THREADS_ENV_VAR
 from naruto_gym.vector.infos import merge_shard_infos
 from naruto_gym.vector.packed_infos import InfoPacker, InfoUnpacker
 from naruto_gym.vector.shared_buffers import SharedObservations
+from naruto_gym.vector.shared_scenes import SharedSceneStreams
 
 #: Fewest agents a worker process gets by default: below it the step's fixed cost per process
 #: outweighs the parallelism.
@@ -72,10 +73,12 @@ def resolve_workers(workers: int | None, num_envs: int, threads: int) -> int:
     return int(workers)
 
 
-def several_scenes(scenes: Sequence[Any]) -> bool:
+def several_scenes(scenes: Sequence[Any] | SharedSceneStreams) -> bool:
     """Whether ``scenes`` (one entry per agent) put the agents in more than one scene: a
     procedural stream, or entries that are not all the same (names compared by value,
     other scenes by identity, as the scene pool shares runtimes)."""
+    if isinstance(scenes, SharedSceneStreams):
+        return True
     if any(is_procedural_name(item) and parse_procedural_name(item).is_stream for item in scenes):
         return True
     return len({item if isinstance(item, str) else id(item) for item in scenes}) > 1
@@ -180,7 +183,8 @@ class ShardedAgents:
         make_env: builds a share's in-process batched env from keywords (``num_envs``,
             ``scene``, ``threads``; picklable, e.g. the env class).
         num_envs: the agents.
-        scenes: each agent's scene (as the env takes them).
+        scenes: each agent's scene (as the env takes them), or a ``SharedSceneStreams`` (each
+            share gets its groups: a share must start at a group's first agent).
         env_kwargs: every other keyword of the shares' envs.
         observation_space: one agent's observation space.
         workers: the processes (at most ``num_envs``).
@@ -193,7 +197,7 @@ class ShardedAgents:
         self,
         make_env: Callable[..., Any],
         num_envs: int,
-        scenes: Sequence[Any],
+        scenes: Sequence[Any] | SharedSceneStreams,
         env_kwargs: dict[str, Any],
         observation_space: spaces.Dict,
         workers: int,
@@ -211,6 +215,11 @@ class ShardedAgents:
             (int(part[0]), int(part[-1]) + 1)
             for part in np.array_split(np.arange(self.num_envs), workers)
         ]
+        # Each share's scenes, made before anything is started (a share may be refused).
+        share_scenes = [
+            scenes.share(start) if isinstance(scenes, SharedSceneStreams) else scenes[start:stop]
+            for start, stop in self.bounds
+        ]
         self.buffers = SharedObservations(observation_space, self.num_envs, context)
         self.threads = max(1, int(threads))
         self._unpacker = InfoUnpacker(workers)
@@ -222,7 +231,9 @@ class ShardedAgents:
             kwargs = {
                 **env_kwargs,
                 "num_envs": stop - start,
-                "scene": list(scenes[start:stop]),
+                "scene": share_scenes[k]
+                if isinstance(share_scenes[k], SharedSceneStreams)
+                else list(share_scenes[k]),
                 "threads": share_threads,
             }
             parent_end, child_end = context.Pipe()

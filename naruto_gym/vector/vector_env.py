@@ -81,12 +81,16 @@ class NarutoReconVectorEnv(BatchedEnvBase):
       all agents), a list of ``num_envs`` such scenes, or a stream name
       ``"procedural:room"`` / ``"procedural:apartment"`` (``":train"`` or ``":test"`` split
       appended, default train): a new generated scene for every episode, drawn from the
-      episode's seeded generator (see :mod:`naruto_gym.scenes.stream`).
+      episode's seeded generator (see :mod:`naruto_gym.scenes.stream`); or a
+      :class:`~naruto_gym.vector.shared_scenes.SharedSceneStreams`: agents in groups, each
+      group on one scene of a stream for several episodes (a scene built once for many
+      episodes, a group's rays cast in one call), as RL training on many scenes wants.
     * ``max_episode_steps``: episodes are truncated after this many steps (None: never).
     * ``autoreset_mode``: ``AutoresetMode.NEXT_STEP`` (Gymnasium's default) or
       ``AutoresetMode.SAME_STEP`` (the final observation and info go in ``info["final_obs"]``
       / ``info["final_info"]``, as Stable-Baselines3 expects).
-    * ``scene_cache_size``: generated scenes kept in memory for reuse (stream scenes only).
+    * ``scene_cache_size``: generated scenes kept in memory for reuse (stream scenes only;
+      a ``SharedSceneStreams`` group holds its current scene besides).
     * ``pinhole_backend``: as for ``NarutoReconEnv``, but ``"auto"`` by default: the
       rasterizer up to ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED`` triangles per pixel (a
       higher limit than for one frame, as drawing many frames at once pays off on denser
@@ -136,7 +140,9 @@ class NarutoReconVectorEnv(BatchedEnvBase):
             env_kwargs,
             "NarutoReconVectorEnv",
         )
-        self._pool = ScenePool(self._agent_scenes(scene), self.settings, scene_cache_size)
+        self._pool = ScenePool(
+            self._agent_scenes(scene), self.settings, scene_cache_size, self.num_envs
+        )
         template = self._pool.template()
         self._check_pose_actions(self._pool.has_streams or len(self._pool.distinct()) > 1)
         self._set_spaces(template.observation_space(), template.action_space())
@@ -305,7 +311,7 @@ class NarutoReconVectorEnv(BatchedEnvBase):
         for i, seed in zip(agents, seeds, strict=True):
             if seed is not None or self._rngs[i] is None:
                 self._rngs[i], _ = seeding.np_random(seed)
-        self._pool.draw_scenes(agents, [self._rngs[i] for i in agents], self.thread_count)
+        self._pool.draw_scenes(agents, [self._rngs[i] for i in agents], self.thread_count, seeds)
         for i in agents:
             self._reset_state(int(i), options)
 

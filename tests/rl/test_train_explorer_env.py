@@ -1,0 +1,57 @@
+"""The explorer's training script builds its env on shared scenes by default (a documented
+flag turns them off) through ``make_vector_env``, with the panorama band when asked."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("stable_baselines3")
+
+from naruto_agent.cli_args import parse_dataclass_args  # noqa: E402
+from naruto_gym.rl.explorer_env import TRAIN_MIX  # noqa: E402
+from naruto_gym.vector import NarutoReconVectorEnv, SharedSceneStreams  # noqa: E402
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "train_explorer.py"
+
+
+@pytest.fixture(scope="module")
+def train_explorer():
+    spec = importlib.util.spec_from_file_location("train_explorer_under_test", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    yield module
+    del sys.modules[spec.name]
+
+
+def test_shared_scenes_by_default_and_a_flag_for_a_scene_per_agent(train_explorer):
+    args = parse_dataclass_args(train_explorer.Args, ["--num-envs", "4", "--agents-per-scene", "2"])
+    assert args.shared_scenes and isinstance(
+        train_explorer.training_scenes(args), SharedSceneStreams
+    )
+    env = train_explorer.make_batched_env(args)
+    assert isinstance(env, NarutoReconVectorEnv)
+    assert env.settings.panorama_horizon_deg is None
+    env.reset(seed=0)
+    runtimes = env.scene_runtimes
+    assert runtimes[0] is runtimes[1] and runtimes[2] is runtimes[3]
+    assert runtimes[0] is not runtimes[2]
+    assert train_explorer.agent_streams(args) == [
+        *[TRAIN_MIX[0]] * 2,
+        *[TRAIN_MIX[1]] * 2,
+    ]
+    env.close()
+
+    alone = parse_dataclass_args(
+        train_explorer.Args,
+        ["--num-envs", "4", "--no-shared-scenes", "--panorama-horizon-deg", "30"],
+    )
+    assert train_explorer.training_scenes(alone) == train_explorer.train_mix(4)
+    env = train_explorer.make_batched_env(alone)
+    assert env.settings.panorama_horizon_deg == 30
+    assert train_explorer.explorer_settings(alone)["panorama_horizon_deg"] == 30
+    env.close()
