@@ -131,7 +131,7 @@ def run_episode_loop(
         method(*arguments)
         seconds[hook.phase] += time.perf_counter() - clock
 
-    policy.bind(EnvContext.from_env(env, step_budget=max_episode_steps))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=max_episode_steps))
     for hook in hooks:
         call(hook, hook.before_reset, env, policy)
     clock = time.perf_counter()

@@ -99,7 +99,7 @@ class BatchedEnvBase(gym.vector.VectorEnv):
             env_kwargs,
             accepted_keywords(),
             owner,
-            "The episode length is max_episode_steps (step_budget is the single env's).",
+            "The episode length is max_episode_steps.",
         )
         self.settings = EnvSettings(**env_kwargs)
         # Compiled loops (ray filling, shading, coverage) split agents between this many
