@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from naruto_gym.utils.checks import check_integer
+
 
 def eval_point_steps(max_episode_steps: int, eval_points: int) -> list[int]:
     """Steps (1..max_episode_steps-1) at which an episode's reconstruction is scored:
@@ -114,8 +116,7 @@ def run_episode_loop(
 
     from naruto_agent.policies import EnvContext
 
-    if max_episode_steps < 1:
-        raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
+    check_integer("max_episode_steps", max_episode_steps, low=1)
     seconds = {} if seconds is None else seconds
     for phase in ("reset_env", "reset_policy", "policy", "env"):
         seconds.setdefault(phase, 0.0)

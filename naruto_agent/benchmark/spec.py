@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from naruto_agent.benchmark.checks import check_scene
+from naruto_gym.utils.checks import check_bool, check_choice, check_integer, check_number
 
 UP_AXES = ("x", "y", "z", "-x", "-y", "-z", "auto")
 """Up axes of a mesh file (``"auto"``: read from a recognised dataset layout)."""
@@ -54,8 +55,7 @@ def parse_scene(argument: str, up_axis: str = "z") -> SceneSpec:
     Raises:
         ValueError: an empty scene or an unknown axis.
     """
-    if up_axis not in UP_AXES:
-        raise ValueError(f"unknown up axis {up_axis!r}; use one of {', '.join(UP_AXES)}")
+    check_choice("up_axis", up_axis, UP_AXES)
     scene = argument
     if "@" in argument:
         scene, _, written = argument.rpartition("@")
@@ -74,9 +74,7 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "scene"
 
 
-def split_policy_kwargs(
-    kwargs: dict[str, Any], policies: list[str]
-) -> dict[str, dict[str, Any]]:
+def split_policy_kwargs(kwargs: dict[str, Any], policies: list[str]) -> dict[str, dict[str, Any]]:
     """Constructor arguments per policy from either form of ``--policy-kwargs``.
 
     Keyed by policy (``{"random": {"max_run_steps": 20}}``): every key is one of
@@ -146,17 +144,20 @@ class EpisodeSpec:
     device: str = "auto"
 
     def __post_init__(self) -> None:
-        if self.steps < 1:
-            raise ValueError(f"steps must be at least 1, got {self.steps}")
-        if self.image_scale <= 0:
-            raise ValueError(f"image_scale must be positive, got {self.image_scale}")
-        if self.eval_points < 0:
-            raise ValueError(f"eval_points must be >= 0, got {self.eval_points}")
-        if not self.eval_samples_per_m2 >= 0:
-            raise ValueError(
-                f"eval_samples_per_m2 must be >= 0 (0: no density bound), got "
-                f"{self.eval_samples_per_m2}"
-            )
+        check_integer("seed", self.seed, low=0)
+        check_integer("steps", self.steps, low=1)
+        check_choice("up_axis", self.up_axis, UP_AXES)
+        check_number("image_scale", self.image_scale, low=0.0)
+        check_bool("reconstruct", self.reconstruct)
+        check_integer("eval_points", self.eval_points, low=0)
+        check_integer("eval_samples", self.eval_samples, low=1)
+        check_integer("checkpoint_samples", self.checkpoint_samples, low=1)
+        check_number(
+            "eval_samples_per_m2 (0: no density bound)",
+            self.eval_samples_per_m2,
+            low=0.0,
+            low_open=False,
+        )
 
     @property
     def scene_label(self) -> str:

@@ -93,7 +93,7 @@ def test_the_loop_stops_at_max_episode_steps_and_refuses_none():
     env = _env(policy, steps=50)
     result = run_episode_loop(env, policy, 4, seed=0)
     assert result.steps_run == 4 and not result.truncated
-    with pytest.raises(ValueError, match="max_episode_steps must be at least 1"):
+    with pytest.raises(ValueError, match="max_episode_steps must be an integer of at least 1"):
         run_episode_loop(env, policy, 0, seed=0)
     env.close()
 
