@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from naruto_gym.utils.checks import check_integer
+
 
 def eval_point_steps(max_episode_steps: int, eval_points: int) -> list[int]:
     """Steps (1..max_episode_steps-1) at which an episode's reconstruction is scored:
@@ -114,8 +116,7 @@ def run_episode_loop(
 
     from naruto_agent.policies import EnvContext
 
-    if max_episode_steps < 1:
-        raise ValueError(f"max_episode_steps must be at least 1, got {max_episode_steps}")
+    check_integer("max_episode_steps", max_episode_steps, low=1)
     seconds = {} if seconds is None else seconds
     for phase in ("reset_env", "reset_policy", "policy", "env"):
         seconds.setdefault(phase, 0.0)
@@ -131,7 +132,7 @@ def run_episode_loop(
         method(*arguments)
         seconds[hook.phase] += time.perf_counter() - clock
 
-    policy.bind(EnvContext.from_env(env, step_budget=max_episode_steps))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=max_episode_steps))
     for hook in hooks:
         call(hook, hook.before_reset, env, policy)
     clock = time.perf_counter()

@@ -57,6 +57,9 @@ class Args:
     up_axis: str = "z"
     """up axis of the mesh paths written without @AXIS: z, y, -y, x, -x, -z or auto (from a
     recognised dataset layout)"""
+    mesh_units: str = "m"
+    """length unit of the mesh paths (m, cm or mm), rescaled to metres on loading; catalogue
+    and procedural scenes are in metres"""
     image_scale: float = 0.25
     """camera resolution factor of the 680 x 1200 (H x W) camera (0.25: 170 x 300)"""
     workers: int = 2
@@ -194,6 +197,7 @@ def episode_specs(args: Args, argv: list[str] | None = None) -> list[EpisodeSpec
     suite_points = suite.DEFAULT_EVAL_POINTS if args.suite else DEFAULT_EVAL_POINTS
     settings = dict(
         up_axis=args.up_axis,
+        mesh_units=args.mesh_units,
         image_scale=args.image_scale,
         eval_points=suite_points if args.eval_points is None else args.eval_points,
         eval_samples=args.eval_samples,

@@ -102,7 +102,9 @@ def _top_down_background(record: dict[str, Any]) -> tuple[np.ndarray, Any] | Non
     from naruto_gym.sensors.raycaster import RayCaster
 
     config = record["config"]
-    scene = resolve_scene(config["scene"], config.get("up_axis", "z"))
+    scene = resolve_scene(
+        config["scene"], config.get("up_axis", "z"), config.get("mesh_units", "m")
+    )
     top_down = TopDownMap(scene, RayCaster(scene.vertices, scene.faces))
     return top_down.image, top_down
 

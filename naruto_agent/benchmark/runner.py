@@ -46,6 +46,7 @@ def make_env(spec: EpisodeSpec, action_mode: str) -> Any:
         ENV_ID,
         scene=spec.scene,
         up_axis=spec.up_axis,
+        mesh_units=spec.mesh_units,
         action_mode=action_mode,
         max_episode_steps=spec.steps,
         **kwargs,

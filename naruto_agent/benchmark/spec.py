@@ -15,18 +15,31 @@ from pathlib import Path
 from typing import Any
 
 from naruto_agent.benchmark.checks import check_scene
+from naruto_gym.scenes.units import MESH_UNITS
+from naruto_gym.utils.checks import check_bool, check_choice, check_integer, check_number
 
 UP_AXES = ("x", "y", "z", "-x", "-y", "-z", "auto")
 """Up axes of a mesh file (``"auto"``: read from a recognised dataset layout)."""
 TRAJECTORY_FILE = "traj.txt"
+#: Env keywords the harness sets itself (from the scene argument, the policy and the budget),
+#: which ``env_kwargs`` may therefore not hold.
+SPEC_ENV_KEYWORDS = frozenset(
+    {"scene", "up_axis", "mesh_units", "action_mode", "max_episode_steps"}
+)
+#: Fields added to :class:`EpisodeSpec` after records were stored, with their defaults: the
+#: hash leaves them out at these values.
+HASH_OMITS_AT_DEFAULT: dict[str, Any] = {"mesh_units": "m"}
+_NO_DEFAULT = object()
 
 
 @dataclass(frozen=True)
 class SceneSpec:
-    """A scene argument: a catalogue name or a mesh path, with the mesh file's up axis."""
+    """A scene argument: a catalogue name or a mesh path, with the mesh file's up axis and
+    length unit (``"m"``, ``"cm"`` or ``"mm"``, rescaled to metres on loading)."""
 
     scene: str
     up_axis: str = "z"
+    mesh_units: str = "m"
 
     @property
     def label(self) -> str:
@@ -43,19 +56,21 @@ class SceneSpec:
         return Path(self.scene).suffix != ""
 
 
-def parse_scene(argument: str, up_axis: str = "z") -> SceneSpec:
+def parse_scene(argument: str, up_axis: str = "z", mesh_units: str = "m") -> SceneSpec:
     """``"NAME"``, ``"PATH"`` or ``"PATH@AXIS"`` (e.g. ``room.obj@y``) to a :class:`SceneSpec`.
 
     Args:
         argument: the scene argument.
         up_axis: the up axis of a mesh path written without ``@AXIS`` (``--up-axis``); an
             ``@AXIS`` wins over it, and catalogue names ignore both.
+        mesh_units: the length unit of a mesh path (``--mesh-units``); catalogue names,
+            which are in metres, ignore it.
 
     Raises:
-        ValueError: an empty scene or an unknown axis.
+        ValueError: an empty scene, an unknown axis or an unknown unit.
     """
-    if up_axis not in UP_AXES:
-        raise ValueError(f"unknown up axis {up_axis!r}; use one of {', '.join(UP_AXES)}")
+    check_choice("up_axis", up_axis, UP_AXES)
+    check_choice("mesh_units", mesh_units, tuple(MESH_UNITS))
     scene = argument
     if "@" in argument:
         scene, _, written = argument.rpartition("@")
@@ -67,16 +82,16 @@ def parse_scene(argument: str, up_axis: str = "z") -> SceneSpec:
         up_axis = written
     if not scene:
         raise ValueError(f"empty scene in {argument!r}; use NAME, PATH or PATH@AXIS")
-    return SceneSpec(scene, up_axis if SceneSpec(scene).is_path else "z")
+    if not SceneSpec(scene).is_path:
+        return SceneSpec(scene)
+    return SceneSpec(scene, up_axis, mesh_units)
 
 
 def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "scene"
 
 
-def split_policy_kwargs(
-    kwargs: dict[str, Any], policies: list[str]
-) -> dict[str, dict[str, Any]]:
+def split_policy_kwargs(kwargs: dict[str, Any], policies: list[str]) -> dict[str, dict[str, Any]]:
     """Constructor arguments per policy from either form of ``--policy-kwargs``.
 
     Keyed by policy (``{"random": {"max_run_steps": 20}}``): every key is one of
@@ -128,6 +143,7 @@ class EpisodeSpec:
             sample counts alone, as the published evaluation). Large scenes need it: see
             :mod:`naruto_gym.evaluation.metrics`.
         device: Open3D device of the reference mapper.
+        mesh_units: length unit of a mesh file (``"m"``, ``"cm"``, ``"mm"``).
     """
 
     scene: str
@@ -144,19 +160,31 @@ class EpisodeSpec:
     checkpoint_samples: int = 50_000
     eval_samples_per_m2: float = 2_000.0
     device: str = "auto"
+    mesh_units: str = "m"
 
     def __post_init__(self) -> None:
-        if self.steps < 1:
-            raise ValueError(f"steps must be at least 1, got {self.steps}")
-        if self.image_scale <= 0:
-            raise ValueError(f"image_scale must be positive, got {self.image_scale}")
-        if self.eval_points < 0:
-            raise ValueError(f"eval_points must be >= 0, got {self.eval_points}")
-        if not self.eval_samples_per_m2 >= 0:
+        check_integer("seed", self.seed, low=0)
+        check_integer("steps", self.steps, low=1)
+        check_choice("up_axis", self.up_axis, UP_AXES)
+        check_choice("mesh_units", self.mesh_units, tuple(MESH_UNITS))
+        set_here = sorted(SPEC_ENV_KEYWORDS & set(self.env_kwargs))
+        if set_here:
             raise ValueError(
-                f"eval_samples_per_m2 must be >= 0 (0: no density bound), got "
-                f"{self.eval_samples_per_m2}"
+                f"env_kwargs must not set {set_here}: the harness sets them from the scene "
+                "argument, the policy and --max-episode-steps (give a mesh file's axis and "
+                "unit with --up-axis / --mesh-units or PATH@AXIS)"
             )
+        check_number("image_scale", self.image_scale, low=0.0)
+        check_bool("reconstruct", self.reconstruct)
+        check_integer("eval_points", self.eval_points, low=0)
+        check_integer("eval_samples", self.eval_samples, low=1)
+        check_integer("checkpoint_samples", self.checkpoint_samples, low=1)
+        check_number(
+            "eval_samples_per_m2 (0: no density bound)",
+            self.eval_samples_per_m2,
+            low=0.0,
+            low_open=False,
+        )
 
     @property
     def scene_label(self) -> str:
@@ -179,8 +207,16 @@ class EpisodeSpec:
 
     @property
     def config_hash(self) -> str:
-        """Short hash of every setting: a stored record with another hash is out of date."""
-        text = json.dumps(self.as_dict(), sort_keys=True, default=str)
+        """Short hash of every setting: a stored record with another hash is out of date.
+
+        A field of :data:`HASH_OMITS_AT_DEFAULT` at its default is left out, so that the
+        records stored before the field existed stay current."""
+        settings = {
+            name: value
+            for name, value in self.as_dict().items()
+            if HASH_OMITS_AT_DEFAULT.get(name, _NO_DEFAULT) != value
+        }
+        text = json.dumps(settings, sort_keys=True, default=str)
         return hashlib.sha1(text.encode()).hexdigest()[:12]
 
     def record_path(self, output_dir: str | Path) -> Path:
@@ -210,6 +246,7 @@ def build_specs(
     seeds: list[int],
     steps: int,
     up_axis: str = "z",
+    mesh_units: str = "m",
     **settings: Any,
 ) -> list[EpisodeSpec]:
     """The episodes of scenes x policies x seeds, ordered scene-major.
@@ -220,6 +257,7 @@ def build_specs(
         seeds: episode seeds.
         steps: step budget of every episode.
         up_axis: the up axis of mesh paths written without ``@AXIS``.
+        mesh_units: the length unit of mesh paths (catalogue names are in metres).
         **settings: further :class:`EpisodeSpec` fields (``image_scale``, ``eval_points``...);
             ``policy_kwargs`` here is a dict from policy name to its arguments, or the
             arguments themselves when there is one policy (:func:`split_policy_kwargs`).
@@ -234,7 +272,7 @@ def build_specs(
     per_policy = split_policy_kwargs(settings.pop("policy_kwargs", {}) or {}, policies)
     specs = []
     for argument in scenes:
-        scene = parse_scene(argument, up_axis)
+        scene = parse_scene(argument, up_axis, mesh_units)
         check_scene(scene.scene, scene.is_path)
         for policy in policies:
             kwargs = {**default_policy_kwargs(policy, scene), **per_policy.get(policy, {})}
@@ -243,6 +281,7 @@ def build_specs(
                     EpisodeSpec(
                         scene=scene.scene,
                         up_axis=scene.up_axis,
+                        mesh_units=scene.mesh_units,
                         policy=_absolute_policy_file(policy),
                         seed=int(seed),
                         steps=int(steps),

@@ -18,6 +18,8 @@ import ctypes
 import ctypes.util
 import sys
 
+from naruto_gym.utils.checks import check_integer
+
 # mallopt parameter numbers from glibc's <malloc.h>.
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
@@ -53,13 +55,13 @@ def keep_freed_memory_for_reuse(
     Returns False, changing nothing, on a C library other than glibc.
     """
     global _applied
-    if not 0 < mmap_threshold_bytes <= MAX_MMAP_THRESHOLD_BYTES:
-        raise ValueError(
-            f"mmap_threshold_bytes must be in 1..{MAX_MMAP_THRESHOLD_BYTES} (glibc's maximum), "
-            f"got {mmap_threshold_bytes}"
-        )
-    if trim_threshold_bytes <= 0:
-        raise ValueError(f"trim_threshold_bytes must be positive, got {trim_threshold_bytes}")
+    check_integer(
+        "mmap_threshold_bytes (glibc's maximum is 32 MiB)",
+        mmap_threshold_bytes,
+        low=1,
+        high=MAX_MMAP_THRESHOLD_BYTES,
+    )
+    check_integer("trim_threshold_bytes", trim_threshold_bytes, low=1)
     if _applied:
         return True
     libc = _glibc()

@@ -37,6 +37,7 @@ import torch
 from torch import nn
 
 from naruto_agent.mapping import cpu_kernels
+from naruto_gym.utils.checks import check_integer, check_number
 
 # Spatial-hash primes of Instant-NGP (the first is 1 so that x varies fastest).
 _HASH_PRIMES = (1, 2654435761, 805459861)
@@ -47,13 +48,9 @@ ONE_BLOB_CUTOFF = 9.0
 
 def level_resolutions(num_levels: int, base_resolution: int, finest_resolution: float) -> list[int]:
     """Grid resolution of each level: a geometric progression from base to finest."""
-    if num_levels < 1:
-        raise ValueError(f"num_levels must be at least 1, got {num_levels}")
-    if base_resolution < 1 or finest_resolution < base_resolution:
-        raise ValueError(
-            f"need 1 <= base_resolution <= finest_resolution, got {base_resolution} and "
-            f"{finest_resolution}"
-        )
+    check_integer("num_levels", num_levels, low=1)
+    check_number("base_resolution", base_resolution, low=1.0, low_open=False)
+    check_number("finest_resolution", finest_resolution, low=base_resolution, low_open=False)
     if num_levels == 1:
         return [int(base_resolution)]
     scale = math.exp(math.log(finest_resolution / base_resolution) / (num_levels - 1))
@@ -90,8 +87,7 @@ class OneBlobEncoding(nn.Module):
 
     def __init__(self, num_bins: int = 16) -> None:
         super().__init__()
-        if num_bins < 1:
-            raise ValueError(f"num_bins must be at least 1, got {num_bins}")
+        check_integer("num_bins", num_bins, low=1)
         self.num_bins = int(num_bins)
         self.register_buffer(
             "centres", (torch.arange(num_bins, dtype=torch.float32) + 0.5) / num_bins
@@ -214,8 +210,7 @@ class HashGridEncoding(nn.Module):
         init_scale: float = 1e-4,
     ) -> None:
         super().__init__()
-        if not 1 <= log2_table_size <= 26:
-            raise ValueError(f"log2_table_size must be in 1..26, got {log2_table_size}")
+        check_integer("log2_table_size", log2_table_size, low=1, high=26)
         self.num_levels = int(num_levels)
         self.features_per_level = int(features_per_level)
         self.log2_table_size = int(log2_table_size)

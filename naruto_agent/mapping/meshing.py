@@ -9,6 +9,7 @@ import trimesh
 from skimage.measure import marching_cubes
 
 from naruto_agent.mapping.sdf_volume import SdfVolume
+from naruto_gym.utils.checks import check_number
 
 
 def mesh_from_sdf_function(
@@ -28,8 +29,7 @@ def mesh_from_sdf_function(
     Returns:
         The mesh (empty when the SDF has no zero crossing in the box).
     """
-    if not voxel_size > 0:
-        raise ValueError(f"voxel_size must be positive, got {voxel_size}")
+    check_number("voxel_size (metres)", voxel_size, low=0.0)
     volume = SdfVolume.from_function(sdf_fn, bounds, voxel_size)
     values = volume.values
     if not (values.min() < 0.0 < values.max()):

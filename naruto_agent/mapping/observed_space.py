@@ -46,6 +46,7 @@ from scipy import ndimage
 from naruto_agent.mapping.occupancy import OccupancyGrid
 from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.utils.checks import check_integer, check_number
 
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
 
@@ -92,17 +93,17 @@ class ObservedSpaceConfig:
     look_behind_surface_m: float = 0.15
 
     def __post_init__(self) -> None:
-        if not (self.voxel_size_m > 0 and self.max_range_m > 0):
-            raise ValueError("voxel_size_m and max_range_m must be positive")
-        if self.rays_per_frame < 1 or self.min_cluster_voxels < 1:
-            raise ValueError("rays_per_frame and min_cluster_voxels must be at least 1")
-        if self.support_below_m is not None and not self.support_below_m > 0:
-            raise ValueError(f"support_below_m must be positive or None, got "
-                             f"{self.support_below_m}")
-        if self.support_reach_m < 0 or not 0 < self.top_quantile <= 1:
-            raise ValueError("support_reach_m must be >= 0 and top_quantile in (0, 1]")
-        if self.look_weight < 0 or not self.look_range_m > 0:
-            raise ValueError("look_weight must be >= 0 and look_range_m positive")
+        check_number("voxel_size_m", self.voxel_size_m, low=0.0)
+        check_number("max_range_m", self.max_range_m, low=0.0)
+        check_integer("rays_per_frame", self.rays_per_frame, low=1)
+        check_integer("min_cluster_voxels", self.min_cluster_voxels, low=1)
+        if self.support_below_m is not None:
+            check_number("support_below_m (or None)", self.support_below_m, low=0.0)
+        check_number("support_reach_m", self.support_reach_m, low=0.0, low_open=False)
+        check_number("top_quantile", self.top_quantile, low=0.0, high=1.0)
+        check_number("look_weight", self.look_weight, low=0.0, low_open=False)
+        check_number("look_range_m", self.look_range_m, low=0.0)
+        check_number("look_behind_surface_m", self.look_behind_surface_m)
 
 
 class ObservedSpace:
@@ -212,8 +213,9 @@ class ObservedSpace:
             if self.config.support_below_m is None:
                 self._supported = np.ones(self.grid.shape, bool)
                 return self._supported
-            self._supported = self.grid.supported_below(self.config.support_below_m,
-                                                         self.config.support_reach_m)
+            self._supported = self.grid.supported_below(
+                self.config.support_below_m, self.config.support_reach_m
+            )
         return self._supported
 
     def sectors_seen_below(self, points: np.ndarray, max_length_m: float = 5.0) -> np.ndarray:
@@ -261,8 +263,11 @@ class ObservedSpace:
         return np.where(inside, values, np.zeros((), values.dtype))
 
     def state_dict(self) -> dict[str, np.ndarray]:
-        return {"log_odds": self.grid.log_odds.copy(), "observed": self.grid.observed.copy(),
-                "looks": self.looks.copy()}
+        return {
+            "log_odds": self.grid.log_odds.copy(),
+            "observed": self.grid.observed.copy(),
+            "looks": self.looks.copy(),
+        }
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         if np.shape(state["log_odds"]) != self.grid.shape:
@@ -290,7 +295,8 @@ def add_unknown_space_uncertainty(
         (:meth:`ObservedSpace.frontier_variance`: ``initial_variance`` until frames look at
         it without resolving it).
     """
-    frontier = observed.sample(observed.frontier_variance(initial_variance),
-                               uncertainty.grid_points()).reshape(uncertainty.shape)
+    frontier = observed.sample(
+        observed.frontier_variance(initial_variance), uncertainty.grid_points()
+    ).reshape(uncertainty.shape)
     values = np.maximum(uncertainty.values, frontier)
     return SdfVolume(values, uncertainty.origin, uncertainty.voxel_size)

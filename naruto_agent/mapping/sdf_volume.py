@@ -20,6 +20,7 @@ import numpy as np
 from scipy import ndimage
 
 from naruto_agent.mapping.grid_memory import check_grid_memory
+from naruto_gym.utils.checks import check_number
 
 if TYPE_CHECKING:  # pragma: no cover
     from naruto_gym.scenes.mesh_scene import Scene
@@ -68,11 +69,7 @@ class SdfVolume:
         self.origin = np.asarray(self.origin, dtype=np.float64).reshape(-1)
         if self.origin.shape != (3,) or not np.all(np.isfinite(self.origin)):
             raise ValueError(f"origin must be a finite (3,) world point, got {self.origin}")
-        self.voxel_size = float(self.voxel_size)
-        if not np.isfinite(self.voxel_size) or self.voxel_size <= 0.0:
-            raise ValueError(
-                f"voxel_size must be a positive length in metres, got {self.voxel_size}"
-            )
+        self.voxel_size = check_number("voxel_size (metres)", self.voxel_size, low=0.0)
 
     @property
     def _upper_index(self) -> np.ndarray:
@@ -131,7 +128,12 @@ class SdfVolume:
         # numpy for the few dozen points of a collision check. Its "constant" mode
         # returns cval for every point outside [0, n - 1] on any axis and never blends it in.
         return ndimage.map_coordinates(
-            self.values, index.T, order=1, mode="constant", cval=outside_value, prefilter=False,
+            self.values,
+            index.T,
+            order=1,
+            mode="constant",
+            cval=outside_value,
+            prefilter=False,
             output=np.float64,
         )
 
@@ -145,10 +147,8 @@ class SdfVolume:
             raise ValueError(f"bounds must be a finite (2, 3) [min, max] box, got {bounds}")
         if np.any(bounds[1] <= bounds[0]):
             raise ValueError(f"bounds max must exceed min on every axis, got {bounds.tolist()}")
-        if not voxel_size > 0.0:
-            raise ValueError(f"voxel_size must be positive, got {voxel_size}")
-        if padding < 0.0:
-            raise ValueError(f"padding must be >= 0 metres, got {padding}")
+        voxel_size = check_number("voxel_size (metres)", voxel_size, low=0.0)
+        padding = check_number("padding (metres)", padding, low=0.0, low_open=False)
         lower = bounds[0] - padding
         extent = bounds[1] + padding - lower
         counts = np.maximum(np.ceil(extent / voxel_size - 1e-9).astype(int) + 1, 2)

@@ -44,6 +44,7 @@ from naruto_agent.mapping.observed_space import (
 from naruto_agent.mapping.sdf_volume import SdfVolume
 from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper
 from naruto_gym.sensors.pinhole import PinholeCamera
+from naruto_gym.utils.checks import check_bool, check_integer, check_number
 
 
 @dataclass
@@ -97,15 +98,23 @@ class TsdfMapperConfig:
     planner_behind_surface_bound: bool = True
 
     def __post_init__(self) -> None:
-        if not 0 < self.min_observation_weight <= 1:
-            raise ValueError(f"min_observation_weight must be in (0, 1], got "
-                             f"{self.min_observation_weight}")
-        for name in ("voxel_size_m", "truncation_m", "max_depth_m", "uncertainty_voxel_m",
-                     "initial_variance", "surface_band_m", "planner_surface_m"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
-        if self.integrate_every < 1 or self.map_every < 1:
-            raise ValueError("integrate_every and map_every must be at least 1")
+        check_number("min_observation_weight", self.min_observation_weight, low=0.0, high=1.0)
+        for name in (
+            "voxel_size_m",
+            "truncation_m",
+            "max_depth_m",
+            "uncertainty_voxel_m",
+            "initial_variance",
+            "surface_band_m",
+            "planner_surface_m",
+        ):
+            check_number(name, getattr(self, name), low=0.0)
+        check_integer("integrate_every", self.integrate_every, low=1)
+        check_integer("map_every", self.map_every, low=1)
+        check_integer("frontier_min_cluster_voxels", self.frontier_min_cluster_voxels, low=1)
+        check_integer("observed_rays_per_frame", self.observed_rays_per_frame, low=1)
+        for name in ("unknown_space", "grazing_weighting", "planner_behind_surface_bound"):
+            check_bool(name, getattr(self, name))
 
 
 class TsdfUncertaintyMapper:
@@ -128,7 +137,8 @@ class TsdfUncertaintyMapper:
             voxel_size_m=self.config.voxel_size_m,
             truncation_m=self.config.truncation_m,
             max_depth_m=self.config.max_depth_m,
-            device="cuda" if self._device.type == "cuda" and o3d.core.cuda.is_available()
+            device="cuda"
+            if self._device.type == "cuda" and o3d.core.cuda.is_available()
             else "cpu",
         )
         template = SdfVolume.from_function(
@@ -141,12 +151,15 @@ class TsdfUncertaintyMapper:
         self.frames_integrated = 0
         self._sdf_view: SdfVolume | None = None
         self._bound_view: np.ndarray | None = None  # behind-surface bounds, planner voxels
-        self.observed_space = ObservedSpace(self.bounds, ObservedSpaceConfig(
-            voxel_size_m=self.config.uncertainty_voxel_m,
-            max_range_m=self.config.max_depth_m,
-            rays_per_frame=self.config.observed_rays_per_frame,
-            min_cluster_voxels=self.config.frontier_min_cluster_voxels,
-        ))
+        self.observed_space = ObservedSpace(
+            self.bounds,
+            ObservedSpaceConfig(
+                voxel_size_m=self.config.uncertainty_voxel_m,
+                max_range_m=self.config.max_depth_m,
+                rays_per_frame=self.config.observed_rays_per_frame,
+                min_cluster_voxels=self.config.frontier_min_cluster_voxels,
+            ),
+        )
 
     @property
     def device(self) -> torch.device:
@@ -168,10 +181,14 @@ class TsdfUncertaintyMapper:
         """Index ranges of the count grid within the box around the view frustum (to the
         mapping range): grid points outside it cannot be seen, so they are not projected."""
         camera, far = self.camera, self.config.max_depth_m
-        corners = np.array([[0.0, 0.0, 0.0]] + [
-            [(u - camera.cx) / camera.fx * far, (v - camera.cy) / camera.fy * far, far]
-            for u in (0.0, camera.width) for v in (0.0, camera.height)
-        ])
+        corners = np.array(
+            [[0.0, 0.0, 0.0]]
+            + [
+                [(u - camera.cx) / camera.fx * far, (v - camera.cy) / camera.fy * far, far]
+                for u in (0.0, camera.width)
+                for v in (0.0, camera.height)
+            ]
+        )
         world = corners @ pose[:3, :3].T + pose[:3, 3]
         low = np.floor((world.min(axis=0) - self._grid_origin) / self.config.uncertainty_voxel_m)
         high = np.ceil((world.max(axis=0) - self._grid_origin) / self.config.uncertainty_voxel_m)
@@ -184,8 +201,9 @@ class TsdfUncertaintyMapper:
         block = self._frustum_block(pose)
         flat_index = self._flat_index[block].reshape(-1)
         world_to_camera = np.linalg.inv(pose)
-        camera_points = (self._grid_points[flat_index] @ world_to_camera[:3, :3].T
-                         + world_to_camera[:3, 3])
+        camera_points = (
+            self._grid_points[flat_index] @ world_to_camera[:3, :3].T + world_to_camera[:3, 3]
+        )
         pixels, z = self.camera.project(camera_points)
         u = np.round(pixels[:, 0]).astype(np.int64)
         v = np.round(pixels[:, 1]).astype(np.int64)
@@ -225,16 +243,15 @@ class TsdfUncertaintyMapper:
         if math.isclose(voxel_size, self.config.uncertainty_voxel_m):
             values = self.variance_grid()  # the same grid: no interpolation needed
         else:
-            values = self.variance_volume().sample(
-                sdf_volume.grid_points(), outside_value=0.0
-            ).reshape(sdf_volume.shape)
+            values = (
+                self.variance_volume()
+                .sample(sdf_volume.grid_points(), outside_value=0.0)
+                .reshape(sdf_volume.shape)
+            )
         # Surface voxels by the sampled SDF: the bound reaches voxels behind a surface,
         # which no frame can see (they would stay targets at the initial variance).
-        on_surface = (sampled.values >= 0.0) & (
-            sampled.values <= self.config.planner_surface_m
-        )
-        uncertainty = SdfVolume(np.where(on_surface, values, 0.0), sdf_volume.origin,
-                                voxel_size)
+        on_surface = (sampled.values >= 0.0) & (sampled.values <= self.config.planner_surface_m)
+        uncertainty = SdfVolume(np.where(on_surface, values, 0.0), sdf_volume.origin, voxel_size)
         if self.config.unknown_space:
             uncertainty = add_unknown_space_uncertainty(
                 uncertainty, self.observed_space, self.config.initial_variance
@@ -253,23 +270,27 @@ class TsdfUncertaintyMapper:
             self.tsdf.pop_touched_blocks()
             cached = self._sdf_view = SdfVolume.from_function(self.sdf, self.bounds, voxel_size)
             self._view_points = cached.grid_points()
-            self._bound_view = (self.tsdf.behind_surface_bounds(self._view_points,
-                                                                0.5 * voxel_size)
-                                if bound else None)
+            self._bound_view = (
+                self.tsdf.behind_surface_bounds(self._view_points, 0.5 * voxel_size)
+                if bound
+                else None
+            )
         else:
             blocks = self.tsdf.pop_touched_blocks()
-            changed = self.tsdf.grid_near_blocks(cached.origin, cached.voxel_size,
-                                                 cached.shape, blocks).reshape(-1)
+            changed = self.tsdf.grid_near_blocks(
+                cached.origin, cached.voxel_size, cached.shape, blocks
+            ).reshape(-1)
             if changed.any():
                 cached.values.reshape(-1)[changed] = self.sdf(self._view_points[changed])
             if bound:
                 # The bound reads every fused voxel in a planner voxel's cell.
-                near = self.tsdf.grid_cells_near_blocks(cached.origin, cached.voxel_size,
-                                                        cached.shape, blocks,
-                                                        0.5 * voxel_size).reshape(-1)
+                near = self.tsdf.grid_cells_near_blocks(
+                    cached.origin, cached.voxel_size, cached.shape, blocks, 0.5 * voxel_size
+                ).reshape(-1)
                 if near.any():
                     self._bound_view[near] = self.tsdf.behind_surface_bounds(
-                        self._view_points[near], 0.5 * voxel_size)
+                        self._view_points[near], 0.5 * voxel_size
+                    )
         sampled = SdfVolume(cached.values.copy(), cached.origin, cached.voxel_size)
         if not bound:
             return sampled, sampled

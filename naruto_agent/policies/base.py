@@ -2,13 +2,13 @@
 
 A policy is bound once to an :class:`EnvContext` (what a real robot knows before it starts:
 the action mode and space, the scene's bounding box, the camera intrinsics, its step limits
-and the episode's step budget), then, for every episode, ``reset`` with the first observation
+and the episode's length), then, for every episode, ``reset`` with the first observation
 and info, then ``act`` on each observation. It never sees the ground-truth mesh: geometry comes
 only from the observations (RGB-D, pose, panorama) and the info of the last step.
 
 The loop a runner drives::
 
-    policy.bind(EnvContext.from_env(env, step_budget=500))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=500))
     obs, info = env.reset(seed=seed, options=policy.reset_options())
     policy.reset(obs, info, seed=seed)
     for _ in range(500):
@@ -27,6 +27,7 @@ import numpy as np
 
 from naruto_agent.policies.layers import Layer
 from naruto_agent.policies.watchdog import StallEvent, StallWatchdog, StallWatchdogConfig
+from naruto_gym.envs.validation import check_keyword_names
 from naruto_gym.geometry.transforms import quaternion_from_pose
 from naruto_gym.sensors.pinhole import PinholeCamera
 
@@ -47,7 +48,7 @@ class EnvContext:
         max_rotation_rad: largest rotation of one step.
         agent_radius_m: radius of the agent's collision sphere.
         max_depth_m: sensor range; depth is 0 beyond it.
-        step_budget: steps the episode will last, when known.
+        max_episode_steps: steps the episode will last, when known.
     """
 
     action_mode: str
@@ -58,17 +59,25 @@ class EnvContext:
     max_rotation_rad: float = float(np.deg2rad(20.0))
     agent_radius_m: float = 0.05
     max_depth_m: float = 10.0
-    step_budget: int | None = None
+    max_episode_steps: int | None = None
 
     @classmethod
-    def from_env(cls, env: gym.Env, step_budget: int | None = None) -> EnvContext:
+    def from_env(
+        cls, env: gym.Env, max_episode_steps: int | None = None, **unknown: Any
+    ) -> EnvContext:
         """Context of a (possibly wrapped) ``NarutoReconEnv``.
 
         Args:
             env: the env, wrapped or not.
-            step_budget: the episode's step budget; defaults to the ``TimeLimit`` of the
-                env's spec when there is one.
+            max_episode_steps: the episode's length in steps; defaults to the ``TimeLimit``
+                of the env's spec when there is one, else to the unwrapped env's own
+                ``max_episode_steps``.
+
+        Raises:
+            ValueError: a keyword other than these (a renamed one names its new name).
         """
+        if unknown:
+            check_keyword_names(unknown, {"env", "max_episode_steps"}, "EnvContext.from_env")
         base = env.unwrapped
         for name in ("bounds", "camera", "settings"):
             if not hasattr(base, name):
@@ -76,8 +85,10 @@ class EnvContext:
                     f"EnvContext.from_env needs a NarutoReconEnv-like env with `{name}`; got "
                     f"{type(base).__name__}. Build the EnvContext yourself for other envs."
                 )
-        if step_budget is None and env.spec is not None:
-            step_budget = env.spec.max_episode_steps
+        if max_episode_steps is None and env.spec is not None:
+            max_episode_steps = env.spec.max_episode_steps
+        if max_episode_steps is None:
+            max_episode_steps = getattr(base, "max_episode_steps", None)
         settings = base.settings
         return cls(
             action_mode=settings.action_mode,
@@ -88,7 +99,7 @@ class EnvContext:
             max_rotation_rad=float(settings.max_rotation_rad),
             agent_radius_m=float(settings.agent_radius_m),
             max_depth_m=float(settings.max_depth_m),
-            step_budget=step_budget,
+            max_episode_steps=max_episode_steps,
         )
 
 
@@ -178,8 +189,9 @@ class Policy(ABC):
             self.stall_watchdog.reset()
 
     # -- stall watchdog (opt-in) -----------------------------------------------------------
-    def use_stall_watchdog(self, config: StallWatchdogConfig | None = None,
-                           enabled: bool = True) -> None:
+    def use_stall_watchdog(
+        self, config: StallWatchdogConfig | None = None, enabled: bool = True
+    ) -> None:
         """Watch this policy for stalls from now on (``enabled=False``: stop watching).
 
         Args:
@@ -188,8 +200,9 @@ class Policy(ABC):
         """
         self.stall_watchdog = StallWatchdog(config) if enabled else None
 
-    def check_stall(self, observation: Observation, info: Info | None,
-                    progress: float | None = None) -> StallEvent | None:
+    def check_stall(
+        self, observation: Observation, info: Info | None, progress: float | None = None
+    ) -> StallEvent | None:
         """Feed the watchdog this step's position and refusal (and ``progress``, a measure
         of what the policy knows, e.g. its observed voxels, when it has one); on a stall, run
         :meth:`recover_from_stall` and return the event (with what the recovery did), else

@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from naruto_gym.utils.checks import check_integer, check_number
+
 #: A layer name: letters, digits, spaces and ``-_().%``, with ``/`` between sub-layers.
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9 _\-().%]*(/[A-Za-z0-9][A-Za-z0-9 _\-().%]*)*")
 
@@ -33,15 +35,23 @@ def _points(values: object, what: str) -> np.ndarray:
     if array.size == 0:
         return np.zeros((0, 3))
     if array.ndim != 2 or array.shape[1] != 3 or not np.all(np.isfinite(array)):
-        raise ValueError(f"{what} must be a finite (N, 3) array of world points, got shape "
-                         f"{array.shape}")
+        raise ValueError(
+            f"{what} must be a finite (N, 3) array of world points, got shape {array.shape}"
+        )
     return array
 
 
-def _colour(value: tuple[int, int, int]) -> tuple[int, int, int]:
-    colour = tuple(int(channel) for channel in value)
-    if len(colour) != 3 or not all(0 <= channel <= 255 for channel in colour):
-        raise ValueError(f"a colour is three integers 0-255 (R, G, B), got {value!r}")
+def _colour(value: tuple[int, int, int], what: str) -> tuple[int, int, int]:
+    try:
+        channels = tuple(value)
+    except TypeError:
+        channels = ()
+    if len(channels) != 3:
+        raise ValueError(f"{what} is three integers 0-255 (R, G, B), got {value!r}")
+    colour = tuple(
+        check_integer(f"{what} {band}", channel, low=0, high=255)
+        for band, channel in zip(("red", "green", "blue"), channels, strict=True)
+    )
     return colour  # type: ignore[return-value]
 
 
@@ -66,12 +76,15 @@ class PointsLayer:
     def __post_init__(self) -> None:
         _check_name(self.name)
         object.__setattr__(self, "points", _points(self.points, f"layer {self.name!r} points"))
-        object.__setattr__(self, "colour", _colour(self.colour))
+        object.__setattr__(self, "colour", _colour(self.colour, f"layer {self.name!r} colour"))
+        check_number(f"layer {self.name!r} radius_m", self.radius_m, low=0.0)
         if self.colours is not None:
             colours = np.asarray(self.colours)
             if colours.shape != (len(self.points), 3):
-                raise ValueError(f"layer {self.name!r}: colours must be (N, 3) for N points, "
-                                 f"got {colours.shape} for {len(self.points)}")
+                raise ValueError(
+                    f"layer {self.name!r}: colours must be (N, 3) for N points, "
+                    f"got {colours.shape} for {len(self.points)}"
+                )
             object.__setattr__(self, "colours", np.clip(colours, 0, 255).astype(np.uint8))
 
 
@@ -95,7 +108,8 @@ class LinesLayer:
         _check_name(self.name)
         strips = tuple(_points(strip, f"layer {self.name!r} strip") for strip in self.strips)
         object.__setattr__(self, "strips", strips)
-        object.__setattr__(self, "colour", _colour(self.colour))
+        object.__setattr__(self, "colour", _colour(self.colour, f"layer {self.name!r} colour"))
+        check_number(f"layer {self.name!r} width_m", self.width_m, low=0.0)
 
 
 @dataclass(frozen=True)
@@ -122,7 +136,7 @@ class BoxesLayer:
             raise ValueError(f"layer {self.name!r}: half sizes must be >= 0")
         object.__setattr__(self, "centres", centres)
         object.__setattr__(self, "half_sizes", half)
-        object.__setattr__(self, "colour", _colour(self.colour))
+        object.__setattr__(self, "colour", _colour(self.colour, f"layer {self.name!r} colour"))
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,7 @@ from naruto_agent.policies.config import PassiveConfig, build_config
 from naruto_agent.policies.registry import register_policy
 from naruto_agent.policies.watchdog import StallEvent
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, validate_pose
+from naruto_gym.utils.checks import check_integer
 
 HOLD_HEIGHT_STEPS = 20
 """Steps the wall follower keeps its height after a refused move that changed it."""
@@ -76,14 +77,13 @@ def load_trajectory(path: str | Path) -> np.ndarray:
     return poses
 
 
-def subsample_poses(poses: np.ndarray, step_budget: int) -> np.ndarray:
-    """The poses to replay in ``step_budget`` steps: all of them when they fit, else
-    ``step_budget + 1`` uniformly spaced ones (first and last kept)."""
-    if step_budget < 1:
-        raise ValueError(f"step_budget must be at least 1, got {step_budget}")
-    if len(poses) <= step_budget + 1:
+def subsample_poses(poses: np.ndarray, max_episode_steps: int) -> np.ndarray:
+    """The poses to replay in ``max_episode_steps`` steps: all of them when they fit, else
+    ``max_episode_steps + 1`` uniformly spaced ones (first and last kept)."""
+    steps = check_integer("max_episode_steps", max_episode_steps, low=1)
+    if len(poses) <= steps + 1:
         return poses
-    index = np.round(np.linspace(0, len(poses) - 1, step_budget + 1)).astype(np.int64)
+    index = np.round(np.linspace(0, len(poses) - 1, steps + 1)).astype(np.int64)
     return poses[index]
 
 
@@ -151,7 +151,7 @@ class PassivePolicy(Policy):
         """The poses this episode replays (after fitting to the budget)."""
         if self.poses is None:
             raise ValueError("this PassivePolicy has no trajectory; it follows a scripted scan")
-        budget = self.context.step_budget if self._context is not None else None
+        budget = self.context.max_episode_steps if self._context is not None else None
         if self.config.fit_to_budget and budget is not None:
             return subsample_poses(self.poses, budget)
         return self.poses
@@ -275,8 +275,9 @@ class PassivePolicy(Policy):
             return "skipped to the next pose"
         if self._profile is not None:
             headings = self._heading + np.deg2rad(np.arange(0.0, 360.0, 15.0))
-            clearance = [profile_clearance(self._profile, yaw, np.deg2rad(20.0))
-                         for yaw in headings]
+            clearance = [
+                profile_clearance(self._profile, yaw, np.deg2rad(20.0)) for yaw in headings
+            ]
             self._heading = float(headings[int(np.argmax(clearance))])
         self._found_wall = False
         self._visits = []
@@ -286,8 +287,7 @@ class PassivePolicy(Policy):
         words = f"walk towards heading {np.rad2deg(self._heading) % 360.0:.0f} deg"
         bounds = self.context.bounds
         middle = 0.5 * (bounds[0, 2] + bounds[1, 2])
-        self._height_offset += STALL_HEIGHT_CHANGE_M * (
-            1.0 if event.position[2] < middle else -1.0)
+        self._height_offset += STALL_HEIGHT_CHANGE_M * (1.0 if event.position[2] < middle else -1.0)
         words += f", scan height {self._height_offset:+.2f} m first"
         self._height_first = True
         return words
@@ -331,8 +331,11 @@ class PassivePolicy(Policy):
             next_position[:2] += direction * step
         # A refused move that also climbed or sank (onto a tall cabinet's top, under a
         # shelf) is tried again at the height the agent has, until it walks clear.
-        if collided and self._last_target is not None and abs(
-                self._last_target[2] - position[2]) > 1e-6:
+        if (
+            collided
+            and self._last_target is not None
+            and abs(self._last_target[2] - position[2]) > 1e-6
+        ):
             self._hold_height = HOLD_HEIGHT_STEPS
         if self._hold_height > 0:
             self._hold_height -= 1

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -11,7 +12,12 @@ import numpy as np
 from naruto_gym.coverage import CoverageTracker
 from naruto_gym.envs.scene_runtime import SceneRuntime
 from naruto_gym.envs.settings import PINHOLE_BACKEND, EnvSettings
-from naruto_gym.envs.validation import check_env_keywords, check_reset_options, check_seed
+from naruto_gym.envs.validation import (
+    check_env_keywords,
+    check_keyword_names,
+    check_reset_options,
+    check_seed,
+)
 from naruto_gym.evaluation.scoring import EpisodeReconstruction
 from naruto_gym.geometry.transforms import make_pose, validate_pose
 from naruto_gym.motion.actions import (
@@ -27,6 +33,12 @@ from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.panorama import EquirectangularCamera, no_hit_share, render_panorama
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
 from naruto_gym.sensors.raycaster import RayCaster
+
+#: Every keyword ``NarutoReconEnv`` takes: its settings' and its own.
+ENV_KEYWORDS = frozenset(
+    {item.name for item in dataclasses.fields(EnvSettings)}
+    | {"scene", "reconstruct", "max_episode_steps", "render_mode"}
+)
 
 
 class NarutoReconEnv(gym.Env):
@@ -87,7 +99,7 @@ class NarutoReconEnv(gym.Env):
     Reconstruction quality is scored apart from the reward: ``env.unwrapped.evaluate(mesh)``
     scores a policy's own mesh against the ground truth, culled to what the episode's frames
     saw, and with ``reconstruct=True`` ``env.unwrapped.reconstruction_metrics()`` scores the
-    env's reference map (see ``reconstruct`` and ``step_budget``).
+    env's reference map (see ``reconstruct`` and ``max_episode_steps``).
 
     ## Starting State
     ``reset(seed=...)`` draws a position in free space at least ``start_clearance_m`` from every
@@ -99,8 +111,8 @@ class NarutoReconEnv(gym.Env):
 
     ## Episode End
     The env never terminates. ``gymnasium.make`` adds a ``TimeLimit`` (2000 steps for the
-    default ids, the published Replica budget), which truncates. Given ``step_budget``, the
-    env also truncates by itself on the step that reaches it.
+    default ids, the published Replica budget), which truncates. Given ``max_episode_steps``,
+    the env also truncates by itself on the step that reaches it.
 
     ## Arguments
     * ``scene``: a catalogue name (see ``naruto_gym.scenes.available_scenes()``), a mesh path
@@ -160,14 +172,16 @@ class NarutoReconEnv(gym.Env):
     * ``reconstruct``: fuse every frame into a reference TSDF map (2 cm voxels) so that any
       policy gets accuracy / completion / completion ratio:
       ``env.unwrapped.reconstruction_metrics()`` gives them at any time, and the info of the
-      step that reaches ``step_budget`` carries them under ``"reconstruction"``.
-    * ``step_budget``: the episode's length in steps, when the env itself should know it
-      (None: it does not). The env truncates on the step that reaches it and, with
+      step that reaches ``max_episode_steps`` carries them under ``"reconstruction"``.
+    * ``max_episode_steps``: the episode's length in steps, when the env itself should know
+      it (None: it does not). The env truncates on the step that reaches it and, with
       ``reconstruct=True``, puts the final metrics into that step's info, so that no wrapper
-      is needed (Gymnasium refuses registered wrappers together with the vector entry
-      point). ``gymnasium.make(..., max_episode_steps=N)`` sets only its ``TimeLimit``, which
-      cannot tell the env: pass ``step_budget=N`` as well, or wrap the env in
-      ``naruto_gym.wrappers.FinalReconstructionMetrics``.
+      is needed. ``gymnasium.make(..., max_episode_steps=N)`` takes the keyword for its own
+      ``TimeLimit`` and does not pass it on (Gymnasium keeps the budget on that wrapper; the
+      made env's ``unwrapped.spec.max_episode_steps`` is None), so the env made so does not
+      know its end: wrap it in ``naruto_gym.wrappers.FinalReconstructionMetrics`` for the
+      metrics there (Gymnasium refuses registered wrappers together with the vector entry
+      point, so the ids cannot add it).
     * ``render_mode``: None or ``"rgb_array"``.
 
     ## Version History
@@ -201,9 +215,12 @@ class NarutoReconEnv(gym.Env):
         pinhole_backend: str = PINHOLE_BACKEND,
         threads: int | None = None,
         reconstruct: bool = False,
-        step_budget: int | None = None,
+        max_episode_steps: int | None = None,
         render_mode: str | None = None,
+        **unknown: Any,
     ) -> None:
+        if unknown:  # a misspelt or renamed keyword: refused by name, with what it takes
+            check_keyword_names(unknown, ENV_KEYWORDS, type(self).__name__)
         settings = EnvSettings(
             up_axis=up_axis,
             mesh_units=mesh_units,
@@ -227,12 +244,14 @@ class NarutoReconEnv(gym.Env):
             pinhole_backend=pinhole_backend,
             threads=threads,
         )
-        check_env_keywords(render_mode, self.metadata["render_modes"], reconstruct, step_budget)
+        check_env_keywords(
+            render_mode, self.metadata["render_modes"], reconstruct, max_episode_steps
+        )
         # The native ray-casting scene, the coverage samples and the observable surface are
         # built lazily (first reset), after any fork.
         self.runtime = SceneRuntime.load(scene, settings)
         self.render_mode = render_mode
-        self.step_budget = None if step_budget is None else int(step_budget)
+        self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
         self._intrinsics = self.camera.as_dict()
         self.reconstruction: EpisodeReconstruction | None = (
             EpisodeReconstruction(self.camera) if reconstruct else None
@@ -252,8 +271,8 @@ class NarutoReconEnv(gym.Env):
     # -- what the env is made of (each owned by its settings or its scene's runtime) ------
     @property
     def settings(self) -> EnvSettings:
-        """The env's settings: every keyword but ``scene``, ``reconstruct``, ``step_budget``
-        and ``render_mode`` (``env.settings.max_translation_m``, ...)."""
+        """The env's settings: every keyword but ``scene``, ``reconstruct``,
+        ``max_episode_steps`` and ``render_mode`` (``env.settings.max_translation_m``, ...)."""
         return self.runtime.settings
 
     @property
@@ -391,7 +410,9 @@ class NarutoReconEnv(gym.Env):
         gain = self.coverage.update(self._pose, self._depth)
         reward = 100.0 * gain - (settings.collision_penalty if move.collided else 0.0)
         info = self._info(gain, move.collided, move.reason)
-        truncated = self.step_budget is not None and self._step_count >= self.step_budget
+        truncated = (
+            self.max_episode_steps is not None and self._step_count >= self.max_episode_steps
+        )
         if truncated and self.reconstruction is not None:
             info["reconstruction"] = self.reconstruction_metrics()
         return self._observation(), float(reward), False, truncated, info

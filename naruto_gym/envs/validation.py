@@ -35,6 +35,9 @@ MAX_PANORAMA_SIDE = 8_192
 MAX_LENGTH_M = 1e6
 #: The most coverage samples (each costs a projection per step).
 MAX_COVERAGE_SAMPLES = 10_000_000
+#: Keywords of the envs renamed so that one concept has one name: old name -> new name. An
+#: old name is refused with an error naming the new one (0.x: no aliases).
+RENAMED_KEYWORDS: dict[str, str] = {"step_budget": "max_episode_steps"}
 
 
 def check_panorama_shape(value: Any) -> tuple[int, int] | None:
@@ -54,8 +57,13 @@ def check_keyword_names(given: Any, accepted: Any, owner: str, hint: str = "") -
     """Refuse keyword names ``owner`` does not take, with the names it does take.
 
     Raises:
-        ValueError: an unknown keyword (the message lists the accepted ones and ``hint``).
+        ValueError: an old name of :data:`RENAMED_KEYWORDS` (the message names the new one),
+            or an unknown keyword (the message lists the accepted ones and ``hint``).
     """
+    for old, new in RENAMED_KEYWORDS.items():
+        if old in given and new in accepted:
+            value = f"={given[old]!r}" if isinstance(given, dict) else ""
+            raise ValueError(f"{owner}'s keyword {old!r} was renamed: pass {new}{value} instead")
     unknown = sorted(set(given) - set(accepted))
     if unknown:
         raise ValueError(
@@ -148,7 +156,7 @@ def check_reset_options(options: Any, supported: tuple[str, ...]) -> dict[str, A
 
 
 def check_env_keywords(
-    render_mode: Any, render_modes: list[str], reconstruct: Any, step_budget: Any
+    render_mode: Any, render_modes: list[str], reconstruct: Any, max_episode_steps: Any
 ) -> None:
     """Check the single env's own keywords (the rest are ``EnvSettings``')."""
     if render_mode is not None and (
@@ -156,8 +164,8 @@ def check_env_keywords(
     ):
         raise ValueError(f"render_mode must be None or one of {render_modes}, got {render_mode!r}")
     check_bool("reconstruct", reconstruct)
-    if step_budget is not None:
-        check_integer("step_budget", step_budget, low=1)
+    if max_episode_steps is not None:
+        check_integer("max_episode_steps", max_episode_steps, low=1)
 
 
 def check_vector_keywords(max_episode_steps: Any, scene_cache_size: Any) -> None:

@@ -96,12 +96,7 @@ class BatchedEnvBase(gym.vector.VectorEnv):
         self.render_mode = None
         env_kwargs = {"pinhole_backend": BATCHED_PINHOLE_BACKEND, **env_kwargs}
         self.reconstruct = bool(env_kwargs.pop("reconstruct", False))
-        check_keyword_names(
-            env_kwargs,
-            accepted_keywords(),
-            owner,
-            "The episode length is max_episode_steps (step_budget is the single env's).",
-        )
+        check_keyword_names(env_kwargs, accepted_keywords(), owner)
         self.settings = EnvSettings(**env_kwargs)
         # Compiled loops (ray filling, shading, coverage) split agents between this many
         # threads; Open3D's casts use the process's default count.

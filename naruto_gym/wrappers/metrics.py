@@ -14,7 +14,8 @@ class FinalReconstructionMetrics(gym.Wrapper):
 
     Wrap it around the ``TimeLimit`` (``gymnasium.make``'s, whatever its budget) or any other
     wrapper that ends episodes: it sees every episode end, which the env itself cannot (the
-    env adds the metrics itself only on the step that reaches its own ``step_budget``). It
+    env adds the metrics itself only on the step that reaches its own ``max_episode_steps``,
+    which ``gymnasium.make`` keeps for the ``TimeLimit`` and does not pass on). It
     computes the metrics once per episode end, and not at all when the env already added them
     or was made without ``reconstruct=True``.
     """

@@ -38,7 +38,7 @@ class Calls(EpisodeHook):
         self.calls = []
 
     def before_reset(self, env, policy):
-        self.calls.append(("before_reset", policy.context.step_budget))
+        self.calls.append(("before_reset", policy.context.max_episode_steps))
 
     def on_reset(self, observation, info):
         self.calls.append(("reset", 0))
@@ -51,7 +51,7 @@ def test_the_loop_runs_as_a_hand_written_one():
     """Same seed, same policy: the loop's path is the one of bind, reset, act and step."""
     policy = make_policy("random")
     env = _env(policy)
-    policy.bind(EnvContext.from_env(env, step_budget=STEPS))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=STEPS))
     observation, info = env.reset(seed=3, options=policy.reset_options())
     policy.reset(observation, info, seed=3)
     by_hand = [observation["pose"][:3, 3].copy()]
@@ -93,6 +93,22 @@ def test_the_loop_stops_at_max_episode_steps_and_refuses_none():
     env = _env(policy, steps=50)
     result = run_episode_loop(env, policy, 4, seed=0)
     assert result.steps_run == 4 and not result.truncated
-    with pytest.raises(ValueError, match="max_episode_steps must be at least 1"):
+    with pytest.raises(ValueError, match="max_episode_steps must be an integer of at least 1"):
         run_episode_loop(env, policy, 0, seed=0)
     env.close()
+
+
+def test_the_context_reads_the_episode_length_from_the_time_limit_or_the_env():
+    """``EnvContext.from_env`` takes the length given, else the TimeLimit's, else the env's
+    own ``max_episode_steps``; the old keyword ``step_budget`` is refused with the new one."""
+    from naruto_gym import NarutoReconEnv
+
+    made = _env(make_policy("random"), steps=9)
+    assert EnvContext.from_env(made).max_episode_steps == 9
+    assert EnvContext.from_env(made, max_episode_steps=4).max_episode_steps == 4
+    made.close()
+    small = {"scene": "two_rooms", "image_scale": 0.05, "panorama_shape": None}
+    assert EnvContext.from_env(NarutoReconEnv(max_episode_steps=7, **small)).max_episode_steps == 7
+    assert EnvContext.from_env(NarutoReconEnv(**small)).max_episode_steps is None
+    with pytest.raises(ValueError, match="'step_budget' was renamed: pass max_episode_steps=5"):
+        EnvContext.from_env(made, step_budget=5)

@@ -41,7 +41,7 @@ VALID: dict[str, st.SearchStrategy] = {
     "raycaster_backend": st.sampled_from(["open3d", "embreex"]),
     "pinhole_backend": st.sampled_from(["raycast", "raster", "auto"]),
     "reconstruct": st.booleans(),
-    "step_budget": st.one_of(st.none(), st.integers(1, 10**9)),
+    "max_episode_steps": st.one_of(st.none(), st.integers(1, 10**9)),
     "render_mode": st.sampled_from([None, "rgb_array"]),
     "threads": st.one_of(st.none(), st.integers(1, 4)),
 }
@@ -212,9 +212,19 @@ def _vector_env() -> NarutoReconVectorEnv:
     return _VECTOR[0]
 
 
-@pytest.mark.parametrize("keyword", ["step_budget", "max_depht_m"])
-def test_an_unknown_keyword_of_the_vector_env_is_refused_by_name(keyword):
-    """A keyword the batched env does not take (``step_budget`` is the single env's, the
-    other a typo) is refused by name with what to pass, not by its settings' dataclass."""
-    with pytest.raises(ValueError, match=f"unknown keyword.*'{keyword}'.*max_episode_steps"):
-        NarutoReconVectorEnv(2, scene=small_room(), **{keyword: 5}, **FAST)
+@pytest.mark.parametrize("make", [NarutoReconEnv, lambda **kw: NarutoReconVectorEnv(2, **kw)])
+def test_an_unknown_keyword_is_refused_by_name(make):
+    """A keyword neither env takes (a typo) is refused by name with the keywords it takes,
+    not by its settings' dataclass nor by Python's TypeError."""
+    with pytest.raises(ValueError, match="unknown keyword.*'max_depht_m'.*max_depth_m"):
+        make(scene=small_room(), max_depht_m=5, **FAST)
+
+
+@pytest.mark.parametrize("make", [NarutoReconEnv, lambda **kw: NarutoReconVectorEnv(2, **kw)])
+def test_the_old_name_of_the_episode_length_is_refused_with_the_new_one(make):
+    """``step_budget`` was renamed ``max_episode_steps`` (0.x: no alias): either env refuses
+    it with an error that names the new keyword, through gymnasium.make too."""
+    with pytest.raises(ValueError, match="'step_budget' was renamed: pass max_episode_steps=5"):
+        make(scene=small_room(), step_budget=5, **FAST)
+    with pytest.raises(ValueError, match="pass max_episode_steps=5"):
+        gym.make("NarutoRecon-v0", scene=small_room(), step_budget=5, **FAST)

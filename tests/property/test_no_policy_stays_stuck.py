@@ -42,7 +42,7 @@ def _episode(scene, name: str, seed: int, start_z: float | None = None, steps: i
     env = gym.make("NarutoRecon-v0", scene=scene, image_scale=0.05, coverage_samples=1000,
                    panorama_shape=(32, 64), action_mode=policy.preferred_action_mode,
                    max_episode_steps=steps)
-    policy.bind(EnvContext.from_env(env, step_budget=steps))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=steps))
     options = policy.reset_options()
     if start_z is not None and options is None:
         observation, _ = env.reset(seed=seed)
@@ -165,7 +165,7 @@ def test_the_wall_follower_leaves_a_room_it_has_circled():
     policy = make_policy("passive")
     env = gym.make("NarutoRecon-v0", scene="two_rooms:holes", image_scale=0.1,
                    coverage_samples=2000, panorama_shape=(32, 64), max_episode_steps=300)
-    policy.bind(EnvContext.from_env(env, step_budget=300))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=300))
     observation, info = env.reset(seed=1)
     policy.reset(observation, info, seed=1)
     for _ in range(300):
@@ -185,7 +185,7 @@ def test_the_wall_follower_walks_off_a_cabinet_it_started_above():
     env = gym.make("NarutoRecon-v0", scene="procedural:flat:1000006", image_scale=0.1,
                    observable_only=False)
     policy = make_policy("passive")
-    policy.bind(EnvContext.from_env(env, step_budget=800))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=800))
     observation, info = env.reset(seed=0, options=policy.reset_options())
     policy.reset(observation, info, seed=0)
     refused = 0

@@ -60,7 +60,7 @@ def _scene(kind: str) -> Scene:
 
 
 def _episode(policy, env: NarutoReconEnv) -> None:
-    policy.bind(EnvContext.from_env(env, step_budget=STEPS))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=STEPS))
     try:
         observation, info = env.reset(seed=0, options=policy.reset_options())
     except RuntimeError as error:

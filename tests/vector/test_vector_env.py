@@ -284,44 +284,47 @@ def _cheap_metrics(env: gym.Env) -> gym.Env:
     return env
 
 
-@pytest.mark.parametrize("budget", [1, 3])
-def test_env_truncates_at_its_step_budget_with_the_final_metrics(budget):
-    """Given its step budget, the env ends the episode itself on the step that reaches it and
-    puts the reference map's metrics into that step's info (no wrapper needed, which
-    make_vec's vector entry point forbids); a TimeLimit of the same budget agrees."""
-    env = _cheap_metrics(
-        gym.make(
-            "NarutoRecon-v0",
-            max_episode_steps=budget,
-            step_budget=budget,
-            reconstruct=True,
-            **SMALL,
-        )
-    )
-    for _ in range(2):  # a second episode after the reset, too
+def _episodes_end_at(env: gym.Env, budget: int) -> None:
+    """Two episodes (one after a reset) are truncated on step ``budget``, whose info alone
+    carries the reference map's metrics."""
+    for _ in range(2):
         env.reset(seed=0)
         steps = [env.step(0) for _ in range(budget)]
         assert [step[3] for step in steps] == [False] * (budget - 1) + [True]
         assert ["reconstruction" in step[4] for step in steps] == [False] * (budget - 1) + [True]
     env.close()
-    bare = NarutoReconEnv(step_budget=budget, **SMALL)
-    bare.reset(seed=0)
-    assert [bare.step(0)[3] for _ in range(budget)] == [False] * (budget - 1) + [True]
+
+
+@pytest.mark.parametrize("budget", [1, 3])
+def test_env_truncates_at_its_max_episode_steps_with_the_final_metrics(budget):
+    """Given its episode length, the env ends the episode itself on the step that reaches it
+    and puts the reference map's metrics into that step's info (no wrapper needed, which
+    make_vec's vector entry point forbids)."""
+    env = _cheap_metrics(NarutoReconEnv(max_episode_steps=budget, reconstruct=True, **SMALL))
+    assert env.max_episode_steps == budget
+    _episodes_end_at(env, budget)
     assert gym.spec("NarutoRecon-v0").additional_wrappers == ()
-    with pytest.raises(ValueError, match="step_budget"):
-        NarutoReconEnv(step_budget=0, **SMALL)
+    with pytest.raises(ValueError, match="max_episode_steps must be an integer of at least 1"):
+        NarutoReconEnv(max_episode_steps=0, **SMALL)
 
 
-def test_final_metrics_wrapper_sees_the_time_limit_end():
-    """Without a step budget the env cannot know where gymnasium.make's TimeLimit ends the
-    episode; FinalReconstructionMetrics, around it, adds the metrics there."""
-    env = FinalReconstructionMetrics(
-        _cheap_metrics(gym.make("NarutoRecon-v0", max_episode_steps=2, reconstruct=True, **SMALL))
+@pytest.mark.parametrize("budget", [1, 3])
+def test_a_made_env_ends_at_its_time_limit_with_the_final_metrics_under_the_wrapper(budget):
+    """gymnasium.make(..., max_episode_steps=N) keeps N for its TimeLimit and does not pass it
+    on (the env's spec says None), so the env cannot know where the episode ends;
+    FinalReconstructionMetrics, around the TimeLimit, adds the metrics there."""
+    made = _cheap_metrics(
+        gym.make("NarutoRecon-v0", max_episode_steps=budget, reconstruct=True, **SMALL)
     )
-    env.reset(seed=0)
-    infos = [env.step(0)[4] for _ in range(2)]
-    assert ["reconstruction" in info for info in infos] == [False, True]
-    env.close()
+    assert made.spec.max_episode_steps == budget
+    assert made.unwrapped.max_episode_steps is None
+    assert made.unwrapped.spec.max_episode_steps is None
+    _episodes_end_at(FinalReconstructionMetrics(made), budget)
+    bare = _cheap_metrics(
+        gym.make("NarutoRecon-v0", max_episode_steps=2, reconstruct=True, **SMALL)
+    )
+    bare.reset(seed=0)
+    assert ["reconstruction" in bare.step(0)[4] for _ in range(2)] == [False, False]
 
 
 def test_split_steps_share_the_agents_so_that_the_parts_finish_together():

@@ -236,7 +236,7 @@ def test_randomised_episodes_never_stall(scene) -> None:
     env = gym.make("NarutoRecon-v0", scene=mesh, image_scale=0.1, panorama_shape=(32, 64),
                    max_episode_steps=steps + 1)
     policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
-    policy.bind(EnvContext.from_env(env.unwrapped, step_budget=steps))
+    policy.bind(EnvContext.from_env(env.unwrapped, max_episode_steps=steps))
     observation, info = env.reset(seed=seed)
     policy.reset(observation, info, seed=seed)
     coverage = [info["coverage"]]
@@ -262,7 +262,7 @@ def test_on_an_open_scan_goals_stay_inside_the_scanned_space() -> None:
     env = gym.make("NarutoRecon-v0", scene="replica_like_room:no_ceiling", image_scale=0.1,
                    coverage_samples=2000, max_episode_steps=steps + 1)
     policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
-    policy.bind(EnvContext.from_env(env.unwrapped, step_budget=steps))
+    policy.bind(EnvContext.from_env(env.unwrapped, max_episode_steps=steps))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)
     escapes = 0
@@ -285,7 +285,7 @@ def test_goals_may_stay_as_high_as_the_agent_stands_over_a_low_scan() -> None:
     env = gym.make("NarutoRecon-v0", scene="replica_like_room:no_ceiling", image_scale=0.1,
                    coverage_samples=2000, max_episode_steps=20)
     policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
-    policy.bind(EnvContext.from_env(env.unwrapped, step_budget=20))
+    policy.bind(EnvContext.from_env(env.unwrapped, max_episode_steps=20))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)
     for _ in range(10):
@@ -342,7 +342,7 @@ def _agent_after(scene: str, steps: int) -> NarutoPolicy:
     env = gym.make("NarutoRecon-v0", scene=scene, image_scale=0.1, coverage_samples=2000,
                    max_episode_steps=steps)
     policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
-    policy.bind(EnvContext.from_env(env.unwrapped, step_budget=steps))
+    policy.bind(EnvContext.from_env(env.unwrapped, max_episode_steps=steps))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)
     for _ in range(steps):

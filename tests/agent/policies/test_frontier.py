@@ -66,7 +66,7 @@ def _coverage(policy, steps: int, seed: int) -> float:
         coverage_samples=4000,
         max_episode_steps=steps,
     )
-    policy.bind(EnvContext.from_env(env, step_budget=steps))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=steps))
     observation, info = env.reset(seed=seed)
     policy.reset(observation, info, seed=seed)
     for _ in range(steps):
@@ -92,7 +92,7 @@ def test_frontier_plans_again_after_a_bump_even_when_the_env_moved_it_part_way()
     policy = FrontierPolicy()
     env = gym.make("NarutoRecon-v0", scene="replica_like_room", image_scale=0.1,
                    coverage_samples=500, max_episode_steps=100)
-    policy.bind(EnvContext.from_env(env, step_budget=100))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=100))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)
     for _ in range(100):

@@ -53,7 +53,7 @@ def test_sees_all_around_below():
 def _env(scene: str, policy) -> gym.Env:
     env = gym.make("NarutoRecon-v0", scene=scene, image_scale=0.1, coverage_samples=500,
                    action_mode=policy.preferred_action_mode, max_episode_steps=300)
-    policy.bind(EnvContext.from_env(env, step_budget=300))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=300))
     return env
 
 

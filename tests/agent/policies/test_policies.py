@@ -37,7 +37,7 @@ def make_env(policy_mode: str = "pose", scene: str = "two_rooms", steps: int = 5
 
 def rollout(env, policy, steps: int, seed: int = 0):
     """Run a policy; returns the poses (start included), infos and the policy."""
-    policy.bind(EnvContext.from_env(env, step_budget=steps))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=steps))
     observation, info = env.reset(seed=seed, options=policy.reset_options())
     policy.reset(observation, info, seed=seed)
     poses, infos = [observation["pose"].astype(np.float64)], [info]

@@ -97,7 +97,7 @@ class _Recovering(_StandStill):
 
 
 def _context(env):
-    return EnvContext.from_env(env, step_budget=50)
+    return EnvContext.from_env(env, max_episode_steps=50)
 
 
 def test_a_users_policy_opts_in_and_its_recovery_is_logged():
@@ -145,7 +145,7 @@ def test_every_shipped_policy_recovers_from_a_stall_and_moves_again(name):
         panorama_shape=(32, 64),
         action_mode=policy.preferred_action_mode,
     )
-    policy.bind(EnvContext.from_env(env, step_budget=200))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=200))
     observation, info = env.reset(seed=3, options=policy.reset_options())
     policy.reset(observation, info, seed=3)
     for _ in range(12):  # under way first

@@ -58,7 +58,7 @@ def test_a_policy_shows_nothing_by_default():
 def _episode(policy, steps):
     env = gym.make("NarutoRecon-v0", scene="replica_like_room", image_scale=0.1,
                    action_mode=policy.preferred_action_mode)
-    policy.bind(EnvContext.from_env(env, step_budget=steps))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=steps))
     observation, info = env.reset(seed=0, options=policy.reset_options())
     policy.reset(observation, info, seed=0)
     actions = []
