@@ -6,7 +6,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 status=0
-"${PYTHON:-python3}" -m pytest "$@" || status=$?
+# One worker per core of this machine; a test module stays on one worker (its fixtures, such as a
+# docs page's REPL session, are module-scoped).
+"${PYTHON:-python3}" -m pytest -n auto --dist loadscope "$@" || status=$?
 if [ "${NARUTO_RLLIB_ENV:-1}" != "0" ]; then
     bash scripts/rllib_env.sh || status=$?
 fi
