@@ -24,6 +24,9 @@ from tests.agent.planning.planning_scenes import (
 )
 
 RADIUS = 0.05
+# Plans whose result a test checks get a wall-time limit no loaded machine reaches: the planner
+# gives up at its time limit (5 s by default), which a busy CI worker can hit.
+UNTIMED_S = 600.0
 # NARUTO checks the trilinear SDF of a 0.1 m grid with no safety margin. Trilinear
 # interpolation overestimates the distance near convex edges (door jambs, box corners), so
 # the true clearance can fall below the radius: over 100 random requests in this room the
@@ -66,7 +69,7 @@ def assert_valid_path(result, start, goal, caster, min_clearance, step=0.1):
 
 
 def test_e_rrt_goes_through_the_doorway(room_sdf, room_caster):
-    result = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=0))
+    result = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=0, time_limit_s=UNTIMED_S))
     assert_valid_path(result, START, GOAL, room_caster, RADIUS - CORNER_CUTTING_TOLERANCE)
     # The straight line is blocked, so the path is longer than it and passes the doorway.
     crossing = result.path[np.argmin(np.abs(result.path[:, 0]))]
@@ -84,7 +87,7 @@ def test_random_requests_are_collision_free(variant, room_sdf, room_caster):
     components = FreeSpaceComponents.from_sdf(room_sdf, RADIUS)
     for seed in range(25):
         start, goal = free[rng.integers(len(free), size=2)] + rng.uniform(-0.04, 0.04, (2, 3))
-        config = PlannerConfig(seed=seed, **VARIANTS[variant])
+        config = PlannerConfig(seed=seed, time_limit_s=UNTIMED_S, **VARIANTS[variant])
         result = plan_path(room_sdf, start, goal, config, components=components)
         assert_valid_path(result, start, goal, room_caster, RADIUS - CORNER_CUTTING_TOLERANCE)
 
@@ -92,7 +95,12 @@ def test_random_requests_are_collision_free(variant, room_sdf, room_caster):
 def test_guaranteed_margin_keeps_the_true_clearance(room_sdf, room_caster):
     margin = guaranteed_margin_m(room_sdf.voxel_size, 0.02)
     for seed in range(5):
-        result = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=seed, safety_margin_m=margin))
+        result = plan_path(
+            room_sdf,
+            START,
+            GOAL,
+            PlannerConfig(seed=seed, safety_margin_m=margin, time_limit_s=UNTIMED_S),
+        )
         assert_valid_path(result, START, GOAL, room_caster, RADIUS)
 
 
@@ -102,12 +110,12 @@ def test_slow_variants_also_find_valid_paths(variant, room_sdf, room_caster):
     result = plan_path(room_sdf, START, GOAL, config)
     assert_valid_path(result, START, GOAL, room_caster, RADIUS - CORNER_CUTTING_TOLERANCE)
     # Without the direct line nothing pulls the tree to the goal: many more nodes.
-    fast = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=1))
+    fast = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=1, time_limit_s=UNTIMED_S))
     assert result.nodes > 5 * fast.nodes
 
 
 def test_same_seed_same_path(room_sdf):
-    config = PlannerConfig(seed=11, direct_line=False)
+    config = PlannerConfig(seed=11, direct_line=False, time_limit_s=UNTIMED_S)
     first = plan_path(room_sdf, START, GOAL, config)
     second = plan_path(room_sdf, START, GOAL, config)
     assert first.success and second.success
@@ -126,7 +134,7 @@ def test_same_seed_same_path(room_sdf):
 )
 def test_unreachable_goals_fail_fast(goal, reason, room_sdf):
     began = time.perf_counter()
-    result = plan_path(room_sdf, START, goal, PlannerConfig(seed=0))
+    result = plan_path(room_sdf, START, goal, PlannerConfig(seed=0, time_limit_s=UNTIMED_S))
     elapsed = time.perf_counter() - began
     assert not result.success
     assert reason in result.reason
@@ -191,12 +199,14 @@ def test_torch_nearest_neighbour_matches_numpy():
     np.testing.assert_array_equal(trees[0].path_to(4), points[:5])
 
 
-@pytest.mark.skipif(
-    not __import__("torch").cuda.is_available(), reason="needs a CUDA device"
-)
+@pytest.mark.skipif(not __import__("torch").cuda.is_available(), reason="needs a CUDA device")
 def test_cuda_search_gives_the_same_path(room_sdf):
-    cpu = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=5, device="cpu"))
-    gpu = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=5, device="cuda"))
+    cpu = plan_path(
+        room_sdf, START, GOAL, PlannerConfig(seed=5, device="cpu", time_limit_s=UNTIMED_S)
+    )
+    gpu = plan_path(
+        room_sdf, START, GOAL, PlannerConfig(seed=5, device="cuda", time_limit_s=UNTIMED_S)
+    )
     np.testing.assert_allclose(cpu.path, gpu.path)
 
 
@@ -228,14 +238,18 @@ def test_travel_distances_go_around_walls(room_sdf, closed_wall_sdf):
 def test_shortcut_path_is_shorter_free_and_keeps_its_ends(room_sdf):
     """A zigzag RRT path through the doorway, shortcut: the same ends, no longer, every
     segment free at the planner's clearance; a free straight path stays as it is."""
-    result = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=3, direct_line=False))
+    result = plan_path(
+        room_sdf, START, GOAL, PlannerConfig(seed=3, direct_line=False, time_limit_s=UNTIMED_S)
+    )
     assert result.success
     short = shortcut_path(room_sdf, result.path, RADIUS)
     length = lambda path: float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())  # noqa: E731
     assert np.array_equal(short[0], result.path[0]) and np.array_equal(short[-1], result.path[-1])
     assert len(short) < len(result.path) and length(short) < length(result.path)
-    assert all(segment_is_free(room_sdf, a, b, 0.02, RADIUS)
-               for a, b in zip(short[:-1], short[1:], strict=True))
+    assert all(
+        segment_is_free(room_sdf, a, b, 0.02, RADIUS)
+        for a, b in zip(short[:-1], short[1:], strict=True)
+    )
     # Kept nodes come from the path, in order.
     rows = [int(np.flatnonzero(np.all(result.path == node, axis=1))[0]) for node in short]
     assert rows == sorted(rows)
@@ -252,15 +266,24 @@ def test_a_shortcut_with_a_margin_keeps_the_true_clearance(room_sdf, room_caster
     map."""
     margin = 0.05
     for seed in range(8):
-        result = plan_path(room_sdf, START, GOAL, PlannerConfig(seed=seed, direct_line=False))
+        result = plan_path(
+            room_sdf,
+            START,
+            GOAL,
+            PlannerConfig(seed=seed, direct_line=False, time_limit_s=UNTIMED_S),
+        )
         assert result.success
         short = shortcut_path(room_sdf, result.path, RADIUS + margin)
-        assert all(segment_is_free(room_sdf, a, b, 0.02, RADIUS + margin)
-                   for a, b in zip(short[:-1], short[1:], strict=True)
-                   if not _consecutive(result.path, a, b))
+        assert all(
+            segment_is_free(room_sdf, a, b, 0.02, RADIUS + margin)
+            for a, b in zip(short[:-1], short[1:], strict=True)
+            if not _consecutive(result.path, a, b)
+        )
         tree_clearance = room_caster.unsigned_distance(densify(result.path)).min()
-        assert room_caster.unsigned_distance(densify(short)).min() >= min(
-            RADIUS, tree_clearance) - 1e-6
+        assert (
+            room_caster.unsigned_distance(densify(short)).min()
+            >= min(RADIUS, tree_clearance) - 1e-6
+        )
 
 
 def _consecutive(path: np.ndarray, a: np.ndarray, b: np.ndarray) -> bool:
