@@ -158,9 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         **vars(dataclass_parser(Args, description=__doc__.split("\n\n")[0]).parse_args(argv))
     )
     path = Path(args.output_dir) / RESULT_FILE
-    done: dict[str, Any] = json.loads(path.read_text()) if path.is_file() else {}
-    episodes: list[dict[str, Any]] = done.get("episodes", [])
-    have = {(e["scene"], e["policy"], e["seed"], e["steps"], e["image_scale"]) for e in episodes}
+    have = {_key(e) for e in _read(path)}
     for scene in args.scenes:
         for seed in args.seeds:
             for policy in args.policies:
@@ -169,28 +167,48 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{policy} on {scene}, seed {seed}", flush=True)
                 episode = run_episode(scene, policy, seed, args)
                 episode["load_average"] = [round(v, 2) for v in os.getloadavg()]
-                episodes.append(episode)
                 print(
                     f"  stay {episode['longest_stay_steps']}, coverage "
                     f"{100 * episode['coverage']:.1f} %, path {episode['path_m']:.1f} m, "
                     f"{episode['seconds']:.0f} s",
                     flush=True,
                 )
-                write_json_atomic(
-                    path,
-                    {
-                        "args": asdict(args),
-                        "machine": machine(),
-                        "episodes": episodes,
-                        "summary": summary(episodes),
-                    },
-                )
-    result = summary(episodes)
-    write_json_atomic(
-        path, {"args": asdict(args), "machine": machine(), "episodes": episodes, "summary": result}
-    )
+                _write(path, args, [episode])
+    result = _write(path, args, [])
     print(json.dumps(result, indent=1))
     return 1 if result["stays_over_limit"] else 0
+
+
+def _key(episode: dict[str, Any]) -> tuple:
+    return (
+        episode["scene"],
+        episode["policy"],
+        episode["seed"],
+        episode["steps"],
+        episode["image_scale"],
+    )
+
+
+def _read(path: Path) -> list[dict[str, Any]]:
+    return json.loads(path.read_text())["episodes"] if path.is_file() else []
+
+
+def _write(path: Path, args: Args, new: list[dict[str, Any]]) -> dict[str, Any]:
+    """Add ``new`` to the episodes in the file as it is now (a second run of the script, say
+    for another policy, may have added some meanwhile) and write it; returns the summary."""
+    episodes = {_key(e): e for e in _read(path)}
+    episodes.update({_key(e): e for e in new})
+    result = summary(list(episodes.values()))
+    write_json_atomic(
+        path,
+        {
+            "args": asdict(args),
+            "machine": machine(),
+            "episodes": list(episodes.values()),
+            "summary": result,
+        },
+    )
+    return result
 
 
 if __name__ == "__main__":

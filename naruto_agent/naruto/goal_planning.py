@@ -88,7 +88,8 @@ class GoalPlanner:
     def leave(self, spot: np.ndarray, radius_m: float) -> None:
         """The next plan goes to a goal farther than ``radius_m`` from ``spot`` and moves at
         once, without turning towards its target first (a stall watchdog cut a stay there
-        short: a goal next to it, or a turn in place, would only make the stay longer)."""
+        short: a goal next to it, or a turn in place, would only make the stay longer).
+        Plans that find no such goal fail, until the recovery they lead to moves away."""
         self._leave = (np.asarray(spot, np.float64).copy(), float(radius_m))
 
     def plan(self, position: np.ndarray, frame: int = 0) -> Plan | None:
@@ -117,9 +118,9 @@ class GoalPlanner:
             return Plan(climb, look_around_views(climb[-1], self.config), climb[-1].copy(),
                         {"recovery": "climb", "trusted": True})
         if self.monitor.needs_recovery():
-            self._leave = None
+            self._leave = None  # a recovery moves away too
             return self._recover(position, record, frame)
-        leave, self._leave = self._leave, None
+        leave = self._leave  # kept until a plan leaves (failed plans lead to a recovery)
         prefix = position[None]
         start = position
         clearance = self.agent_map.clearance_m
@@ -182,6 +183,7 @@ class GoalPlanner:
                     self._visit = (goal.copy(), search.goal_visible[rank])
                     if leave is not None:
                         record["move_at_once"] = True
+                        self._leave = None
                     return Plan(path, views, goal.copy(), record)
                 self.monitor.goal_failed(goal)
             self._plan_failed(position, record, f"no goal reachable ({result.reason})")

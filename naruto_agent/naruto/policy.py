@@ -70,9 +70,9 @@ from naruto_agent.policies.registry import register_policy
 from naruto_agent.policies.watchdog import StallEvent, StallWatchdogConfig
 
 #: The agent's stall watchdog: the default settings, so that no stay lasts over 30 steps. A
-#: look-around (the first one: 8 views, alternately 25 degrees up and down, about 35 steps)
-#: that still learns is cut short after ``max_stay_steps`` for the next goal; a stay that
-#: learns nothing is a stall after one window.
+#: look-around that still learns (8 views alternately 20 degrees up and down take 25 steps,
+#: a goal's up to 10 views longer) is cut short after ``max_stay_steps`` for the next goal;
+#: a stay that learns nothing is a stall after one window.
 STALL_WATCHDOG = StallWatchdogConfig()
 
 #: The phases whose seconds ``NarutoPolicy.timings`` holds.
