@@ -222,7 +222,7 @@ def test_naruto_cuts_a_long_look_around_short_for_a_goal_away_from_it():
         coverage_samples=500,
         action_mode=policy.preferred_action_mode,
     )
-    policy.bind(EnvContext.from_env(env, step_budget=200))
+    policy.bind(EnvContext.from_env(env, max_episode_steps=200))
     observation, info = env.reset(seed=3)
     policy.reset(observation, info, seed=3)
     start = observation["pose"][:3, 3].copy()
