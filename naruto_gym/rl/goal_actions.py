@@ -14,7 +14,9 @@ An action is one of
   doorways' lintels); at the viewpoint it turns towards the cluster, only as far as needed
   (half a turn at most). The cluster is then done for the episode, and the walker goes on to
   the nearest candidate for the rest of the ``K`` steps. An empty slot means candidate 0;
-  with no candidate at all the agent turns in place, looking for one every few steps.
+  with no candidate at all the agent walks to the reachable place farthest from where it has
+  been (looking for candidates every few steps on the way), or turns in place where there is
+  none.
 * with ``primitive_actions``, the 10 discrete moves after them (index ``N + m``), each
   repeated for the ``K`` steps; a horizontal move the map does not know to be safe, or a
   vertical one without a panorama hit at least ``step + VERTICAL_MARGIN_M`` above (below) the
@@ -44,7 +46,7 @@ from gymnasium.vector.utils import batch_space
 
 from naruto_gym.motion.actions import DISCRETE_ACTIONS
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
-from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES, find_candidates
+from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES, find_candidates, wander_goal
 from naruto_gym.rl.goal_planner import (
     REACHED,
     REPLAN,
@@ -147,6 +149,7 @@ class GoalWalker:
         self.primitives = np.full(n, -1, np.int64)  # -1: walking to a candidate
         self.phases = np.full(n, IDLE, np.int64)
         self.idle_steps = np.zeros(n, np.int64)
+        self.wandering = np.zeros(n, bool)  # walking to a place with no candidate in view
         self.slice_restarts = np.zeros(n, np.int64)  # the map's count when the goal was set
         self.targets = np.zeros((n, 2))  # world (x, y) of the cluster to face
         self.target_clusters = np.full((n, 2), -1, np.int64)
@@ -176,6 +179,7 @@ class GoalWalker:
         envs = np.arange(self.map.num_envs) if envs is None else np.asarray(envs, np.int64)
         self.done[envs] = False
         self.phases[envs] = IDLE
+        self.wandering[envs] = False
         self.primitives[envs] = -1
         self.lengths[envs] = 0
         self.tables[envs] = 0.0
@@ -239,14 +243,31 @@ class GoalWalker:
         if slot >= self.counts[i]:
             slot = 0  # an empty slot: the nearest candidate
         self.slice_restarts[i] = self.map.slice_restarts[i]
+        self.wandering[i] = self.counts[i] == 0
         if self.counts[i] == 0:
-            self.phases[i] = IDLE
-            self.idle_steps[i] = 0
+            self._wander(i)
             return
         self.targets[i] = self.centres[i, slot]
         self.target_clusters[i] = self.clusters[i, slot]
         self.phases[i] = WALK
         self._plan(i, self.viewpoints[i, slot])
+
+    def _wander(self, i: int) -> None:
+        """No candidate: walk to the reachable place farthest from the trail (the path
+        lengths of the last search are around the current pose), or turn in place."""
+        pose = self.map.poses[i]
+        si, sj = np.floor((pose[:2, 3] - self.map.origins[i]) / self.map.cell_m).astype(int)
+        wi, wj = wander_goal(self.map.grids[i], self._scratch, si, sj, self.radius, 3)
+        self.target_clusters[i] = -1
+        if wi < 0:
+            self.phases[i] = IDLE
+            self.idle_steps[i] = 0
+            return
+        goal = self.map.origins[i] + (np.array([wi, wj]) + 0.5) * self.map.cell_m
+        self.targets[i] = goal
+        self.phases[i] = WALK
+        self.idle_steps[i] = 0
+        self._plan(i, goal)
 
     def _plan(self, i: int, goal: np.ndarray) -> None:
         self.lengths[i] = plan_path(
@@ -304,6 +325,12 @@ class GoalWalker:
                 self._go_to(i, 0)
                 if self.phases[i] == IDLE:
                     return TURN_LEFT
+            if self.phases[i] == WALK and self.wandering[i]:
+                self.idle_steps[i] += 1
+                if self.idle_steps[i] % IDLE_SEARCH_EVERY == 0:
+                    self._refresh(i)  # a candidate found on the way ends the wander
+                    if self.counts[i] > 0:
+                        self._go_to(i, 0)
             if self.phases[i] == WALK:
                 move = self._walk(i)
                 if move >= 0:

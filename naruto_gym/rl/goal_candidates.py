@@ -38,10 +38,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN
+from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL
 from naruto_gym.rl.goal_planner import traversable
 
-__all__ = ["CANDIDATE_FEATURES", "find_candidates"]
+__all__ = ["CANDIDATE_FEATURES", "find_candidates", "path_lengths", "wander_goal"]
 
 #: Columns of the candidate feature table.
 CANDIDATE_FEATURES = (
@@ -300,3 +300,36 @@ def find_candidates(
             clusters[row, 1] = gj
             found = min(found + 1, capacity)
     return found
+
+
+@numba.njit(**_JIT)
+def wander_goal(
+    grid: np.ndarray, lengths: np.ndarray, si: int, sj: int, radius: int, stride: int
+) -> tuple[int, int]:
+    """The reachable cell (``lengths`` from :func:`path_lengths` around ``(si, sj)``) farthest
+    from every cell the agent stood in (its trail), every ``stride``-th cell looked at: where
+    an agent with no candidate left sees the rooms from a new place. (-1, -1) when none."""
+    side = 2 * radius + 1
+    trail_i = np.empty(side * side, np.int64)
+    trail_j = np.empty(side * side, np.int64)
+    count = 0
+    for a in range(0, side, 2):
+        for b in range(0, side, 2):
+            i, j = si + a - radius, sj + b - radius
+            if 0 <= i < grid.shape[1] and 0 <= j < grid.shape[2] and grid[TRAIL, i, j] != 0:
+                trail_i[count], trail_j[count] = i, j
+                count += 1
+    best, best_i, best_j = -1.0, -1, -1
+    for a in range(0, side, stride):
+        for b in range(0, side, stride):
+            if lengths[a, b] <= 0:
+                continue
+            i, j = si + a - radius, sj + b - radius
+            nearest = 1e18
+            for k in range(count):
+                d = (trail_i[k] - i) ** 2 + (trail_j[k] - j) ** 2
+                if d < nearest:
+                    nearest = d
+            if nearest > best:
+                best, best_i, best_j = nearest, i, j
+    return best_i, best_j

@@ -9,9 +9,14 @@ import numpy as np
 import pytest
 
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation, VectorEgocentricMapObservation
-from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN
+from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL
 from naruto_gym.rl.goal_actions import FACE, GoalActions, VectorGoalActions
-from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES, find_candidates
+from naruto_gym.rl.goal_candidates import (
+    CANDIDATE_FEATURES,
+    find_candidates,
+    path_lengths,
+    wander_goal,
+)
 from naruto_gym.rl.goal_planner import (
     MOVE_FORWARD,
     REACHED,
@@ -147,6 +152,23 @@ def test_candidate_0_is_the_nearest_by_path_not_by_straight_distance():
     done[tuple(clusters[0])] = True
     count, _, _, again, _ = _candidates(grid, 1.75, 0.55, done)
     assert count == 1 and np.allclose(again[0], centres[1])
+
+
+def test_with_no_candidate_it_wanders_to_the_reachable_place_farthest_from_its_trail():
+    grid = _room_with_wall()
+    grid[OCCUPIED, 20, 30:35] = 255  # the gap closed
+    grid[TRAIL, 3:8, 3:8] = 255  # it stood near (0.5, 0.5) m
+    lengths = np.zeros((81, 81))
+    path_lengths(grid, 5, 5, 40, 1, lengths)
+    i, j = wander_goal(grid, lengths, 5, 5, 40, 1)
+    assert traversable(grid, i, j, 1) and lengths[i - 5 + 40, j - 5 + 40] > 0
+    assert i < 20  # on its side of the wall ...
+    assert np.hypot(i - 5, j - 5) > 25  # ... and far from where it stood
+    # Through the gap, the far side of the wall is reachable: farther from the trail there.
+    grid[OCCUPIED, 20, 30:35] = 0
+    path_lengths(grid, 5, 5, 40, 1, lengths)
+    far_i, far_j = wander_goal(grid, lengths, 5, 5, 40, 1)
+    assert far_i > 20 and lengths[far_i - 5 + 40, far_j - 5 + 40] > 0
 
 
 def test_a_free_space_edge_is_walked_up_to():
