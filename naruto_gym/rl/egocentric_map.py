@@ -245,6 +245,15 @@ class EgocentricMapBuilder:
         self.clearance_up[envs] = np.where((top > 0).all(axis=1), top.min(axis=1), 0.0)
         self.clearance_down[envs] = np.where((bottom > 0).all(axis=1), bottom.min(axis=1), 0.0)
 
+    def mark_blocked(self, env: int, x: float, y: float) -> None:
+        """Mark the cell at world ``(x, y)`` an obstacle for agent ``env``: the env refused a
+        move into it (e.g. out of an open scan's scanned space, where no surface shows)."""
+        i, j = np.floor((np.array([x, y]) - self.origins[env]) / self.cell_m).astype(int)
+        if 0 <= i < self.grids.shape[-2] and 0 <= j < self.grids.shape[-1]:
+            self.grids[env, OCCUPIED, i, j] = 255
+            self.grids[env, FREE, i, j] = 0
+            self.coarse[env, OCCUPIED, i // self.far_factor, j // self.far_factor] = 255
+
     def observe(
         self, observations: dict[str, np.ndarray], envs: np.ndarray | None = None
     ) -> dict[str, np.ndarray]:

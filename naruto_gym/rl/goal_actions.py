@@ -48,6 +48,7 @@ from naruto_gym.motion.actions import DISCRETE_ACTIONS
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
 from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES, find_candidates, wander_goal
 from naruto_gym.rl.goal_planner import (
+    MOVE_FORWARD,
     REACHED,
     REPLAN,
     TURN_LEFT,
@@ -150,6 +151,8 @@ class GoalWalker:
         self.phases = np.full(n, IDLE, np.int64)
         self.idle_steps = np.zeros(n, np.int64)
         self.wandering = np.zeros(n, bool)  # walking to a place with no candidate in view
+        self.last_moves = np.full(n, -1, np.int64)  # the walking move sent last, and from where
+        self.last_positions = np.zeros((n, 2))
         self.slice_restarts = np.zeros(n, np.int64)  # the map's count when the goal was set
         self.targets = np.zeros((n, 2))  # world (x, y) of the cluster to face
         self.target_clusters = np.full((n, 2), -1, np.int64)
@@ -180,6 +183,7 @@ class GoalWalker:
         self.done[envs] = False
         self.phases[envs] = IDLE
         self.wandering[envs] = False
+        self.last_moves[envs] = -1
         self.primitives[envs] = -1
         self.lengths[envs] = 0
         self.tables[envs] = 0.0
@@ -257,7 +261,10 @@ class GoalWalker:
         lengths of the last search are around the current pose), or turn in place."""
         pose = self.map.poses[i]
         si, sj = np.floor((pose[:2, 3] - self.map.origins[i]) / self.map.cell_m).astype(int)
-        wi, wj = wander_goal(self.map.grids[i], self._scratch, si, sj, self.radius, 3)
+        wi, wj = wander_goal(
+            self.map.grids[i], self.map.coarse[i], self.map.far_factor, self._scratch, si, sj,
+            self.radius, 3,
+        )  # fmt: skip
         self.target_clusters[i] = -1
         if wi < 0:
             self.phases[i] = IDLE
@@ -302,6 +309,25 @@ class GoalWalker:
         return TURN_LEFT
 
     def _move(self, i: int) -> int:
+        move = self._choose(i)
+        self.last_moves[i] = move
+        self.last_positions[i] = self.map.poses[i][:2, 3]
+        return move
+
+    def _refused(self, i: int) -> bool:
+        """Whether the env refused the forward move sent last (the agent did not move): the
+        cell it led into is marked blocked on the map, and the goal given up."""
+        if self.last_moves[i] != MOVE_FORWARD:
+            return False
+        pose = self.map.poses[i]
+        if np.hypot(*(pose[:2, 3] - self.last_positions[i])) > 0.25 * self.step_m:
+            return False
+        heading = np.arctan2(pose[1, 2], pose[0, 2])
+        ahead = pose[:2, 3] + self.step_m * np.array([np.cos(heading), np.sin(heading)])
+        self.map.mark_blocked(i, float(ahead[0]), float(ahead[1]))
+        return True
+
+    def _choose(self, i: int) -> int:
         if self.primitives[i] >= 0:
             return self._primitive(i)
         pose = self.map.poses[i]
@@ -316,6 +342,8 @@ class GoalWalker:
             # The map restarted at a new height: the goal was found on the old slice.
             self._refresh(i)
             self._go_to(i, 0)
+        if self._refused(i) and self.phases[i] == WALK:
+            self.phases[i] = GIVEN_UP
         for _ in range(MAX_GOALS_PER_STEP):
             if self.phases[i] == IDLE:
                 self.idle_steps[i] += 1
@@ -325,6 +353,9 @@ class GoalWalker:
                 self._go_to(i, 0)
                 if self.phases[i] == IDLE:
                     return TURN_LEFT
+            if self.phases[i] == GIVEN_UP:
+                self._finish(i)
+                continue
             if self.phases[i] == WALK and self.wandering[i]:
                 self.idle_steps[i] += 1
                 if self.idle_steps[i] % IDLE_SEARCH_EVERY == 0:

@@ -304,11 +304,20 @@ def find_candidates(
 
 @numba.njit(**_JIT)
 def wander_goal(
-    grid: np.ndarray, lengths: np.ndarray, si: int, sj: int, radius: int, stride: int
+    grid: np.ndarray,
+    coarse: np.ndarray,
+    factor: int,
+    lengths: np.ndarray,
+    si: int,
+    sj: int,
+    radius: int,
+    stride: int,
 ) -> tuple[int, int]:
     """The reachable cell (``lengths`` from :func:`path_lengths` around ``(si, sj)``) farthest
     from every cell the agent stood in (its trail), every ``stride``-th cell looked at: where
-    an agent with no candidate left sees the rooms from a new place. (-1, -1) when none."""
+    an agent with no candidate left sees the rooms from a new place. Only cells whose far
+    cell holds surface the camera saw (a floor under it: inside an open scan's scanned
+    space, not past its edge) qualify. (-1, -1) when none."""
     side = 2 * radius + 1
     trail_i = np.empty(side * side, np.int64)
     trail_j = np.empty(side * side, np.int64)
@@ -325,6 +334,8 @@ def wander_goal(
             if lengths[a, b] <= 0:
                 continue
             i, j = si + a - radius, sj + b - radius
+            if coarse[SEEN, i // factor, j // factor] == 0:
+                continue
             nearest = 1e18
             for k in range(count):
                 d = (trail_i[k] - i) ** 2 + (trail_j[k] - j) ** 2

@@ -91,6 +91,10 @@ def test_obstacles_and_free_space_restart_when_the_agent_changes_height():
     assert not builder.grids[0, 0].any() and not builder.coarse[0, 0].any()  # obstacles gone
     np.testing.assert_array_equal(builder.grids[0, 2], seen_before)  # seen surface kept
     assert builder.grids[0, 3].any()  # and the trail
+    builder.mark_blocked(0, 0.35, 0.05)  # a move the env refused led there
+    i, j = np.floor((np.array([0.35, 0.05]) - builder.origins[0]) / 0.1).astype(int)
+    assert builder.grids[0, 0, i, j] and not builder.grids[0, 1, i, j]
+    assert builder.coarse[0, 0, i // 4, j // 4]
 
 
 def test_the_crop_turns_with_the_agent_heading():

@@ -158,16 +158,18 @@ def test_with_no_candidate_it_wanders_to_the_reachable_place_farthest_from_its_t
     grid = _room_with_wall()
     grid[OCCUPIED, 20, 30:35] = 255  # the gap closed
     grid[TRAIL, 3:8, 3:8] = 255  # it stood near (0.5, 0.5) m
+    grid[SEEN, :, 4:] = 255  # the floor seen everywhere but along y < 0.4 m
     lengths = np.zeros((81, 81))
     path_lengths(grid, 5, 5, 40, 1, lengths)
-    i, j = wander_goal(grid, lengths, 5, 5, 40, 1)
+    i, j = wander_goal(grid, _coarse(grid), 4, lengths, 5, 5, 40, 1)
     assert traversable(grid, i, j, 1) and lengths[i - 5 + 40, j - 5 + 40] > 0
     assert i < 20  # on its side of the wall ...
     assert np.hypot(i - 5, j - 5) > 25  # ... and far from where it stood
+    assert j >= 4  # never where it saw no floor
     # Through the gap, the far side of the wall is reachable: farther from the trail there.
     grid[OCCUPIED, 20, 30:35] = 0
     path_lengths(grid, 5, 5, 40, 1, lengths)
-    far_i, far_j = wander_goal(grid, lengths, 5, 5, 40, 1)
+    far_i, far_j = wander_goal(grid, _coarse(grid), 4, lengths, 5, 5, 40, 1)
     assert far_i > 20 and lengths[far_i - 5 + 40, far_j - 5 + 40] > 0
 
 
