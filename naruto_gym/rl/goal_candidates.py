@@ -177,7 +177,8 @@ def find_candidates(
     """The candidates of one agent (module docstring), nearest by path first.
 
     Args:
-        grid, coarse: the agent's fine and far world grids.
+        grid: the agent's fine world grid.
+        coarse: its far grid.
         factor: far cell side in fine cells.
         origin: world (x, y) of the fine grid's corner.
         cell_m: fine cell side.
@@ -191,7 +192,8 @@ def find_candidates(
         done: (clusters a side, clusters a side) bool: clusters already viewed.
         lengths: (2 radius + 1)^2 float scratch (path lengths).
         table: (N, len(CANDIDATE_FEATURES)) float32 output.
-        viewpoints, centres: (N, 2) world (x, y) outputs.
+        viewpoints: (N, 2) world (x, y) output: each candidate's viewpoint.
+        centres: (N, 2) world (x, y) output: each candidate's cluster centre.
         clusters: (N, 2) int64 output: each candidate's cluster index.
 
     Returns:
