@@ -71,8 +71,8 @@ class Args:
     """episode length in env steps (the small class's budget; a multiple of steps_per_goal)"""
     steps_per_goal: int = 20
     """env steps walked per goal (K)"""
-    goal_grid: int = 8
-    """goals per side of the far map (goal_grid**2 goals)"""
+    num_candidates: int = 8
+    """candidate goals offered per decision (the nearest first)"""
     primitive_actions: bool = True
     """the 10 discrete moves are actions too (repeated for the K steps, guarded by the map)"""
     n_steps: int = 32
@@ -158,7 +158,7 @@ def make_env(args: Args) -> tuple[Sb3VecEnv, Timed, Timed]:
         VectorGoalActions(
             VectorEgocentricMapObservation(bare),
             args.steps_per_goal,
-            goal_grid=args.goal_grid,
+            num_candidates=args.num_candidates,
             primitive_actions=args.primitive_actions,
         )
     )
@@ -319,7 +319,7 @@ def explorer_settings(args: Args) -> dict[str, Any]:
     """What the explorer policy needs to act as in training (saved beside every model)."""
     return {
         "steps_per_goal": args.steps_per_goal,
-        "goal_grid": args.goal_grid,
+        "num_candidates": args.num_candidates,
         "primitive_actions": args.primitive_actions,
         "map_options": {},
         "panorama_shape": list(EXPLORER_ENV["panorama_shape"]),

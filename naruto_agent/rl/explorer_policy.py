@@ -5,11 +5,12 @@
         '{"explorer": {"model_path": "runs/explorer/final_model.zip"}}'
 
 It builds the egocentric map from the observations it is handed
-(:class:`~naruto_gym.rl.egocentric_map.EgocentricMapBuilder`), asks the PPO model for a goal
-(or a repeated discrete move) every ``steps_per_goal`` steps, and walks it with the planner
-over its own map (:class:`~naruto_gym.rl.goal_actions.GoalWalker`): the same observations
-and actions as in training, step for step. The training settings (``steps_per_goal``, the
-goal grid, the map's options, the panorama size) are read from the JSON file saved beside the
+(:class:`~naruto_gym.rl.egocentric_map.EgocentricMapBuilder`), finds the candidate goals on
+it, asks the PPO model for one (or a repeated discrete move) every ``steps_per_goal`` steps,
+and walks it with the planner over its own map
+(:class:`~naruto_gym.rl.goal_actions.GoalWalker`): the same observations and actions as in
+training, step for step. The training settings (``steps_per_goal``, the number of
+candidates, the map's options, the panorama size) are read from the JSON file saved beside the
 model (``<model>.json``, written by the training script), so a model and its settings cannot
 disagree. Without ``model_path`` it loads the checkpoint shipped in the package
 (:data:`PACKAGED_MODEL`), when there is one.
@@ -34,7 +35,7 @@ PACKAGED_MODEL = Path(__file__).with_name("checkpoints") / "explorer.zip"
 #: Settings of a model saved without its JSON file (the training script's defaults).
 DEFAULT_SETTINGS: dict[str, Any] = {
     "steps_per_goal": 20,
-    "goal_grid": 8,
+    "num_candidates": 8,
     "primitive_actions": True,
     "map_options": {},
     "panorama_shape": [32, 64],
@@ -91,7 +92,7 @@ def export_checkpoint(model_path: str | Path, out_path: str | Path) -> Path:
 
 @register_policy("explorer")
 class MapGoalExplorer(Policy):
-    """A PPO model over the egocentric map that picks goals walked by a planner.
+    """A PPO model over the egocentric map that picks candidate goals walked by a planner.
 
     Args:
         model_path: the SB3 ``.zip`` (its ``.json`` settings beside it); None: the packaged
@@ -128,8 +129,14 @@ class MapGoalExplorer(Policy):
             **DEFAULT_SETTINGS,
             **(json.loads(stored.read_text()) if stored.exists() else {}),
         }
+        if "goal_grid" in self.settings:
+            raise ValueError(
+                f"{path} was trained on the old grid goals (goal_grid in {stored}); the "
+                f"explorer now picks among num_candidates candidate goals: train it again "
+                f"with benchmarks/train_explorer.py"
+            )
         self.model = PPO.load(path, device="cpu")
-        goals = int(self.settings["goal_grid"]) ** 2
+        goals = int(self.settings["num_candidates"])
         expected = goals + (10 if self.settings["primitive_actions"] else 0)
         if int(self.model.action_space.n) != expected:
             raise ValueError(
@@ -165,12 +172,13 @@ class MapGoalExplorer(Policy):
         )
         self.walker = GoalWalker(
             self.map,
-            goal_grid=int(self.settings["goal_grid"]),
+            num_candidates=int(self.settings["num_candidates"]),
             primitive_actions=bool(self.settings["primitive_actions"]),
             step_m=context.max_translation_m,
             turn_rad=context.max_rotation_rad,
         )
         self.map.reset(np.zeros(1, np.int64), np.asarray(observation["pose"])[None])
+        self.walker.reset()
         self._step = 0
 
     def _batch(self, observation: Observation) -> dict[str, np.ndarray]:
@@ -189,6 +197,7 @@ class MapGoalExplorer(Policy):
         self.map.update(batch)
         if self._step % self.steps_per_goal == 0:
             learning = {key: value[0] for key, value in self.map.observe(batch).items()}
+            learning["candidates"] = self.walker.refresh_candidates()[0]
             action, _ = self.model.predict(learning, deterministic=self.deterministic)
             self.walker.set_actions(np.array([int(action)]))
         self._step += 1

@@ -34,8 +34,10 @@ from gymnasium import spaces
 from gymnasium.vector.utils import batch_space
 
 from naruto_gym.rl.egocentric_map_kernels import (
+    FREE,
     LAYERS,
     MAP_CHANNELS,
+    OCCUPIED,
     crop_all,
     update_grid,
 )
@@ -138,6 +140,10 @@ class EgocentricMapBuilder:
         #: nothing, as nothing is known of it).
         self.clearance_up = np.zeros(self.num_envs)
         self.clearance_down = np.zeros(self.num_envs)
+        #: Height the obstacle and free layers of each agent's grid were built at, and how
+        #: many times they restarted this episode (see :meth:`update`).
+        self.slice_heights = np.zeros(self.num_envs)
+        self.slice_restarts = np.zeros(self.num_envs, np.int64)
         self._started = np.zeros(self.num_envs, bool)
         self._intrinsics = np.array([camera.fx, camera.fy, camera.cx, camera.cy], np.float64)
         panorama = EquirectangularCamera(*panorama_shape)
@@ -180,11 +186,19 @@ class EgocentricMapBuilder:
             self.origins[i] = pose[:2, 3] - side_m / 2
             self.start_poses[i] = pose
             self.steps[i] = 0
+            self.slice_heights[i] = pose[2, 3]
+            self.slice_restarts[i] = 0
             self._started[i] = True
 
     def update(self, observations: dict[str, np.ndarray], envs: np.ndarray | None = None) -> None:
         """Add a batch of raw observations (``depth``, ``pose``, ``panorama`` with a leading
         axis over ``envs``, default all) to the agents' maps.
+
+        The obstacle and free layers are one slice at the agent's height: when the camera is
+        more than half the band above or below the height they were built at, they restart
+        empty at the new height (the seen surface and the trail are kept), so that an agent
+        that climbs or sinks (e.g. below a doorway's lintel) does not keep the obstacles of
+        another height.
 
         Raises:
             RuntimeError: an agent has no episode started (call :meth:`reset` first).
@@ -201,6 +215,11 @@ class EgocentricMapBuilder:
         panorama = observations["panorama"]
         empty = np.zeros((0, 0), np.float32)
         for row, i in enumerate(envs):
+            if abs(poses[row][2, 3] - self.slice_heights[i]) > 0.5 * self.band_m:
+                self.grids[i, [OCCUPIED, FREE]] = 0
+                self.coarse[i, [OCCUPIED, FREE]] = 0
+                self.slice_heights[i] = poses[row][2, 3]
+                self.slice_restarts[i] += 1
             frame = empty if depth is None else np.ascontiguousarray(depth[row], np.float32)
             update_grid(
                 self.grids[i],
@@ -225,6 +244,15 @@ class EgocentricMapBuilder:
         top, bottom = panorama[:, 0], panorama[:, -1]
         self.clearance_up[envs] = np.where((top > 0).all(axis=1), top.min(axis=1), 0.0)
         self.clearance_down[envs] = np.where((bottom > 0).all(axis=1), bottom.min(axis=1), 0.0)
+
+    def mark_blocked(self, env: int, x: float, y: float) -> None:
+        """Mark the cell at world ``(x, y)`` an obstacle for agent ``env``: the env refused a
+        move into it (e.g. out of an open scan's scanned space, where no surface shows)."""
+        i, j = np.floor((np.array([x, y]) - self.origins[env]) / self.cell_m).astype(int)
+        if 0 <= i < self.grids.shape[-2] and 0 <= j < self.grids.shape[-1]:
+            self.grids[env, OCCUPIED, i, j] = 255
+            self.grids[env, FREE, i, j] = 0
+            self.coarse[env, OCCUPIED, i // self.far_factor, j // self.far_factor] = 255
 
     def observe(
         self, observations: dict[str, np.ndarray], envs: np.ndarray | None = None

@@ -85,8 +85,8 @@ def make_rllib_explorer_env(config: Mapping[str, Any]) -> gym.Env:
     default model. RLlib vectorises it with ``gym_env_vectorize_mode="sync"``.
 
     Args:
-        config: RLlib's ``env_config``: ``steps_per_goal`` (default 20), ``goal_grid`` (8),
-            ``primitive_actions`` (True), ``map_options`` (``EgocentricMapBuilder``
+        config: RLlib's ``env_config``: ``steps_per_goal`` (default 20), ``num_candidates``
+            (8), ``primitive_actions`` (True), ``map_options`` (``EgocentricMapBuilder``
             keywords), ``flatten`` (True); every other key is a ``NarutoReconEnv`` keyword
             over :data:`EXPLORER_ENV` (``scene`` is required: one scene, e.g.
             ``"procedural:small:17"``).
@@ -99,7 +99,14 @@ def make_rllib_explorer_env(config: Mapping[str, Any]) -> gym.Env:
         raise TypeError(f"config must be a mapping (RLlib's env_config), got {type(config)}")
     options = dict(config)
     options.pop("num_envs", None)
-    walker = {key: options.pop(key) for key in ("goal_grid", "primitive_actions") if key in options}
+    if "goal_grid" in options:
+        raise ValueError(
+            "env_config['goal_grid'] is gone: the goal actions offer candidate goals now; "
+            "set 'num_candidates' (default 8) instead"
+        )
+    walker = {
+        key: options.pop(key) for key in ("num_candidates", "primitive_actions") if key in options
+    }
     steps_per_goal = options.pop("steps_per_goal", 20)
     map_options = options.pop("map_options", {})
     flatten = bool(options.pop("flatten", True))

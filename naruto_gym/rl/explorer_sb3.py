@@ -33,7 +33,7 @@ __all__ = ["ExplorerFeaturesExtractor", "make_explorer_vec_env"]
 def make_explorer_vec_env(
     num_envs: int,
     steps_per_goal: int = 20,
-    goal_grid: int = 8,
+    num_candidates: int = 8,
     primitive_actions: bool = True,
     map_options: dict[str, Any] | None = None,
     **env_kwargs: Any,
@@ -44,7 +44,7 @@ def make_explorer_vec_env(
     Args:
         num_envs: agents.
         steps_per_goal: env steps per action.
-        goal_grid: goals per side of the far map.
+        num_candidates: candidate goals offered per decision.
         primitive_actions: the discrete moves are actions too.
         map_options: :class:`~naruto_gym.rl.egocentric_map.EgocentricMapBuilder` keywords.
         **env_kwargs: ``NarutoReconVectorEnv`` keywords over :data:`EXPLORER_ENV` (``scene``
@@ -57,7 +57,7 @@ def make_explorer_vec_env(
     env = NarutoReconVectorEnv(num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **options)
     env = VectorEgocentricMapObservation(env, **(map_options or {}))
     env = VectorGoalActions(
-        env, steps_per_goal, goal_grid=goal_grid, primitive_actions=primitive_actions
+        env, steps_per_goal, num_candidates=num_candidates, primitive_actions=primitive_actions
     )
     return Sb3VecEnv(env)
 
@@ -73,21 +73,23 @@ def _channels_first(space: spaces.Box) -> tuple[int, int, int]:
 
 class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
     """Features of the explorer's observation: a CNN over the ``map`` channels, a CNN over the
-    ``panorama``, an MLP over the relative ``pose``; concatenated and projected to
+    ``panorama``, an MLP over the relative ``pose`` and one over the ``candidates`` feature
+    table (all its rows at once, so that it can compare them); concatenated and projected to
     ``features_dim``. uint8 images arrive in [0, 1] (SB3's preprocessing), channel-first.
 
     Args:
-        observation_space: ``Dict`` with ``map``, ``panorama`` and ``pose``.
+        observation_space: ``Dict`` with ``map``, ``panorama``, ``pose`` and ``candidates``.
         features_dim: output size.
     """
 
     def __init__(self, observation_space: spaces.Dict, features_dim: int = 128) -> None:
         super().__init__(observation_space, features_dim)
-        missing = {"map", "panorama", "pose"} - set(observation_space.spaces)
+        missing = {"map", "panorama", "pose", "candidates"} - set(observation_space.spaces)
         if missing:
             raise ValueError(
-                f"ExplorerFeaturesExtractor needs the egocentric map observation "
-                f"(map, panorama, pose); {sorted(missing)} missing from {observation_space}"
+                f"ExplorerFeaturesExtractor needs the egocentric map observation with the "
+                f"goal actions' candidates (map, panorama, pose, candidates); {sorted(missing)} "
+                f"missing from {observation_space}"
             )
         channels, height, width = _channels_first(observation_space["map"])
         # Small on purpose: a trained model ships inside the package (at most 5 MB).
@@ -110,11 +112,19 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
         )
         pose_size = int(np.prod(observation_space["pose"].shape))
         self.pose = torch.nn.Sequential(torch.nn.Linear(pose_size, 32), torch.nn.ReLU())
+        table_size = int(np.prod(observation_space["candidates"].shape))
+        self.candidates = torch.nn.Sequential(
+            torch.nn.Linear(table_size, 64),
+            torch.nn.ReLU(),
+            torch.nn.Linear(64, 64),
+            torch.nn.ReLU(),
+        )
         with torch.no_grad():
             width_out = (
                 self.map(torch.zeros(1, channels, height, width)).shape[1]
                 + self.panorama(torch.zeros(1, pano_channels, pano_height, pano_width)).shape[1]
                 + 32
+                + 64
             )
         self.head = torch.nn.Sequential(torch.nn.Linear(width_out, features_dim), torch.nn.ReLU())
 
@@ -125,6 +135,7 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
                     self.map(observations["map"]),
                     self.panorama(observations["panorama"]),
                     self.pose(observations["pose"].flatten(1)),
+                    self.candidates(observations["candidates"].flatten(1)),
                 ],
                 1,
             )

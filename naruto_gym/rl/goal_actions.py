@@ -1,17 +1,24 @@
-"""Goal actions: the policy picks a long-term goal on its egocentric map every ``K`` steps and
-a planner over the agent's own map walks there with the env's discrete moves.
+"""Goal actions: the policy picks one of ``N`` candidate goals found on its egocentric map every
+``K`` steps, and a planner over the agent's own map walks there with the env's discrete moves.
 
 An action is one of
 
-* ``goal_grid**2`` goals: the cells of a ``goal_grid x goal_grid`` grid laid over the far
-  scale of the egocentric map (:mod:`naruto_gym.rl.egocentric_map`; 12.8 m around the agent
-  by default, index ``row * goal_grid + column``, row 0 ahead). The planner
-  (:mod:`naruto_gym.rl.goal_planner`) searches a path over the cells the agent's rays crossed
-  at its height, away from every obstacle it has seen, to the reachable cell nearest the goal,
-  and follows it with turns and forward moves for ``K`` steps (levelling the camera first),
-  planning again when new obstacles block the path; at the goal it turns in place.
-* with ``primitive_actions``, the 10 discrete moves after them (index ``goal_grid**2 + m``),
-  each repeated for the ``K`` steps; a horizontal move the map does not know to be safe, or a
+* ``N`` candidates (``num_candidates``, 8 by default), found at every decision
+  (:mod:`naruto_gym.rl.goal_candidates`): clusters of obstacles at the agent's height the
+  camera has not seen and of free-space edges, each with a viewpoint the planner reaches,
+  ranked by path length (candidate 0 the nearest). The observation gains their feature table
+  (``"candidates"``, ``(N, F)`` float32; an empty slot is all zeros). The planner
+  (:mod:`naruto_gym.rl.goal_planner`) walks a path to the viewpoint over cells the agent's
+  rays crossed at its height, away from every obstacle it has seen, with turns and forward
+  moves (levelling the camera first, and keeping ``WALK_HEIGHT_M`` above the floor: below
+  doorways' lintels); at the viewpoint it turns towards the cluster, only as far as needed
+  (half a turn at most). The cluster is then done for the episode, and the walker goes on to
+  the nearest candidate for the rest of the ``K`` steps. An empty slot means candidate 0;
+  with no candidate at all the agent walks to the reachable place farthest from where it has
+  been (looking for candidates every few steps on the way), or turns in place where there is
+  none.
+* with ``primitive_actions``, the 10 discrete moves after them (index ``N + m``), each
+  repeated for the ``K`` steps; a horizontal move the map does not know to be safe, or a
   vertical one without a panorama hit at least ``step + VERTICAL_MARGIN_M`` above (below) the
   agent, is replaced by a turn in place.
 
@@ -39,10 +46,13 @@ from gymnasium.vector.utils import batch_space
 
 from naruto_gym.motion.actions import DISCRETE_ACTIONS
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
+from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES, find_candidates, wander_goal
 from naruto_gym.rl.goal_planner import (
+    MOVE_FORWARD,
     REACHED,
     REPLAN,
     TURN_LEFT,
+    TURN_RIGHT,
     follow_path,
     move_is_safe,
     plan_path,
@@ -56,72 +66,163 @@ LOOK_DOWN = DISCRETE_ACTIONS.index("look_down")
 MOVE_DOWN = DISCRETE_ACTIONS.index("move_down")
 #: Free space kept above or below the agent after a vertical move (radius and margin).
 VERTICAL_MARGIN_M = 0.2
+#: Walker phases: no goal (turning in place), walking to a viewpoint, turning to face the
+#: cluster, given up on a goal the map no longer lets it reach.
+IDLE, WALK, FACE, GIVEN_UP = 0, 1, 2, 3
+#: Goals the walker may finish within one step (it then turns in place).
+MAX_GOALS_PER_STEP = 3
+#: Height above the floor below (the panorama's bottom row) the walker walks at, and the
+#: tolerance around it: below doorways' lintels, above most furniture.
+WALK_HEIGHT_M = 1.3
+WALK_HEIGHT_TOLERANCE_M = 0.25
+#: Steps between two searches for candidates while the walker has none.
+IDLE_SEARCH_EVERY = 4
+
+
+def _wrap(angle: float) -> float:
+    return float((angle + np.pi) % (2.0 * np.pi) - np.pi)
 
 
 class GoalWalker:
-    """Turns goal or primitive actions into one primitive move per step, for every agent of
-    an :class:`EgocentricMapBuilder`.
+    """Turns candidate or primitive actions into one primitive move per step, for every agent
+    of an :class:`EgocentricMapBuilder`.
+
+    Call :meth:`refresh_candidates` after the map's update at every decision (the wrappers
+    do), then :meth:`set_actions`, then :meth:`next_moves` before every env step; and
+    :meth:`reset` at every episode start.
 
     Args:
         map_builder: the agents' maps (updated by its owner after every step).
-        goal_grid: goals per side of the grid over the far map.
-        primitive_actions: actions past the goals are the discrete moves.
+        num_candidates: candidate slots (``N``).
+        primitive_actions: actions past the candidates are the discrete moves.
         step_m: length of a move (the env's ``max_translation_m``).
         turn_rad: angle of a turn (the env's ``max_rotation_deg`` in radians).
         inflate: cells around an obstacle the planner keeps out of.
+        cluster_cells: side of a target cluster in far cells.
+        min_targets: fewest targets a cluster needs to be a candidate.
+        view_m: farthest a viewpoint may be from its cluster's centre.
+        frontier_m: the same for a cluster of free-space edges only (walked up to).
         max_path: longest path kept (a longer one is followed in parts).
+
+    Raises:
+        ValueError: a count or distance that is not positive.
     """
 
     def __init__(
         self,
         map_builder: EgocentricMapBuilder,
-        goal_grid: int = 8,
+        num_candidates: int = 8,
         primitive_actions: bool = True,
         step_m: float = 0.1,
         turn_rad: float = float(np.deg2rad(20.0)),
         inflate: int = 1,
+        cluster_cells: int = 2,
+        min_targets: int = 1,
+        view_m: float = 2.0,
+        frontier_m: float = 0.6,
         max_path: int = 512,
     ) -> None:
-        if goal_grid < 1:
-            raise ValueError(f"goal_grid must be positive, got {goal_grid}")
+        for name, value in (
+            ("num_candidates", num_candidates),
+            ("cluster_cells", cluster_cells),
+            ("min_targets", min_targets),
+            ("view_m", view_m),
+            ("frontier_m", frontier_m),
+        ):
+            if not value > 0:
+                raise ValueError(f"{name} must be positive, got {value!r}")
         self.map = map_builder
-        self.goal_grid = int(goal_grid)
+        self.num_candidates = int(num_candidates)
         self.primitive_actions = bool(primitive_actions)
         self.step_m = float(step_m)
         self.turn_rad = float(turn_rad)
         self.inflate = int(inflate)
-        n = map_builder.num_envs
+        self.cluster_cells = int(cluster_cells)
+        self.min_targets = int(min_targets)
+        self.view_m = float(view_m)
+        self.frontier_m = float(frontier_m)
+        n, count = map_builder.num_envs, self.num_candidates
+        half_m = map_builder.cells * map_builder.far_cell_m / 2
+        self.radius = int(np.ceil(half_m * np.sqrt(2) / map_builder.cell_m)) + 1
         self.paths = np.zeros((n, max_path, 2), np.int64)
         self.lengths = np.zeros(n, np.int64)
         self.cursors = np.zeros((n, 1), np.int64)
-        self.goals = np.zeros((n, 2))
-        self.primitives = np.full(n, -1, np.int64)  # -1: walking to a goal
-        half_m = map_builder.cells * map_builder.far_cell_m / 2
-        self.radius = int(np.ceil(half_m * np.sqrt(2) / map_builder.cell_m)) + 1
-
-    @property
-    def num_goals(self) -> int:
-        return self.goal_grid**2
+        self.primitives = np.full(n, -1, np.int64)  # -1: walking to a candidate
+        self.phases = np.full(n, IDLE, np.int64)
+        self.idle_steps = np.zeros(n, np.int64)
+        self.wandering = np.zeros(n, bool)  # walking to a place with no candidate in view
+        self.last_moves = np.full(n, -1, np.int64)  # the walking move sent last, and from where
+        self.last_positions = np.zeros((n, 2))
+        self.slice_restarts = np.zeros(n, np.int64)  # the map's count when the goal was set
+        self.targets = np.zeros((n, 2))  # world (x, y) of the cluster to face
+        self.target_clusters = np.full((n, 2), -1, np.int64)
+        #: Per agent: the feature table of :mod:`naruto_gym.rl.goal_candidates`, the
+        #: viewpoints and cluster centres (world x, y), cluster indices, and the count.
+        self.tables = np.zeros((n, count, len(CANDIDATE_FEATURES)), np.float32)
+        self.viewpoints = np.zeros((n, count, 2))
+        self.centres = np.zeros((n, count, 2))
+        self.clusters = np.full((n, count, 2), -1, np.int64)
+        self.counts = np.zeros(n, np.int64)
+        side = -(-map_builder.coarse.shape[-1] // self.cluster_cells)
+        self.done = np.zeros((n, side, side), bool)
+        self._scratch = np.zeros((2 * self.radius + 1, 2 * self.radius + 1))
 
     @property
     def action_space(self) -> spaces.Discrete:
         extra = len(DISCRETE_ACTIONS) if self.primitive_actions else 0
-        return spaces.Discrete(self.num_goals + extra)
+        return spaces.Discrete(self.num_candidates + extra)
 
-    def goal_position(self, env: int, goal: int) -> np.ndarray:
-        """World (x, y) of goal cell ``goal`` for agent ``env`` at its last pose."""
-        pose = self.map.poses[env]
-        row, column = divmod(int(goal), self.goal_grid)
-        span = self.map.cells * self.map.far_cell_m
-        ahead = span * (0.5 - (row + 0.5) / self.goal_grid)
-        right = span * ((column + 0.5) / self.goal_grid - 0.5)
-        heading = np.arctan2(pose[1, 2], pose[0, 2])
-        forward = np.array([np.cos(heading), np.sin(heading)])
-        rightward = np.array([forward[1], -forward[0]])
-        return pose[:2, 3] + ahead * forward + right * rightward
+    @property
+    def candidate_space(self) -> spaces.Box:
+        """One agent's candidate feature table (``N`` rows of :data:`CANDIDATE_FEATURES`)."""
+        return spaces.Box(-1.0, np.inf, (self.num_candidates, len(CANDIDATE_FEATURES)), np.float32)
+
+    def reset(self, envs: np.ndarray | None = None) -> None:
+        """New episodes for ``envs`` (default all): no goal, no cluster viewed."""
+        envs = np.arange(self.map.num_envs) if envs is None else np.asarray(envs, np.int64)
+        self.done[envs] = False
+        self.phases[envs] = IDLE
+        self.wandering[envs] = False
+        self.last_moves[envs] = -1
+        self.primitives[envs] = -1
+        self.lengths[envs] = 0
+        self.tables[envs] = 0.0
+        self.counts[envs] = 0
+
+    def refresh_candidates(self, envs: np.ndarray | None = None) -> np.ndarray:
+        """Find the candidates of ``envs`` (default all) on their maps as they are now;
+        returns their feature tables ``(len(envs), N, F)``."""
+        envs = np.arange(self.map.num_envs) if envs is None else np.asarray(envs, np.int64)
+        for i in envs:
+            self._refresh(int(i))
+        return self.tables[envs].copy()
+
+    def _refresh(self, i: int) -> None:
+        self.counts[i] = find_candidates(
+            self.map.grids[i],
+            self.map.coarse[i],
+            self.map.far_factor,
+            self.map.origins[i],
+            self.map.cell_m,
+            self.map.poses[i],
+            self.radius,
+            self.inflate,
+            self.cluster_cells,
+            self.min_targets,
+            self.view_m,
+            self.frontier_m,
+            self.done[i],
+            self._scratch,
+            self.tables[i],
+            self.viewpoints[i],
+            self.centres[i],
+            self.clusters[i],
+        )
 
     def set_actions(self, actions: np.ndarray, envs: np.ndarray | None = None) -> None:
-        """Start the macro-step of ``actions`` (one per env of ``envs``, default all).
+        """Start the macro-step of ``actions`` (one per env of ``envs``, default all) on the
+        candidates of the last :meth:`refresh_candidates`. An empty candidate slot means
+        candidate 0; with no candidate at all the agent turns in place (looking around).
 
         Raises:
             ValueError: an action outside :attr:`action_space`.
@@ -131,25 +232,57 @@ class GoalWalker:
         bad = (actions < 0) | (actions >= self.action_space.n)
         if bad.any():
             raise ValueError(
-                f"goal actions are 0..{self.action_space.n - 1} ({self.num_goals} goals"
-                f"{' then the 10 discrete moves' if self.primitive_actions else ''}), "
+                f"goal actions are 0..{self.action_space.n - 1} ({self.num_candidates} "
+                f"candidates{' then the 10 discrete moves' if self.primitive_actions else ''}), "
                 f"got {actions[bad].tolist()}"
             )
         for i, action in zip(envs, actions, strict=True):
-            if action < self.num_goals:
+            if action < self.num_candidates:
                 self.primitives[i] = -1
-                self.goals[i] = self.goal_position(int(i), int(action))
-                self._plan(int(i))
+                self._go_to(int(i), int(action))
             else:
-                self.primitives[i] = action - self.num_goals
+                self.primitives[i] = action - self.num_candidates
 
-    def _plan(self, i: int) -> None:
+    def _go_to(self, i: int, slot: int) -> None:
+        if slot >= self.counts[i]:
+            slot = 0  # an empty slot: the nearest candidate
+        self.slice_restarts[i] = self.map.slice_restarts[i]
+        self.wandering[i] = self.counts[i] == 0
+        if self.counts[i] == 0:
+            self._wander(i)
+            return
+        self.targets[i] = self.centres[i, slot]
+        self.target_clusters[i] = self.clusters[i, slot]
+        self.phases[i] = WALK
+        self._plan(i, self.viewpoints[i, slot])
+
+    def _wander(self, i: int) -> None:
+        """No candidate: walk to the reachable place farthest from the trail (the path
+        lengths of the last search are around the current pose), or turn in place."""
+        pose = self.map.poses[i]
+        si, sj = np.floor((pose[:2, 3] - self.map.origins[i]) / self.map.cell_m).astype(int)
+        wi, wj = wander_goal(
+            self.map.grids[i], self.map.coarse[i], self.map.far_factor, self._scratch, si, sj,
+            self.radius, 3,
+        )  # fmt: skip
+        self.target_clusters[i] = -1
+        if wi < 0:
+            self.phases[i] = IDLE
+            self.idle_steps[i] = 0
+            return
+        goal = self.map.origins[i] + (np.array([wi, wj]) + 0.5) * self.map.cell_m
+        self.targets[i] = goal
+        self.phases[i] = WALK
+        self.idle_steps[i] = 0
+        self._plan(i, goal)
+
+    def _plan(self, i: int, goal: np.ndarray) -> None:
         self.lengths[i] = plan_path(
             self.map.grids[i],
             self.map.origins[i],
             self.map.cell_m,
             self.map.poses[i][:2, 3].copy(),
-            self.goals[i],
+            np.asarray(goal, np.float64),
             self.radius,
             self.inflate,
             self.paths[i],
@@ -164,27 +297,104 @@ class GoalWalker:
             moves[row] = self._move(int(i))
         return moves
 
-    def _move(self, i: int) -> int:
+    def _primitive(self, i: int) -> int:
+        primitive = self.primitives[i]
+        if primitive in (MOVE_UP, MOVE_DOWN):
+            clearance = self.map.clearance_up if primitive == MOVE_UP else self.map.clearance_down
+            return int(primitive) if clearance[i] > self.step_m + VERTICAL_MARGIN_M else TURN_LEFT
         grid, origin, cell_m = self.map.grids[i], self.map.origins[i], self.map.cell_m
         pose = self.map.poses[i]
-        primitive = self.primitives[i]
-        if primitive >= 0:
-            if primitive in (MOVE_UP, MOVE_DOWN):
-                clearance = (
-                    self.map.clearance_up if primitive == MOVE_UP else (self.map.clearance_down)
-                )
-                return (
-                    int(primitive)
-                    if clearance[i] > self.step_m + VERTICAL_MARGIN_M
-                    else (TURN_LEFT)
-                )
-            if move_is_safe(grid, origin, cell_m, pose, primitive, self.step_m, self.inflate):
-                return int(primitive)
-            return TURN_LEFT
+        if move_is_safe(grid, origin, cell_m, pose, primitive, self.step_m, self.inflate):
+            return int(primitive)
+        return TURN_LEFT
+
+    def _move(self, i: int) -> int:
+        move = self._choose(i)
+        self.last_moves[i] = move
+        self.last_positions[i] = self.map.poses[i][:2, 3]
+        return move
+
+    def _refused(self, i: int) -> bool:
+        """Whether the env refused the forward move sent last (the agent did not move): the
+        cell it led into is marked blocked on the map, and the goal given up."""
+        if self.last_moves[i] != MOVE_FORWARD:
+            return False
+        pose = self.map.poses[i]
+        if np.hypot(*(pose[:2, 3] - self.last_positions[i])) > 0.25 * self.step_m:
+            return False
+        heading = np.arctan2(pose[1, 2], pose[0, 2])
+        ahead = pose[:2, 3] + self.step_m * np.array([np.cos(heading), np.sin(heading)])
+        self.map.mark_blocked(i, float(ahead[0]), float(ahead[1]))
+        return True
+
+    def _choose(self, i: int) -> int:
+        if self.primitives[i] >= 0:
+            return self._primitive(i)
+        pose = self.map.poses[i]
         pitch = float(np.arcsin(np.clip(pose[2, 2], -1.0, 1.0)))
         if abs(pitch) > 0.5 * self.turn_rad + 1e-6:
             # Walk with the camera level: a pitched one sees floor or ceiling only.
             return LOOK_DOWN if pitch > 0 else LOOK_UP
+        height = self._height_move(i)
+        if height >= 0:
+            return height
+        if self.slice_restarts[i] != self.map.slice_restarts[i]:
+            # The map restarted at a new height: the goal was found on the old slice.
+            self._refresh(i)
+            self._go_to(i, 0)
+        if self._refused(i) and self.phases[i] == WALK:
+            self.phases[i] = GIVEN_UP
+        for _ in range(MAX_GOALS_PER_STEP):
+            if self.phases[i] == IDLE:
+                self.idle_steps[i] += 1
+                if self.idle_steps[i] % IDLE_SEARCH_EVERY:
+                    return TURN_LEFT
+                self._refresh(i)
+                self._go_to(i, 0)
+                if self.phases[i] == IDLE:
+                    return TURN_LEFT
+            if self.phases[i] == GIVEN_UP:
+                self._finish(i)
+                continue
+            if self.phases[i] == WALK and self.wandering[i]:
+                self.idle_steps[i] += 1
+                if self.idle_steps[i] % IDLE_SEARCH_EVERY == 0:
+                    self._refresh(i)  # a candidate found on the way ends the wander
+                    if self.counts[i] > 0:
+                        self._go_to(i, 0)
+            if self.phases[i] == WALK:
+                move = self._walk(i)
+                if move >= 0:
+                    return move
+            if self.phases[i] == FACE:
+                error = _wrap(
+                    np.arctan2(self.targets[i, 1] - pose[1, 3], self.targets[i, 0] - pose[0, 3])
+                    - np.arctan2(pose[1, 2], pose[0, 2])
+                )
+                if abs(error) > 0.5 * self.turn_rad + 1e-6:
+                    return TURN_LEFT if error > 0 else TURN_RIGHT
+            # Viewed (or given up): the cluster is done; on to the nearest candidate now.
+            self._finish(i)
+        return TURN_LEFT
+
+    def _height_move(self, i: int) -> int:
+        """A vertical move towards the walking height, or -1 (at it, or the floor unknown)."""
+        below, above = self.map.clearance_down[i], self.map.clearance_up[i]
+        if below <= 0:
+            return -1
+        if below > WALK_HEIGHT_M + WALK_HEIGHT_TOLERANCE_M:
+            return MOVE_DOWN
+        if below < WALK_HEIGHT_M - WALK_HEIGHT_TOLERANCE_M and above > (
+            self.step_m + VERTICAL_MARGIN_M
+        ):
+            return MOVE_UP
+        return -1
+
+    def _walk(self, i: int) -> int:
+        """The walking move, or -1 once at the viewpoint (phase FACE) or given up."""
+        grid, origin, cell_m = self.map.grids[i], self.map.origins[i], self.map.cell_m
+        pose = self.map.poses[i]
+
         def follow() -> tuple[int, int]:
             return follow_path(
                 grid,
@@ -201,13 +411,26 @@ class GoalWalker:
 
         move, status = follow()
         if status == REPLAN:
-            self._plan(i)  # the path ran into a newly seen obstacle: plan again, once
+            # The path ran into a newly seen obstacle: plan again to its end, once.
+            last = self.paths[i, max(self.lengths[i] - 1, 0)]
+            goal = self.map.origins[i] + (last + 0.5) * self.map.cell_m
+            self._plan(i, goal)
             move, status = follow()
             if status == REPLAN:
-                move = TURN_LEFT
+                self.phases[i] = GIVEN_UP
+                return -1
         if status == REACHED:
             self.lengths[i] = 0
+            self.phases[i] = FACE
+            return -1
         return int(move)
+
+    def _finish(self, i: int) -> None:
+        a, b = self.target_clusters[i]
+        if 0 <= a < self.done.shape[1] and 0 <= b < self.done.shape[2]:
+            self.done[i, a, b] = True
+        self._refresh(i)
+        self._go_to(i, 0)
 
 
 def _find_map(env: Any) -> EgocentricMapBuilder:
@@ -238,6 +461,10 @@ def _walker_for(env: Any, options: dict[str, Any]) -> GoalWalker:
     return GoalWalker(_find_map(env), **options)
 
 
+def _with_candidates(space: spaces.Dict, walker: GoalWalker) -> spaces.Dict:
+    return spaces.Dict({**space.spaces, "candidates": walker.candidate_space})
+
+
 def _check_steps(steps_per_goal: int) -> int:
     if (
         isinstance(steps_per_goal, bool)
@@ -256,7 +483,8 @@ class GoalActions(gym.Wrapper, gym.utils.RecordConstructorArgs):
     Args:
         env: the wrapped env (``action_mode="discrete"``).
         steps_per_goal: ``K``, primitive steps per action.
-        **options: :class:`GoalWalker` keywords (``goal_grid``, ``primitive_actions``, ...).
+        **options: :class:`GoalWalker` keywords (``num_candidates``, ``primitive_actions``,
+            ...).
     """
 
     def __init__(self, env: gym.Env, steps_per_goal: int = 20, **options: Any) -> None:
@@ -265,6 +493,12 @@ class GoalActions(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self.steps_per_goal = _check_steps(steps_per_goal)
         self.walker = _walker_for(env, options)
         self.action_space = self.walker.action_space
+        self.observation_space = _with_candidates(env.observation_space, self.walker)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        observation, info = self.env.reset(seed=seed, options=options)
+        self.walker.reset()
+        return {**observation, "candidates": self.walker.refresh_candidates()[0]}, info
 
     def step(self, action: Any):
         self.walker.set_actions(np.array([action]))
@@ -278,6 +512,7 @@ class GoalActions(gym.Wrapper, gym.utils.RecordConstructorArgs):
             if terminated or truncated:
                 break
         info = {**info, "primitive_steps": steps, "refusals": refusals}
+        observation = {**observation, "candidates": self.walker.refresh_candidates()[0]}
         return observation, total, terminated, truncated, info
 
 
@@ -317,6 +552,14 @@ class VectorGoalActions(gym.vector.VectorWrapper):
         self.walker = _walker_for(env, options)
         self.single_action_space = self.walker.action_space
         self.action_space = batch_space(self.single_action_space, env.num_envs)
+        self.single_observation_space = _with_candidates(env.single_observation_space, self.walker)
+        self.observation_space = batch_space(self.single_observation_space, env.num_envs)
+
+    def reset(self, *, seed: Any = None, options: dict[str, Any] | None = None):
+        observations, infos = self.env.reset(seed=seed, options=options)
+        mask = (options or {}).get("reset_mask")
+        self.walker.reset(None if mask is None else np.flatnonzero(mask))
+        return {**observations, "candidates": self.walker.refresh_candidates()}, infos
 
     def step(self, actions: Any):
         self.walker.set_actions(np.asarray(actions))
@@ -335,6 +578,18 @@ class VectorGoalActions(gym.vector.VectorWrapper):
                     "agent's episodes to start together and last a multiple of steps_per_goal "
                     "(no partial resets)"
                 )
+        ended = np.flatnonzero(terminations | truncations)
+        if len(ended):
+            self.walker.reset(ended)
+            if "final_obs" in infos:
+                # The finished episodes' maps are gone (the new episodes' maps replaced
+                # them): their final observations get an empty candidate table.
+                final = np.array(infos["final_obs"], dtype=object)
+                empty = np.zeros(self.single_observation_space["candidates"].shape, np.float32)
+                for i in np.flatnonzero(infos["_final_obs"]):
+                    final[i] = {**final[i], "candidates": empty}
+                infos = {**infos, "final_obs": final}
+        observations = {**observations, "candidates": self.walker.refresh_candidates()}
         infos = {
             **infos,
             "primitive_steps": np.full(self.num_envs, self.steps_per_goal),

@@ -75,6 +75,28 @@ def test_a_round_room_gives_an_obstacle_ring_with_free_space_inside():
     assert not near[FREE][near[OCC] > 0].any()  # an obstacle is never free
 
 
+def test_obstacles_and_free_space_restart_when_the_agent_changes_height():
+    builder = EgocentricMapBuilder(1, CAMERA, PANORAMA, panorama_stride=1)
+    pose = _facing(0.0, z=2.3)
+    builder.reset(np.array([0]), pose[None])
+    builder.update(_observation(pose, np.full(PANORAMA, 1.0)))  # a ring 1 m around it
+    seen_before = builder.grids[0, 2].copy()
+    assert builder.grids[0, 0].any() and builder.slice_restarts[0] == 0
+    lower = _facing(0.0, z=2.3 - 0.1)  # within half the band: the same slice
+    builder.update(_observation(lower, np.full(PANORAMA, 1.0)))
+    assert builder.slice_restarts[0] == 0 and builder.grids[0, 0].any()
+    lowest = _facing(0.0, z=2.3 - 0.3)  # half the band and more below where it started
+    builder.update(_observation(lowest, np.full(PANORAMA, 0.0)))  # sees nothing there
+    assert builder.slice_restarts[0] == 1
+    assert not builder.grids[0, 0].any() and not builder.coarse[0, 0].any()  # obstacles gone
+    np.testing.assert_array_equal(builder.grids[0, 2], seen_before)  # seen surface kept
+    assert builder.grids[0, 3].any()  # and the trail
+    builder.mark_blocked(0, 0.35, 0.05)  # a move the env refused led there
+    i, j = np.floor((np.array([0.35, 0.05]) - builder.origins[0]) / 0.1).astype(int)
+    assert builder.grids[0, 0, i, j] and not builder.grids[0, 1, i, j]
+    assert builder.coarse[0, 0, i // 4, j // 4]
+
+
 def test_the_crop_turns_with_the_agent_heading():
     panorama = _wall_ahead_panorama(1.0)  # a wall 1 m along world +x
     for yaw, side in ((0.0, "ahead"), (np.pi / 2, "right")):

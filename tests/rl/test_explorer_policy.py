@@ -39,7 +39,7 @@ ENV = {
 }
 SETTINGS = {
     "steps_per_goal": 5,
-    "goal_grid": 4,
+    "num_candidates": 4,
     "primitive_actions": True,
     "panorama_shape": [32, 64],
 }
@@ -47,11 +47,11 @@ SETTINGS = {
 
 @pytest.fixture(scope="module")
 def model_path(tmp_path_factory):
-    """An untrained PPO model of the explorer's spaces (goal_grid 4, K = 5), saved."""
+    """An untrained PPO model of the explorer's spaces (4 candidates, K = 5), saved."""
     venv = make_explorer_vec_env(
         1,
         steps_per_goal=5,
-        goal_grid=4,
+        num_candidates=4,
         max_episode_steps=20,
         scene="procedural:room",
         camera=CAMERA,
@@ -84,11 +84,15 @@ def test_the_name_explorer_is_registered():
 def test_the_policy_walks_as_the_training_wrappers_do(model_path):
     model = PPO.load(model_path, device="cpu")
     wrapped = GoalActions(
-        EgocentricMapObservation(gym.make("NarutoRecon-v0", **ENV)), steps_per_goal=5, goal_grid=4
+        EgocentricMapObservation(gym.make("NarutoRecon-v0", **ENV)),
+        steps_per_goal=5,
+        num_candidates=4,
     )
     observation, _ = wrapped.reset(seed=2)
+    actions = []
     for _ in range(6):
         action, _ = model.predict(observation, deterministic=True)
+        actions.append(int(action))
         observation, *_ = wrapped.step(int(action))
     wrapped_pose = wrapped.unwrapped.pose.copy()
     wrapped.close()
@@ -102,6 +106,7 @@ def test_the_policy_walks_as_the_training_wrappers_do(model_path):
     for _ in range(30):
         observation, _, _, _, info = env.step(policy.act(observation, info))
         refusals += int(info["collided"])
+    assert len(set(actions)) > 1  # the model chose among the candidates, not one action
     np.testing.assert_allclose(env.unwrapped.pose, wrapped_pose, atol=1e-6)
     assert refusals <= 1
     env.close()
@@ -128,8 +133,11 @@ def test_a_model_and_settings_that_disagree_are_refused(model_path, tmp_path):
         MapGoalExplorer(str(tmp_path / "missing.zip"))
     other = tmp_path / "model.zip"
     other.write_bytes(model_path.read_bytes())
-    (tmp_path / "model.json").write_text(json.dumps({**SETTINGS, "goal_grid": 8}))
-    with pytest.raises(ValueError, match="74"):
+    (tmp_path / "model.json").write_text(json.dumps({**SETTINGS, "num_candidates": 8}))
+    with pytest.raises(ValueError, match="18"):
+        MapGoalExplorer(str(other))
+    (tmp_path / "model.json").write_text(json.dumps({**SETTINGS, "goal_grid": 4}))
+    with pytest.raises(ValueError, match="num_candidates"):
         MapGoalExplorer(str(other))
 
 
@@ -145,7 +153,7 @@ def test_without_a_path_it_loads_the_packaged_checkpoint_or_says_how_to_train():
 def test_an_exported_checkpoint_has_no_optimiser_state_and_acts_the_same(model_path, tmp_path):
     exported = export_checkpoint(model_path, tmp_path / "explorer.zip")
     assert PPO.load(exported, device="cpu").policy.optimizer.state_dict()["state"] == {}
-    assert json.loads((tmp_path / "explorer.json").read_text())["goal_grid"] == 4
+    assert json.loads((tmp_path / "explorer.json").read_text())["num_candidates"] == 4
     original, small = MapGoalExplorer(str(model_path)), MapGoalExplorer(str(exported))
     observation = {
         key: np.asarray(v)[None] for key, v in small.model.observation_space.sample().items()

@@ -1,5 +1,6 @@
-"""Goal actions: the planner over the agent's own map, and the wrappers that walk its paths
-(refused moves under 1 per 100 steps on generated rooms with random goals)."""
+"""Goal actions: the candidate goals and the planner over the agent's own map, and the
+wrappers that walk their paths (refused moves under 1 per 100 steps on generated rooms with
+random candidates)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,14 @@ import numpy as np
 import pytest
 
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation, VectorEgocentricMapObservation
-from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED
-from naruto_gym.rl.goal_actions import GoalActions, VectorGoalActions
+from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL
+from naruto_gym.rl.goal_actions import FACE, GoalActions, VectorGoalActions
+from naruto_gym.rl.goal_candidates import (
+    CANDIDATE_FEATURES,
+    find_candidates,
+    path_lengths,
+    wander_goal,
+)
 from naruto_gym.rl.goal_planner import (
     MOVE_FORWARD,
     REACHED,
@@ -100,15 +107,91 @@ def test_following_a_path_turns_towards_it_then_moves_forward():
     ) == (TURN_LEFT, REACHED)
 
 
+def _coarse(grid: np.ndarray, factor: int = 4) -> np.ndarray:
+    layers, side = grid.shape[0], grid.shape[1] // factor
+    return grid.reshape(layers, side, factor, side, factor).max(axis=(2, 4))
+
+
+def _candidates(grid: np.ndarray, x: float, y: float, done: np.ndarray | None = None):
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # optical axis +x
+    pose[:2, 3] = [x, y]
+    done = np.zeros((5, 5), bool) if done is None else done
+    table = np.zeros((8, len(CANDIDATE_FEATURES)), np.float32)
+    viewpoints, centres = np.zeros((8, 2)), np.zeros((8, 2))
+    clusters = np.zeros((8, 2), np.int64)
+    radius = 40
+    count = find_candidates(
+        grid, _coarse(grid), 4, ORIGIN, 0.1, pose, radius, 1, 2, 1, 2.0, 0.6, done,
+        np.zeros((2 * radius + 1, 2 * radius + 1)), table, viewpoints, centres, clusters,
+    )  # fmt: skip
+    return count, table, viewpoints, centres, clusters
+
+
+def test_candidate_0_is_the_nearest_by_path_not_by_straight_distance():
+    grid = _room_with_wall()
+    known = (grid[FREE] == 0) & (grid[OCCUPIED] == 0)
+    grid[OCCUPIED][known] = 255  # closed all around: no free-space edge
+    grid[SEEN] = grid[OCCUPIED]  # every obstacle seen: no target yet
+    grid[OCCUPIED, 24:26, 4:6] = 255  # unseen: 0.7 m away in a straight line, behind the wall
+    grid[OCCUPIED, 4:6, 24:26] = 255  # unseen: 1.9 m away, on the agent's side
+    count, table, viewpoints, centres, clusters = _candidates(grid, 1.75, 0.55)
+    assert count == 2 and table[:2, 0].tolist() == [1, 1] and not table[2:].any()
+    assert np.allclose(centres[0], [0.6, 2.6], atol=0.25)  # the one on the agent's side
+    assert np.allclose(centres[1], [2.6, 0.6], atol=0.25)  # through the gap in the wall
+    assert table[0, 1] < table[1, 1]  # path lengths (tens of metres), nearest first
+    assert table[1, 2] < table[0, 2]  # though the second is nearer in a straight line
+    assert table[0, 6] == 1.0  # unseen obstacles, no free-space edge
+    # Every viewpoint is reachable and within 2 m of its cluster, on the path's side.
+    for k in range(2):
+        assert np.hypot(*(viewpoints[k] - centres[k])) <= 2.0 + 1e-9
+        i, j = np.floor(viewpoints[k] / 0.1).astype(int)
+        assert traversable(grid, i, j, 1)
+    # A viewed cluster is not offered again.
+    done = np.zeros((5, 5), bool)
+    done[tuple(clusters[0])] = True
+    count, _, _, again, _ = _candidates(grid, 1.75, 0.55, done)
+    assert count == 1 and np.allclose(again[0], centres[1])
+
+
+def test_with_no_candidate_it_wanders_to_the_reachable_place_farthest_from_its_trail():
+    grid = _room_with_wall()
+    grid[OCCUPIED, 20, 30:35] = 255  # the gap closed
+    grid[TRAIL, 3:8, 3:8] = 255  # it stood near (0.5, 0.5) m
+    grid[SEEN, :, 4:] = 255  # the floor seen everywhere but along y < 0.4 m
+    lengths = np.zeros((81, 81))
+    path_lengths(grid, 5, 5, 40, 1, lengths)
+    i, j = wander_goal(grid, _coarse(grid), 4, lengths, 5, 5, 40, 1)
+    assert traversable(grid, i, j, 1) and lengths[i - 5 + 40, j - 5 + 40] > 0
+    assert i < 20  # on its side of the wall ...
+    assert np.hypot(i - 5, j - 5) > 25  # ... and far from where it stood
+    assert j >= 4  # never where it saw no floor
+    # Through the gap, the far side of the wall is reachable: farther from the trail there.
+    grid[OCCUPIED, 20, 30:35] = 0
+    path_lengths(grid, 5, 5, 40, 1, lengths)
+    far_i, far_j = wander_goal(grid, _coarse(grid), 4, lengths, 5, 5, 40, 1)
+    assert far_i > 20 and lengths[far_i - 5 + 40, far_j - 5 + 40] > 0
+
+
+def test_a_free_space_edge_is_walked_up_to():
+    grid = _room_with_wall()
+    grid[SEEN] = grid[OCCUPIED]
+    # The cells beyond y = 3.8 m are unknown: the free cells beside them are edges.
+    count, table, viewpoints, centres, _ = _candidates(grid, 0.55, 0.55)
+    assert count >= 1 and table[:count, 6].max() == 0.0  # free-space edges only
+    nearest = int(np.argmin(np.hypot(*(viewpoints[:count] - centres[:count]).T)))
+    assert np.hypot(*(viewpoints[nearest] - centres[nearest])) <= 0.6 + 1e-9
+
+
 @pytest.mark.parametrize(
     ("scene", "primitive_actions"),
     [
         ("procedural:room", False),
         ("procedural:small:train:no_ceiling+holes", False),
-        ("procedural:room", True),  # random goals and guarded discrete moves
+        ("procedural:room", True),  # random candidates and guarded discrete moves
     ],
 )
-def test_random_goals_are_refused_under_once_per_100_steps(scene, primitive_actions):
+def test_random_candidates_are_refused_under_once_per_100_steps(scene, primitive_actions):
     envs = VectorGoalActions(
         VectorEgocentricMapObservation(
             NarutoReconVectorEnv(
@@ -140,16 +223,19 @@ def test_single_env_goal_actions_take_k_steps_and_sum_the_rewards():
         steps_per_goal=10,
     )
     try:
-        env.reset(seed=0)
-        assert env.action_space.n == 64 + 10
-        _, reward, _, truncated, info = env.step(3 * 8 + 4)
+        observation, _ = env.reset(seed=0)
+        assert env.action_space.n == 8 + 10
+        assert env.observation_space.contains(observation)
+        assert observation["candidates"].shape == (8, len(CANDIDATE_FEATURES))
+        assert observation["candidates"][0, 0] == 1  # a room has something to look at
+        observation, reward, _, truncated, info = env.step(7)  # an empty slot: candidate 0
         assert info["primitive_steps"] == 10 and info["refusals"] == 0 and not truncated
         assert reward > 0  # walking and looking finds new surface
-        env.step(64 + 6)  # turn_left, repeated
+        env.step(8 + 6)  # turn_left, repeated
         _, _, _, truncated, info = env.step(0)
         assert truncated and info["primitive_steps"] == 5  # the episode ends first
-        with pytest.raises(ValueError, match="goal actions are 0..73"):
-            env.step(74)
+        with pytest.raises(ValueError, match="goal actions are 0..17"):
+            env.step(18)
     finally:
         env.close()
 
@@ -187,9 +273,49 @@ def test_a_goal_is_walked_with_the_camera_level():
     )
     try:
         env.reset(seed=0)
-        env.step(64 + 8)  # look_up, three times: the camera pitched up 60 degrees
+        env.step(8 + 8)  # look_up, three times: the camera pitched up 60 degrees
         assert env.unwrapped.pose[2, 2] > 0.8
-        env.step(3 * 8 + 4)  # a goal: the walker levels the camera before it walks
+        env.step(0)  # a candidate: the walker levels the camera before it walks
         assert abs(env.unwrapped.pose[2, 2]) < 0.2
+    finally:
+        env.close()
+
+
+class _Moves(gym.Wrapper):
+    """Keeps every move sent to the env."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.moves: list[int] = []
+        self.phases: list[tuple[int, int, int]] = []  # the walker's phase and cluster
+        self.walker = None
+
+    def step(self, action):
+        self.moves.append(int(action))
+        cluster = self.walker.target_clusters[0]
+        self.phases.append((int(self.walker.phases[0]), int(cluster[0]), int(cluster[1])))
+        return self.env.step(action)
+
+
+def test_the_nearest_candidate_turns_at_a_goal_only_as_far_as_it_needs():
+    moves = _Moves(
+        gym.make("NarutoRecon-v0", scene="procedural:small:1000000", max_episode_steps=120, **ENV)
+    )
+    env = GoalActions(EgocentricMapObservation(moves), steps_per_goal=20)
+    moves.walker = env.walker
+    try:
+        env.reset(seed=0)
+        coverage = []
+        for _ in range(6):
+            _, _, _, _, info = env.step(0)
+            coverage.append(info["coverage"])
+        turns: dict[tuple[int, int], int] = {}
+        for phase, *cluster in moves.phases:
+            if phase == FACE:
+                turns[tuple(cluster)] = turns.get(tuple(cluster), 0) + 1
+        # At a goal the walker turns towards the cluster: half a turn at most (9 steps of
+        # 20 degrees), never a full spin.
+        assert len(turns) >= 2 and max(turns.values()) <= 9
+        assert coverage[-1] > coverage[0] + 0.1  # it goes somewhere new
     finally:
         env.close()

@@ -21,7 +21,7 @@ CONFIG = {
     "coverage_samples": 1000,
     "max_episode_steps": 20,
     "steps_per_goal": 5,
-    "goal_grid": 4,
+    "num_candidates": 4,
 }
 
 
@@ -31,7 +31,7 @@ def test_the_creator_gives_flat_float_observations_and_goal_actions():
         observation, _ = env.reset(seed=0)
         assert observation.dtype == np.float32 and observation.ndim == 1
         assert env.observation_space.contains(observation)
-        assert env.action_space == gym.spaces.Discrete(16 + 10)
+        assert env.action_space == gym.spaces.Discrete(4 + 10)
         steps = 0
         truncated = False
         while not truncated:
@@ -42,6 +42,8 @@ def test_the_creator_gives_flat_float_observations_and_goal_actions():
         env.close()
     with pytest.raises(ValueError, match="scene"):
         make_rllib_explorer_env({key: v for key, v in CONFIG.items() if key != "scene"})
+    with pytest.raises(ValueError, match="num_candidates"):
+        make_rllib_explorer_env({**CONFIG, "goal_grid": 4})
 
 
 @pytest.mark.slow

@@ -1,0 +1,174 @@
+"""Do the explorer's goal actions let a trivial choice explore? Results: docs/benchmarks/explorer.md
+
+Runs scripted choices through the explorer's wrappers (the egocentric map observation and the
+candidate goal actions, :mod:`naruto_gym.rl.goal_actions`) and the harness's ``frontier`` and
+``random`` baselines on the same scenes and seed, and writes the coverage curves (every env
+step) and their area (the mean coverage over the episode's steps) to ``output_dir/check.json``:
+
+* ``candidate 0``: always the nearest candidate by path;
+* ``random candidate``: a candidate drawn uniformly among the valid slots at every decision.
+
+Coverage only (no reconstruction), the harness's env settings at ``--image-scale``; the
+wrappers' env has the explorer's (32, 64) panorama (the panorama does not count towards
+coverage). Baseline curves already in ``check.json`` for the same settings are reused
+(``--rerun-baselines`` runs them again).
+
+    nice -n 10 python benchmarks/explorer_scripted_check.py \\
+        --output-dir benchmarks/results/explorer_candidates
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import naruto_gym  # noqa: F401  (registers NarutoRecon-v0)
+from naruto_agent.benchmark.runner import run_episode
+from naruto_agent.benchmark.spec import EpisodeSpec
+from naruto_agent.cli_args import parse_dataclass_args
+from naruto_gym.rl.egocentric_map import EgocentricMapObservation
+from naruto_gym.rl.explorer_env import EXPLORER_ENV
+from naruto_gym.rl.goal_actions import GoalActions
+
+SCRIPTED = ("candidate 0", "random candidate")
+BASELINES = ("frontier", "random")
+
+
+@dataclass
+class Args:
+    scenes: list[str] = field(
+        default_factory=lambda: [f"procedural:small:{1_000_000 + k}" for k in range(3)]
+    )
+    """scenes (the small class's first test scenes by default)"""
+    seed: int = 0
+    """episode seed (the env's reset and the random choices)"""
+    max_episode_steps: int = 400
+    """episode length in env steps"""
+    steps_per_goal: int = 20
+    """env steps per goal action (K)"""
+    image_scale: float = 0.1
+    """camera resolution factor of every run"""
+    rerun_baselines: bool = False
+    """run frontier and random again even when check.json holds them"""
+    output_dir: str = "benchmarks/results/explorer_candidates"
+    """output folder"""
+
+
+class CoverageCurve(gym.Wrapper):
+    """Keeps the env's coverage after every step (and the refused moves)."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.curve: list[float] = []
+        self.refusals = 0
+
+    def step(self, action: Any):
+        result = self.env.step(action)
+        self.curve.append(float(result[4]["coverage"]))
+        self.refusals += int(bool(result[4].get("collided", False)))
+        return result
+
+
+def scripted(args: Args, scene: str, choice: str) -> dict[str, Any]:
+    """One episode of a scripted choice through the wrappers."""
+    env = gym.make(
+        "NarutoRecon-v0",
+        scene=scene,
+        max_episode_steps=args.max_episode_steps,
+        image_scale=args.image_scale,
+        action_mode="discrete",
+        panorama_shape=EXPLORER_ENV["panorama_shape"],
+    )
+    recorder = CoverageCurve(env)
+    wrapped = GoalActions(EgocentricMapObservation(recorder), args.steps_per_goal)
+    rng = np.random.default_rng(args.seed)
+    observation, _ = wrapped.reset(seed=args.seed)
+    decisions, valid = 0, 0
+    while len(recorder.curve) < args.max_episode_steps:
+        count = int(observation["candidates"][:, 0].sum())
+        valid += count
+        action = 0 if choice == "candidate 0" or count == 0 else int(rng.integers(count))
+        observation, _, terminated, truncated, _ = wrapped.step(action)
+        decisions += 1
+        if terminated or truncated:
+            break
+    wrapped.close()
+    return {
+        "coverage_curve": np.round(recorder.curve, 5).tolist(),
+        "refusals": recorder.refusals,
+        "mean_valid_candidates": round(valid / max(decisions, 1), 2),
+    }
+
+
+def baseline(args: Args, scene: str, policy: str) -> dict[str, Any]:
+    """One harness episode of a baseline policy, coverage only."""
+    spec = EpisodeSpec(
+        scene,
+        policy,
+        args.seed,
+        args.max_episode_steps,
+        image_scale=args.image_scale,
+        reconstruct=False,
+        eval_points=0,
+    )
+    record = run_episode(spec)
+    return {"coverage_curve": record["coverage_curve"], "refusals": record["collisions"]}
+
+
+def area(curve: list[float], steps: int) -> float:
+    """Mean coverage over ``steps`` steps (the last value held when the curve is shorter)."""
+    values = np.asarray(curve[:steps], float)
+    if len(values) < steps:
+        values = np.concatenate([values, np.full(steps - len(values), values[-1])])
+    return float(values.mean())
+
+
+def main(args: Args) -> dict[str, Any]:
+    output_dir = Path(args.output_dir)
+    output_dir.mkdir(parents=True, exist_ok=True)
+    path = output_dir / "check.json"
+    settings = {key: value for key, value in asdict(args).items() if key != "rerun_baselines"}
+    stored = json.loads(path.read_text()) if path.exists() else {}
+    same = {k: v for k, v in stored.get("settings", {}).items() if k != "steps_per_goal"} == {
+        k: v for k, v in settings.items() if k != "steps_per_goal"
+    }
+    runs: dict[str, dict[str, Any]] = {}
+    for scene in args.scenes:
+        for policy in SCRIPTED + BASELINES:
+            key = f"{scene}/{policy}"
+            if policy in BASELINES and same and not args.rerun_baselines:
+                if key in stored.get("runs", {}):
+                    runs[key] = stored["runs"][key]
+                    continue
+            run = (
+                scripted(args, scene, policy)
+                if policy in SCRIPTED
+                else baseline(args, scene, policy)
+            )
+            run["final"] = run["coverage_curve"][-1]
+            run["auc"] = round(area(run["coverage_curve"], args.max_episode_steps), 4)
+            runs[key] = run
+            print(f"{key}: final {run['final']:.3f} auc {run['auc']:.3f}", flush=True)
+    table = {
+        policy: {
+            "final": [runs[f"{s}/{policy}"]["final"] for s in args.scenes],
+            "auc": [runs[f"{s}/{policy}"]["auc"] for s in args.scenes],
+            "mean_auc": round(
+                float(np.mean([runs[f"{s}/{policy}"]["auc"] for s in args.scenes])), 4
+            ),
+        }
+        for policy in SCRIPTED + BASELINES
+    }
+    result = {"settings": settings, "table": table, "runs": runs}
+    path.write_text(json.dumps(result, indent=1))
+    print(json.dumps(table, indent=1))
+    return result
+
+
+if __name__ == "__main__":
+    main(parse_dataclass_args(Args))
