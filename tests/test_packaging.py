@@ -72,6 +72,9 @@ def test_wheel_installs_and_steps_in_a_fresh_environment(built: Path, tmp_path: 
     env_dir = tmp_path / "venv"
     venv.EnvBuilder(system_site_packages=True, with_pip=False).create(env_dir)
     python = env_dir / "bin" / "python"
+    # Without the caller's PYTHONPATH: a checkout on it (its egg-info) makes pip take the
+    # package as installed already and skip the wheel.
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NARUTO_GYM_ASSETS_DIR")}
     install = subprocess.run(
         [
             sys.executable,
@@ -88,6 +91,7 @@ def test_wheel_installs_and_steps_in_a_fresh_environment(built: Path, tmp_path: 
         capture_output=True,
         text=True,
         timeout=600,
+        env=env,
     )
     if install.returncode != 0 and "no such option: --python" in install.stderr:
         pytest.skip("pip is too old for --python")
@@ -103,7 +107,6 @@ def test_wheel_installs_and_steps_in_a_fresh_environment(built: Path, tmp_path: 
     )
     work = tmp_path / "elsewhere"
     work.mkdir()
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NARUTO_GYM_ASSETS_DIR")}
     env["NARUTO_GYM_CACHE_DIR"] = str(tmp_path / "cache")
     result = subprocess.run(
         [str(python), "-c", script],
