@@ -159,6 +159,7 @@ def test_the_demo_refuses_a_millimetre_mesh_and_runs_it_with_mesh_units(tmp_path
     assert "likely in millimetres" in error and "--mesh-units" in error
     assert not (tmp_path / "refused").exists()
     flags = ["--policy", "random", "--max-episode-steps", "3", "--eval-points", "0",
-             "--gif-frames", "0", "--no-record", "--no-viewer", "--image-scale", "0.1"]
+             "--gif-frames", "0", "--no-record", "--no-viewer", "--image-scale", "0.1",
+             "--eval-samples", "2000"]
     main(["--scene", path, "--mesh-units", "mm", *flags, "--output-dir", str(tmp_path / "ok")])
     assert (tmp_path / "ok").is_dir()
