@@ -28,6 +28,7 @@ from naruto_agent.policies.base import Info, Observation, Policy
 from naruto_agent.policies.registry import register_policy
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
 from naruto_gym.rl.goal_actions import GoalWalker
+from naruto_gym.sensors.panorama import EquirectangularCamera
 
 PACKAGED_MODEL = Path(__file__).with_name("checkpoints") / "explorer.zip"
 """The explorer checkpoint shipped in the package (with ``explorer.json`` beside it)."""
@@ -149,6 +150,7 @@ class MapGoalExplorer(Policy):
         self.walker: GoalWalker | None = None
         self._step = 0
         self._panorama_stride = (1, 1)
+        self._band: EquirectangularCamera | None = None
 
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
         super().reset(observation, info, seed)
@@ -162,6 +164,14 @@ class MapGoalExplorer(Policy):
                 f"the env with panorama_shape={trained} (or a whole multiple of it)"
             )
         self._panorama_stride = (given[0] // trained[0], given[1] // trained[1])
+        # A model trained on the panorama band (panorama_horizon_deg) sees the band here too,
+        # whether the env casts only those rows or every row.
+        horizon = self.settings.get("panorama_horizon_deg")
+        self._band = (
+            None
+            if horizon is None
+            else EquirectangularCamera(height=trained[0], width=trained[1], horizon_deg=horizon)
+        )
         context = self.context
         self.map = EgocentricMapBuilder(
             1,
@@ -184,6 +194,8 @@ class MapGoalExplorer(Policy):
     def _batch(self, observation: Observation) -> dict[str, np.ndarray]:
         rows, columns = self._panorama_stride
         panorama = np.asarray(observation["panorama"])[::rows, ::columns]
+        if self._band is not None:
+            panorama = self._band.keep_cast_rows(panorama)
         return {
             "depth": np.asarray(observation["depth"])[None],
             "pose": np.asarray(observation["pose"])[None],

@@ -128,6 +128,29 @@ def test_a_full_size_panorama_is_subsampled_to_the_trained_one(model_path):
     odd.close()
 
 
+def test_a_model_trained_on_the_panorama_band_acts_the_same_on_a_full_panorama(
+    model_path, tmp_path
+):
+    """Settings with ``panorama_horizon_deg`` (the training env cast only that band): the
+    policy shows the model and its map the band, so an env that casts every row and one that
+    casts only the band give the same walk."""
+    banded = tmp_path / "model.zip"
+    banded.write_bytes(model_path.read_bytes())
+    save_settings(banded, {**SETTINGS, "panorama_horizon_deg": 30})
+    poses = []
+    for horizon in (None, 30):
+        env = gym.make("NarutoRecon-v0", **ENV, panorama_horizon_deg=horizon)
+        policy = MapGoalExplorer(str(banded), deterministic=True)
+        policy.bind(EnvContext.from_env(env))
+        observation, info = env.reset(seed=1)
+        policy.reset(observation, info, seed=1)
+        for _ in range(15):
+            observation, _, _, _, info = env.step(policy.act(observation, info))
+        poses.append(env.unwrapped.pose.copy())
+        env.close()
+    np.testing.assert_array_equal(poses[0], poses[1])
+
+
 def test_a_model_and_settings_that_disagree_are_refused(model_path, tmp_path):
     with pytest.raises(FileNotFoundError, match="train_explorer.py"):
         MapGoalExplorer(str(tmp_path / "missing.zip"))
