@@ -146,7 +146,9 @@ def update_grid(
 
 
 @numba.njit(**_JIT)
-def _unknown(grid: np.ndarray, i: int, j: int) -> bool:
+def is_unknown(grid: np.ndarray, i: int, j: int) -> bool:
+    """Cell ``(i, j)`` of a ``(channels, rows, columns)`` grid is neither free nor occupied
+    (outside the grid counts as unknown)."""
     if i < 0 or j < 0 or i >= grid.shape[1] or j >= grid.shape[2]:
         return True
     return grid[FREE, i, j] == 0 and grid[OCCUPIED, i, j] == 0
@@ -174,10 +176,10 @@ def crop_scale(
             out[1, r, c] = free
             out[2, r, c] = grid[SEEN, i, j]
             frontier = free > 0 and (
-                _unknown(grid, i - 1, j)
-                or _unknown(grid, i + 1, j)
-                or _unknown(grid, i, j - 1)
-                or _unknown(grid, i, j + 1)
+                is_unknown(grid, i - 1, j)
+                or is_unknown(grid, i + 1, j)
+                or is_unknown(grid, i, j - 1)
+                or is_unknown(grid, i, j + 1)
             )
             out[3, r, c] = 255 if frontier else 0
             out[4, r, c] = grid[TRAIL, i, j]

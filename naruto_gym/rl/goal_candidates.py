@@ -38,7 +38,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL
+from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL, is_unknown
 from naruto_gym.rl.goal_planner import traversable
 
 __all__ = ["CANDIDATE_FEATURES", "find_candidates", "path_lengths", "wander_goal"]
@@ -93,13 +93,6 @@ def path_lengths(
             out[ni, nj] = out[li, lj] + (_DIAGONAL if diagonal else 1.0)
             queue[tail] = ni * side + nj
             tail += 1
-
-
-@numba.njit(**_JIT)
-def _coarse_unknown(coarse: np.ndarray, i: int, j: int) -> bool:
-    if i < 0 or j < 0 or i >= coarse.shape[1] or j >= coarse.shape[2]:
-        return True
-    return coarse[FREE, i, j] == 0 and coarse[OCCUPIED, i, j] == 0
 
 
 @numba.njit(**_JIT)
@@ -233,10 +226,10 @@ def find_candidates(
                     target = True
             elif coarse[FREE, a, b] != 0:
                 target = (
-                    _coarse_unknown(coarse, a - 1, b)
-                    or _coarse_unknown(coarse, a + 1, b)
-                    or _coarse_unknown(coarse, a, b - 1)
-                    or _coarse_unknown(coarse, a, b + 1)
+                    is_unknown(coarse, a - 1, b)
+                    or is_unknown(coarse, a + 1, b)
+                    or is_unknown(coarse, a, b - 1)
+                    or is_unknown(coarse, a, b + 1)
                 )
             if not target:
                 continue
