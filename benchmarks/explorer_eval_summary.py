@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from naruto_agent.benchmark.efficiency import mean_over_steps
 from naruto_agent.cli_args import parse_dataclass_args
 
 
@@ -36,14 +37,6 @@ class Args:
     """output folder"""
 
 
-def area(curve: list[float], steps: int) -> float:
-    """Mean coverage over ``steps`` steps (the last value held when the curve is shorter)."""
-    values = np.asarray(curve[:steps], float)
-    if len(values) < steps:
-        values = np.concatenate([values, np.full(steps - len(values), values[-1])])
-    return float(values.mean())
-
-
 def main(args: Args) -> dict[str, Any]:
     episodes: dict[tuple[str, str, int], dict[str, float]] = {}
     for path in sorted(Path(args.input_dir, "records").glob("*/*/seed*.json")):
@@ -53,7 +46,7 @@ def main(args: Args) -> dict[str, Any]:
         steps = int(record["config"]["steps"])
         episodes[(record["policy"], record["scene"], int(record["seed"]))] = {
             "final": float(record["coverage_final"]),
-            "auc": area(record["coverage_curve"], steps),
+            "auc": mean_over_steps(record["coverage_curve"], steps),
             "refusals_per_100_steps": 100 * record["collisions"] / max(record["steps_run"], 1),
         }
     policies = sorted({p for p, _, _ in episodes})

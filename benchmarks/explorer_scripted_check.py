@@ -28,6 +28,7 @@ import gymnasium as gym
 import numpy as np
 
 import naruto_gym  # noqa: F401  (registers NarutoRecon-v0)
+from naruto_agent.benchmark.efficiency import mean_over_steps
 from naruto_agent.benchmark.runner import run_episode
 from naruto_agent.benchmark.spec import EpisodeSpec
 from naruto_agent.cli_args import parse_dataclass_args
@@ -120,14 +121,6 @@ def baseline(args: Args, scene: str, policy: str) -> dict[str, Any]:
     return {"coverage_curve": record["coverage_curve"], "refusals": record["collisions"]}
 
 
-def area(curve: list[float], steps: int) -> float:
-    """Mean coverage over ``steps`` steps (the last value held when the curve is shorter)."""
-    values = np.asarray(curve[:steps], float)
-    if len(values) < steps:
-        values = np.concatenate([values, np.full(steps - len(values), values[-1])])
-    return float(values.mean())
-
-
 def main(args: Args) -> dict[str, Any]:
     output_dir = Path(args.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
@@ -151,7 +144,7 @@ def main(args: Args) -> dict[str, Any]:
                 else baseline(args, scene, policy)
             )
             run["final"] = run["coverage_curve"][-1]
-            run["auc"] = round(area(run["coverage_curve"], args.max_episode_steps), 4)
+            run["auc"] = round(mean_over_steps(run["coverage_curve"], args.max_episode_steps), 4)
             runs[key] = run
             print(f"{key}: final {run['final']:.3f} auc {run['auc']:.3f}", flush=True)
     table = {

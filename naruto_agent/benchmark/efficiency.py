@@ -108,6 +108,17 @@ def area_under_curve(x: np.ndarray, ratio_pct: np.ndarray, horizon: float) -> fl
     return area / (100.0 * horizon)
 
 
+def mean_over_steps(curve: Sequence[float], steps: int) -> float:
+    """Mean of a per-step curve (e.g. a record's ``coverage_curve``) over its first ``steps``
+    steps, the last value held when the curve is shorter: the coverage area of the explorer's
+    benchmark pages (a step-sampled mean, not the leaderboard's trapezoid
+    :func:`area_under_curve`)."""
+    values = np.asarray(curve[:steps], float)
+    if len(values) < steps:
+        values = np.concatenate([values, np.full(steps - len(values), values[-1])])
+    return float(values.mean())
+
+
 def first_reach(x: np.ndarray, ratio_pct: np.ndarray, level_pct: float) -> float | None:
     """The first abscissa where the piecewise-linear curve reaches ``level_pct``, or None."""
     x = np.asarray(x, np.float64)

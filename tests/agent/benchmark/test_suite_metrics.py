@@ -11,6 +11,7 @@ from naruto_agent.benchmark.efficiency import (
     cumulative_path,
     episode_efficiency,
     first_reach,
+    mean_over_steps,
 )
 from naruto_agent.benchmark.statistics import bootstrap_ci, excludes_zero, paired_comparison
 from naruto_agent.benchmark.suite import ordered_groups
@@ -182,3 +183,9 @@ def test_the_open_variant_is_its_own_group_and_follows_its_closed_class():
     closed = summary["house"]["p"]["completion_ratio_pct"]["mean"]
     opened = summary["house (open)"]["p"]["completion_ratio_pct"]["mean"]
     assert (closed, opened) == (95.0, 30.0)
+
+
+def test_mean_over_steps_holds_the_last_value_and_cuts_at_the_budget():
+    assert mean_over_steps([0.0, 0.5, 1.0], 3) == 0.5
+    assert mean_over_steps([0.2, 0.4], 4) == (0.2 + 0.4 + 0.4 + 0.4) / 4
+    assert np.isclose(mean_over_steps([0.2, 0.4, 0.9, 0.9], 2), 0.3)
