@@ -75,12 +75,14 @@ def test_a_changed_path_is_a_difference(fingerprint):
 def test_depths_beyond_the_tolerance_or_other_hits_are_differences(fingerprint):
     before = record(fingerprint)
     moved = fingerprint.compare(before, record(fingerprint, offset=1e-3))
-    assert not moved.same and "/episodes/random@room/depth/0/mean" in moved.differences
+    assert not moved.same and len(moved.differences) == 1
+    assert moved.differences[0].startswith("/episodes/random@room/depth (2 of 2 frames")
+    assert moved.exact_depth_differences == []  # reported as the depth difference only
+    assert moved.max_depth_difference_m == pytest.approx(1e-3, rel=1e-3)
     fewer_hits = copy.deepcopy(before)
     fewer_hits["episodes"]["random@room"]["depth"][1]["valid"] -= 1
-    assert fingerprint.compare(before, fewer_hits).differences == [
-        "/episodes/random@room/depth/1/valid"
-    ]
+    (found,) = fingerprint.compare(before, fewer_hits).differences
+    assert found.startswith("/episodes/random@room/depth (1 of 2 frames") and "first 1;" in found
     shorter = copy.deepcopy(before)
     shorter["episodes"]["random@room"]["depth"].pop()
     assert not fingerprint.compare(before, shorter).same
