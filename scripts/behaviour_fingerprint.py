@@ -34,10 +34,10 @@ from naruto_agent.episode_loop import EpisodeHook
 
 #: Metres by which two fingerprints' depth summaries may differ and still be "same": float
 #: rounding. The rasterizing and the ray-casting pinhole backends hit the same triangles but
-#: compute the distance along a pixel's ray in a different float32 order: their depths differ
-#: by about 1e-6 m on most pixels and up to 2e-5 m on rare grazing ones in rooms of a few
-#: metres. A change of behaviour (another pose, another triangle hit) moves depths by
-#: millimetres or more.
+#: compute the distance along a pixel's ray in float32 and float64: their depths differ by
+#: at most about 1e-6 m on 99.99 % of the pixels in rooms of a few metres (docs/environment.md,
+#: "Pinhole backends"), which moves a frame's mean, extremes and grid far less than this. A
+#: change of behaviour (another pose, another triangle hit) moves them by millimetres or more.
 DEPTH_TOLERANCE_M = 1e-4
 #: Rows and columns of the sparse grid of pixels whose depth each frame's summary keeps.
 DEPTH_GRID_SIDE = 8
