@@ -161,10 +161,10 @@ class NarutoReconEnv(gym.Env):
     * ``start_clearance_m``: free space around a random start (0.3 m).
     * ``raycaster_backend``: ``"open3d"`` (default) or ``"embreex"``.
     * ``pinhole_backend``: how the pinhole frame is made: ``"raycast"`` (default, Embree ray
-      casting, the reference), ``"raster"`` (the rasterizer: the same depth, triangles and
-      colours up to exact edge ties, and faster) or ``"auto"`` (the rasterizer unless the
-      mesh has more than 4 triangles per pixel). The panorama, collisions and coverage always
-      ray-cast.
+      casting, the reference), ``"raster"`` (the rasterizer, several times faster: the same
+      triangles and colours up to exact edge ties, depths up to float rounding) or ``"auto"``
+      (the rasterizer unless the mesh has more than 4 triangles per pixel). The panorama,
+      collisions and coverage always ray-cast.
     * ``threads``: threads of the rasterizer and the colour lookup (None: the
       ``NARUTO_GYM_THREADS`` environment variable, else every CPU the process may run on,
       one in the worker of an ``AsyncVectorEnv`` or a Ray actor; see

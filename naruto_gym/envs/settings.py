@@ -20,10 +20,12 @@ from naruto_gym.utils.threads import resolve_threads
 #: ``NarutoReconEnv`` gives the frames every published figure and the behaviour fingerprint
 #: were made with.
 PINHOLE_BACKEND = "raycast"
-#: How the batched env makes them by default: ``"auto"``, the rasterizer where it is cheaper
-#: (the same frames up to exact edge ties), as RL wants throughput. The two defaults stay
-#: apart because either one changed would change fixed-seed frames (edge ties), and with them
-#: the episodes and figures measured with it.
+#: How the batched env makes them by default: ``"auto"``, the rasterizer where it is cheaper,
+#: as RL wants throughput. The two defaults stay apart because the rasterizer's depths differ
+#: from the ray cast's by float rounding (and, at exact edge ties, by another triangle), and
+#: that flips decisions of the frontier and NARUTO policies: with ``"auto"`` as the single
+#: env's default their fixed-seed episodes take other paths (docs/environment.md, "Pinhole
+#: backends").
 BATCHED_PINHOLE_BACKEND = "auto"
 
 

@@ -136,9 +136,10 @@ class RgbdRenderer:
         max_depth_m: sensor range.
         raycaster: an existing ray caster of ``scene`` to share (built if None).
         backend: how pixel hits are found. ``"raycast"`` (default, the reference): Embree
-            casts every pixel ray. ``"raster"``: the pinhole rasterizer, the same hits
-            (z-depth of the exact pixel ray, triangle, barycentrics) several times faster on
-            full frames. ``"auto"``: the rasterizer when the mesh has at most
+            casts every pixel ray. ``"raster"``: the pinhole rasterizer, several times
+            faster on full frames: the same hits (triangle, barycentrics, z-depth of the exact
+            pixel ray) up to exact edge ties and float rounding (Embree's depths are float32
+            sums, the rasterizer's float64). ``"auto"``: the rasterizer when the mesh has at most
             ``auto_max_triangles_per_pixel`` triangles per pixel, else the ray cast.
         threads: threads for the rasterizer and the colour lookup (default:
             :func:`~naruto_gym.utils.threads.default_thread_count`, the CPUs this process
@@ -189,8 +190,15 @@ class RgbdRenderer:
         if self._rasterizer is None:
             camera = self.camera
             self._rasterizer = PinholeRasterizer(
-                self.raycaster.vertices, self.raycaster.faces, camera.width, camera.height,
-                camera.fx, camera.fy, camera.cx, camera.cy, threads=self.threads,
+                self.raycaster.vertices,
+                self.raycaster.faces,
+                camera.width,
+                camera.height,
+                camera.fx,
+                camera.fy,
+                camera.cx,
+                camera.cy,
+                threads=self.threads,
             )
         return self._rasterizer
 
@@ -213,8 +221,11 @@ class RgbdRenderer:
         return self._cast_hits(camera_to_world, (self.camera.height, self.camera.width))
 
     def render_hits_many(
-        self, camera_to_world: np.ndarray, worker: int | None = None,
-        depth_out: np.ndarray | None = None, barycentric_faces: np.ndarray | None = None,
+        self,
+        camera_to_world: np.ndarray,
+        worker: int | None = None,
+        depth_out: np.ndarray | None = None,
+        barycentric_faces: np.ndarray | None = None,
     ) -> PixelHits:
         """:meth:`render_hits` of K poses (K, 4, 4) at once, the same hits frame by frame.
 
@@ -245,11 +256,15 @@ class RgbdRenderer:
         shape = (count, self.camera.height, self.camera.width)
         if depth_out is None:
             depth = np.empty(shape, np.float32)
-        elif depth_out.shape != shape or depth_out.dtype != np.float32 or not (
-            depth_out.flags.c_contiguous
+        elif (
+            depth_out.shape != shape
+            or depth_out.dtype != np.float32
+            or not (depth_out.flags.c_contiguous)
         ):
-            raise ValueError(f"depth_out must be a C-contiguous {shape} float32 array, got "
-                             f"{depth_out.dtype} {depth_out.shape}")
+            raise ValueError(
+                f"depth_out must be a C-contiguous {shape} float32 array, got "
+                f"{depth_out.dtype} {depth_out.shape}"
+            )
         else:
             depth = depth_out
         triangle_ids = np.empty(count * pixels, np.int32)
@@ -265,9 +280,12 @@ class RgbdRenderer:
         def draw(part: int) -> None:
             first, stop = bounds[part], bounds[part + 1]
             workers[part].render_many_into(
-                poses[first:stop], self.max_depth_m, depth[first:stop],
-                triangle_ids[first * pixels:stop * pixels],
-                barycentric_uv[first * pixels:stop * pixels], barycentric_faces,
+                poses[first:stop],
+                self.max_depth_m,
+                depth[first:stop],
+                triangle_ids[first * pixels : stop * pixels],
+                barycentric_uv[first * pixels : stop * pixels],
+                barycentric_faces,
             )
 
         run_parallel(draw, len(workers))
@@ -284,10 +302,19 @@ class RgbdRenderer:
         rasterizer, so each thread needs its own), built on first use."""
         while len(self._workers) < count:
             camera = self.camera
-            self._workers.append(PinholeRasterizer(
-                self.raycaster.vertices, self.raycaster.faces, camera.width, camera.height,
-                camera.fx, camera.fy, camera.cx, camera.cy, threads=1,
-            ))
+            self._workers.append(
+                PinholeRasterizer(
+                    self.raycaster.vertices,
+                    self.raycaster.faces,
+                    camera.width,
+                    camera.height,
+                    camera.fx,
+                    camera.fy,
+                    camera.cx,
+                    camera.cy,
+                    threads=1,
+                )
+            )
         return self._workers[:count]
 
     def shade(self, triangle_ids: np.ndarray, barycentric_uv: np.ndarray) -> np.ndarray:
@@ -321,7 +348,7 @@ class RgbdRenderer:
                 self.camera.ray_directions,
                 np.ascontiguousarray(pose[:3, :3]),
                 np.ascontiguousarray(pose[:3, 3]),
-                rays[k * pixels:(k + 1) * pixels],
+                rays[k * pixels : (k + 1) * pixels],
             )
         hits = self.raycaster.cast_packed(rays)
         depth = hits.distance.copy()

@@ -94,9 +94,9 @@ class NarutoReconVectorEnv(BatchedEnvBase):
     * ``pinhole_backend``: as for ``NarutoReconEnv``, but ``"auto"`` by default: the
       rasterizer up to ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED`` triangles per pixel (a
       higher limit than for one frame, as drawing many frames at once pays off on denser
-      meshes), else the ray cast: the same frames as the single env's reference ray cast up
-      to exact edge ties. Pass ``"raycast"`` for frames equal bit for bit to a default
-      ``NarutoReconEnv``'s.
+      meshes), else the ray cast: the single env's reference frames up to float rounding of
+      the depths and exact edge ties. Pass ``"raycast"`` for frames equal bit for bit to a
+      default ``NarutoReconEnv``'s.
     * ``threads``: CPUs the env's compiled loops use (None: the ``NARUTO_GYM_THREADS``
       environment variable, else every CPU the process may run on; see
       :func:`~naruto_gym.utils.threads.default_thread_count`).
