@@ -83,6 +83,14 @@ class GoalPlanner:
                                         scan_checks.inside_scan,
                                         device, self.timings)
         self._visit: tuple[np.ndarray, np.ndarray] | None = None  # (goal, targets it sees)
+        self._leave: tuple[np.ndarray, float] | None = None  # (spot, radius) of leave()
+
+    def leave(self, spot: np.ndarray, radius_m: float) -> None:
+        """The next plan goes to a goal farther than ``radius_m`` from ``spot`` and moves at
+        once, without turning towards its target first (a stall watchdog cut a stay there
+        short: a goal next to it, or a turn in place, would only make the stay longer).
+        Plans that find no such goal fail, until the recovery they lead to moves away."""
+        self._leave = (np.asarray(spot, np.float64).copy(), float(radius_m))
 
     def plan(self, position: np.ndarray, frame: int = 0) -> Plan | None:
         """The next plan from ``position`` on the newest planner view.
@@ -110,7 +118,9 @@ class GoalPlanner:
             return Plan(climb, look_around_views(climb[-1], self.config), climb[-1].copy(),
                         {"recovery": "climb", "trusted": True})
         if self.monitor.needs_recovery():
+            self._leave = None  # a recovery moves away too
             return self._recover(position, record, frame)
+        leave = self._leave  # kept until a plan leaves (failed plans lead to a recovery)
         prefix = position[None]
         start = position
         clearance = self.agent_map.clearance_m
@@ -130,6 +140,11 @@ class GoalPlanner:
             prefix, start = escape, escape[-1]
         components = self.agent_map.components
         goal_mask = self.goal_mask(start)
+        if leave is not None:
+            away = np.linalg.norm(sdf.grid_points() - leave[0], axis=1) > leave[1]
+            away = away.reshape(sdf.shape)
+            goal_mask = away if goal_mask is None else goal_mask & away
+            record["leaving"] = True
 
         clock = time.perf_counter()
         travel = (components.travel_distances(start)
@@ -166,6 +181,9 @@ class GoalPlanner:
                     self.monitor.plan_succeeded()
                     self.monitor.progress_made(position)
                     self._visit = (goal.copy(), search.goal_visible[rank])
+                    if leave is not None:
+                        record["move_at_once"] = True
+                        self._leave = None
                     return Plan(path, views, goal.copy(), record)
                 self.monitor.goal_failed(goal)
             self._plan_failed(position, record, f"no goal reachable ({result.reason})")

@@ -87,7 +87,7 @@ class FrontierConfig:
             lets a move from the scan's margin through and, once ``max_held_moves`` were
             held at one spot, every move until the agent moves.
         stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
-            recover from them; off by default until the scene suite is re-run with it on.
+            recover from them.
     """
 
     voxel_size_m: float = 0.1
@@ -113,7 +113,7 @@ class FrontierConfig:
     support_below_m: float = 3.0
     support_reach_m: float = 0.3
     guard: ScanGuardConfig = field(default_factory=_frontier_guard)
-    stall_watchdog: bool = False
+    stall_watchdog: bool = True
 
     def __post_init__(self) -> None:
         check_integer("look_around_headings", self.look_around_headings, low=1)
@@ -143,7 +143,7 @@ class RandomConfig:
             probes the edge at a second, wider radius, and holds (turns in place) for
             ``max_held_moves`` steps before it sends the clear part of the move.
         stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
-            recover from them; off by default until the scene suite is re-run with it on.
+            recover from them.
     """
 
     seed: int | None = None
@@ -156,7 +156,7 @@ class RandomConfig:
     max_redraws: int = 8
     sweep_headings: int = 16
     guard: ScanGuardConfig = field(default_factory=_random_guard)
-    stall_watchdog: bool = False
+    stall_watchdog: bool = True
 
     def __post_init__(self) -> None:
         check_integer("min_run_steps", self.min_run_steps, low=1)
