@@ -86,9 +86,7 @@ class NarutoConfig:
     seed: int = 0
     """seed of the agent's randomness when ``reset`` gets none"""
     stall_watchdog: bool = True
-    """the stall watchdog of every shipped policy (:mod:`naruto_agent.policies.watchdog`): a
-    look-around still learning after 24 steps is cut short for the next goal, a stay that
-    learns nothing starts a recovery that moves"""
+    """the stall watchdog (:mod:`naruto_agent.policies.watchdog`; docs/agent-config.md)"""
     guard: ScanGuardConfig = field(default_factory=ScanGuardConfig)
     """the open-scan guard: the panorama check, held moves, the scan's edge, the open sky"""
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
