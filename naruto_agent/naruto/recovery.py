@@ -243,6 +243,15 @@ class BlockedSpace:
         self.radii.append(self.radius_m if radius_m is None else float(radius_m))
         self.guessed.append(bool(guessed))
 
+    def holds(self, point: np.ndarray) -> bool:
+        """Whether ``point`` lies within a blocked ball's radius (a refused move's target:
+        the SDF's voxels cannot say so when the agent's own voxel is blocked too)."""
+        point = np.asarray(point, np.float64)
+        return any(
+            float(np.linalg.norm(point - centre)) <= radius
+            for centre, radius in zip(self.points, self.radii, strict=True)
+        )
+
     def forget_guesses_near(self, position: np.ndarray, reach_m: float) -> int:
         """Drop the guessed balls that come within ``reach_m`` of ``position``; returns how
         many were dropped (what the env refused stays blocked)."""
