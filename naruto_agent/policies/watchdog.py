@@ -27,7 +27,9 @@ the stay lasts ``max_stay_steps``.
 
 A stall triggers the policy's recovery (:meth:`~naruto_agent.policies.Policy.recover_from_stall`:
 a new goal, a new direction, a height change inside the scanned space), and the watchdog then
-starts a new window, so a recovery that did not help triggers the next one a window later.
+starts a new window, so a recovery that did not help triggers the next one a window later;
+the stay itself is still counted from where it began (a recovery that did not leave the spot
+is a stay going on, and the next trigger comes as soon as the window allows).
 Every trigger is kept as a :class:`StallEvent` (the harness and the demo write them to the
 episode record; the Rerun recording shows them). The settings are :class:`StallWatchdogConfig`.
 """
@@ -169,7 +171,7 @@ class StallWatchdog:
     ) -> StallEvent | None:
         """One step: the agent's position, whether the env refused its last move and,
         optionally, the policy's measure of what it knows; the stall noticed now, or None.
-        After a stall the window starts again."""
+        After a stall the window starts again; the stay goes on until the agent leaves."""
         position = np.asarray(position, np.float64).reshape(3).copy()
         progress = float("nan") if progress is None else float(progress)
         self.step += 1
@@ -200,7 +202,6 @@ class StallWatchdog:
         self._positions.clear()
         self._refused.clear()
         self._progress.clear()
-        self._stay = [position]
         return event
 
     def _kind(self, window: deque[np.ndarray], progress: deque[float]) -> str | None:
