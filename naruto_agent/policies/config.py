@@ -131,6 +131,10 @@ class RandomConfig:
         max_run_steps: ... to this.
         max_climb: largest vertical component of a run's (unit) direction.
         max_pitch_deg: the camera's pitch is drawn uniformly within +-this per run.
+        sweep_yaw_deg: while walking, the camera swings this far to either side of the
+            run's heading (0: it looks straight ahead) ...
+        sweep_period_steps: ... once every this many steps (16 at 45 degrees: at most
+            18 degrees a step, inside the env's turn limit).
         height_margin_m: runs turn back vertically within this distance of the bounds'
             floor and ceiling.
         avoid_blocked_deg: a new direction after a block is at least this far from the
@@ -151,6 +155,8 @@ class RandomConfig:
     max_run_steps: int = 40
     max_climb: float = 0.3
     max_pitch_deg: float = 30.0
+    sweep_yaw_deg: float = 45.0
+    sweep_period_steps: int = 16
     height_margin_m: float = 0.3
     avoid_blocked_deg: float = 60.0
     max_redraws: int = 8
@@ -165,6 +171,8 @@ class RandomConfig:
                 f"need 1 <= min_run_steps <= max_run_steps, got {self.min_run_steps}, "
                 f"{self.max_run_steps}"
             )
+        check_number("sweep_yaw_deg", self.sweep_yaw_deg, low=0.0, high=90.0)
+        check_integer("sweep_period_steps", self.sweep_period_steps, low=2)
 
 
 @dataclass
