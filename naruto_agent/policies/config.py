@@ -171,7 +171,7 @@ class RandomConfig:
                 f"need 1 <= min_run_steps <= max_run_steps, got {self.min_run_steps}, "
                 f"{self.max_run_steps}"
             )
-        check_number("sweep_yaw_deg", self.sweep_yaw_deg, low=0.0, high=90.0)
+        check_number("sweep_yaw_deg", self.sweep_yaw_deg, low=0.0, low_open=False, high=90.0)
         check_integer("sweep_period_steps", self.sweep_period_steps, low=2)
 
 

@@ -68,6 +68,16 @@ def test_walking_about_within_the_radius_is_a_stall_only_once_the_stay_lasts():
     assert fired == [(23, "oscillation")]
 
 
+def test_a_stay_goes_on_across_a_recovery_that_did_not_leave():
+    """A look-around that keeps learning is cut at ``max_stay_steps``; when the agent is
+    still there once the window has filled again, the stay counts from where it began, so
+    the next trigger comes at once (not ``max_stay_steps`` later)."""
+    watchdog = StallWatchdog(StallWatchdogConfig(window_steps=20, max_stay_steps=24))
+    events = _feed(watchdog, [np.zeros(3)] * 60, progress=lambda i: float(2**i))
+    fired = [(i, event.kind) for i, event in enumerate(events) if event is not None]
+    assert fired == [(23, "lingering"), (43, "lingering")]
+
+
 def test_creeping_less_than_a_walk_is_still_a_spin():
     """Steps of 2 cm (1 m would take 50) are standing, not walking."""
     watchdog = StallWatchdog(StallWatchdogConfig(window_steps=20, min_walk_m=1.0))
