@@ -13,7 +13,8 @@ episode:
 and per scene whether NARUTO walked at least frontier's path or covered more.
 
 It is resumable: every finished episode is written at once into ``stall_check.json`` under
-``--output-dir``, and a rerun skips the episodes found there. Example::
+``--output-dir`` (with its table, ``stall_check.md``), and a rerun skips the episodes found
+there. Example::
 
     nice -n 10 python benchmarks/stall_check.py
 """
@@ -35,6 +36,8 @@ from naruto_agent.benchmark.records import write_json_atomic
 from naruto_agent.cli_args import dataclass_parser
 
 RESULT_FILE = "stall_check.json"
+#: The episodes' table, written beside the result file (the open-scans page includes it).
+TABLE_FILE = "stall_check.md"
 #: The longest stay the issue allows (steps within ``STAY_RADIUS_M`` below ``COVERED``).
 MAX_STAY_STEPS = 30
 STAY_RADIUS_M = 0.5
@@ -143,6 +146,32 @@ def summary(episodes: list[dict[str, Any]]) -> dict[str, Any]:
     return {"stays_over_limit": long_stays, "naruto_vs_frontier": versus}
 
 
+def table(episodes: list[dict[str, Any]]) -> str:
+    """The episodes as a Markdown table, by scene then policy, and one line per scene on
+    NARUTO against frontier."""
+    lines = [
+        "| Scene | Policy | Longest stay (steps) | Coverage (%) | Path (m) | Watchdog triggers |",
+        "|---|---|---|---|---|---|",
+    ]
+    for e in sorted(episodes, key=lambda e: (e["scene"], e["seed"], e["policy"])):
+        kinds = e["stall_events"]
+        triggers = ", ".join(f"{kind} {count}" for kind, count in sorted(kinds.items()))
+        lines.append(
+            f"| {e['scene']} | {e['policy']} | {e['longest_stay_steps']} | "
+            f"{100 * e['coverage']:.1f} | {e['path_m']:.1f} | {triggers or 'none'} |"
+        )
+    lines.append("")
+    for row in summary(episodes)["naruto_vs_frontier"]:
+        verdict = "holds" if row["holds"] else "does not hold"
+        lines.append(
+            f"* `{row['scene']}`: NARUTO {row['naruto_path_m']:.1f} m, "
+            f"{100 * row['naruto_coverage']:.1f} % against frontier's "
+            f"{row['frontier_path_m']:.1f} m, {100 * row['frontier_coverage']:.1f} % "
+            f"(a longer path or more coverage: {verdict})"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def machine() -> dict[str, Any]:
     """Where the check ran (timings are of a shared, loaded machine unless said otherwise)."""
     return {
@@ -208,6 +237,7 @@ def _write(path: Path, args: Args, new: list[dict[str, Any]]) -> dict[str, Any]:
             "summary": result,
         },
     )
+    (path.parent / TABLE_FILE).write_text(table(list(episodes.values())))
     return result
 
 

@@ -83,14 +83,16 @@ class GoalPlanner:
                                         scan_checks.inside_scan,
                                         device, self.timings)
         self._visit: tuple[np.ndarray, np.ndarray] | None = None  # (goal, targets it sees)
-        self._leave: tuple[np.ndarray, float] | None = None  # (spot, radius) of leave()
+        self._leave: tuple[np.ndarray, float] | None = None  # (spots, radius) of leave()
 
-    def leave(self, spot: np.ndarray, radius_m: float) -> None:
-        """The next plan goes to a goal farther than ``radius_m`` from ``spot`` and moves at
-        once, without turning towards its target first (a stall watchdog cut a stay there
-        short: a goal next to it, or a turn in place, would only make the stay longer).
-        Plans that find no such goal fail, until the recovery they lead to moves away."""
-        self._leave = (np.asarray(spot, np.float64).copy(), float(radius_m))
+    def leave(self, spots: np.ndarray, radius_m: float) -> None:
+        """The next plan goes to a goal farther than ``radius_m`` from every one of ``spots``
+        ((3,) or (n, 3): where the agent stayed) and moves at once, without turning towards
+        its target first (a stall watchdog cut a stay there short: a goal next to it, or a
+        turn in place, would only make the stay longer). Plans that find no such goal fail,
+        until the recovery they lead to moves away."""
+        spots = np.asarray(spots, np.float64).reshape(-1, 3).copy()
+        self._leave = (spots, float(radius_m))
 
     def plan(self, position: np.ndarray, frame: int = 0) -> Plan | None:
         """The next plan from ``position`` on the newest planner view.
@@ -141,7 +143,10 @@ class GoalPlanner:
         components = self.agent_map.components
         goal_mask = self.goal_mask(start)
         if leave is not None:
-            away = np.linalg.norm(sdf.grid_points() - leave[0], axis=1) > leave[1]
+            points = sdf.grid_points()
+            away = np.ones(len(points), bool)
+            for spot in leave[0]:
+                away &= np.linalg.norm(points - spot, axis=1) > leave[1]
             away = away.reshape(sdf.shape)
             goal_mask = away if goal_mask is None else goal_mask & away
             record["leaving"] = True

@@ -231,20 +231,18 @@ class NarutoPolicy(Policy):
 
     def recover_from_stall(self, event: StallEvent) -> str:
         """Cut the plan in progress short and plan again at once: after a stay that kept
-        learning (``"lingering"``, a long look-around) or kept walking (``"oscillation"``:
-        the planner's goals came back to one spot) the next goal of a normal plan past the
-        stay (the goal search weighs what the cut plan left unseen); after a spin or refused
-        moves a recovery that moves (a wander to reachable space away from where the agent
-        has been, or a retreat along its trajectory)."""
+        learning (``"lingering"``, a long look-around) the next goal of a normal plan past
+        the stay (the goal search weighs what the cut look-around left unseen); after any
+        other stall a recovery that moves (a wander to reachable space away from where the
+        agent has been, or a retreat along its trajectory)."""
         self.machine.interrupt()
         self._stalled = True
-        if event.kind in ("lingering", "oscillation"):
-            # Past the spot the agent stayed at, by a step more than the stay radius.
+        if event.kind == "lingering":
+            # Past every place of the stay's window, by a step more than the stay radius.
             radius = self.stall_watchdog.config.radius_m + self.context.max_translation_m
-            self.goal_planner.leave(event.position, radius)
-            if event.kind == "lingering":
-                return "look-around cut short: next goal away from the stay"
-            return "plan cut short: next goal away from the stay"
+            spots = event.position if event.window is None else event.window
+            self.goal_planner.leave(spots, radius)
+            return "look-around cut short: next goal away from the stay"
         self.monitor.request_recovery()
         return "plan cut short: recovery that moves"
 

@@ -37,7 +37,7 @@ episode record; the Rerun recording shows them). The settings are :class:`StallW
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -121,16 +121,20 @@ class StallEvent:
         position: (3,) where the agent was, metres.
         kind: one of :data:`STALL_KINDS`.
         recovery: what the policy did about it (its own words; empty until it recovered).
+        window: (n, 3) the positions the stall was judged on (the last ``window_steps``), so
+            that a recovery can leave the whole spot; not written to records.
     """
 
     step: int
     position: np.ndarray
     kind: str
     recovery: str = ""
+    window: np.ndarray | None = field(default=None, repr=False)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (for episode records)."""
         record = asdict(self)
+        record.pop("window")
         record["position"] = [round(float(v), 3) for v in self.position]
         return record
 
@@ -197,7 +201,7 @@ class StallWatchdog:
                 kind = "lingering"
         if kind is None:
             return None
-        event = StallEvent(self.step, position, kind)
+        event = StallEvent(self.step, position, kind, window=np.asarray(self._positions))
         self.events.append(event)
         self._positions.clear()
         self._refused.clear()
