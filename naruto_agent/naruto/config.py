@@ -85,8 +85,8 @@ class NarutoConfig:
     """the first plan of an episode is a turn in place that looks all around"""
     seed: int = 0
     """seed of the agent's randomness when ``reset`` gets none"""
-    stall_watchdog: bool = False
-    """the stall watchdog of every shipped policy (off until the suite is re-run with it)"""
+    stall_watchdog: bool = True
+    """the stall watchdog (:mod:`naruto_agent.policies.watchdog`; docs/agent-config.md)"""
     guard: ScanGuardConfig = field(default_factory=ScanGuardConfig)
     """the open-scan guard: the panorama check, held moves, the scan's edge, the open sky"""
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)

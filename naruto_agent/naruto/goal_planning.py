@@ -83,6 +83,16 @@ class GoalPlanner:
                                         scan_checks.inside_scan,
                                         device, self.timings)
         self._visit: tuple[np.ndarray, np.ndarray] | None = None  # (goal, targets it sees)
+        self._leave: tuple[np.ndarray, float] | None = None  # (spots, radius) of leave()
+
+    def leave(self, spots: np.ndarray, radius_m: float) -> None:
+        """The next plan goes to a goal farther than ``radius_m`` from every one of ``spots``
+        ((3,) or (n, 3): where the agent stayed) and moves at once, without turning towards
+        its target first (a stall watchdog cut a stay there short: a goal next to it, or a
+        turn in place, would only make the stay longer). Plans that find no such goal fail,
+        until the recovery they lead to moves away."""
+        spots = np.asarray(spots, np.float64).reshape(-1, 3).copy()
+        self._leave = (spots, float(radius_m))
 
     def plan(self, position: np.ndarray, frame: int = 0) -> Plan | None:
         """The next plan from ``position`` on the newest planner view.
@@ -110,7 +120,9 @@ class GoalPlanner:
             return Plan(climb, look_around_views(climb[-1], self.config), climb[-1].copy(),
                         {"recovery": "climb", "trusted": True})
         if self.monitor.needs_recovery():
+            self._leave = None  # a recovery moves away too
             return self._recover(position, record, frame)
+        leave = self._leave  # kept until a plan leaves (failed plans lead to a recovery)
         prefix = position[None]
         start = position
         clearance = self.agent_map.clearance_m
@@ -130,6 +142,14 @@ class GoalPlanner:
             prefix, start = escape, escape[-1]
         components = self.agent_map.components
         goal_mask = self.goal_mask(start)
+        if leave is not None:
+            points = sdf.grid_points()
+            away = np.ones(len(points), bool)
+            for spot in leave[0]:
+                away &= np.linalg.norm(points - spot, axis=1) > leave[1]
+            away = away.reshape(sdf.shape)
+            goal_mask = away if goal_mask is None else goal_mask & away
+            record["leaving"] = True
 
         clock = time.perf_counter()
         travel = (components.travel_distances(start)
@@ -166,6 +186,9 @@ class GoalPlanner:
                     self.monitor.plan_succeeded()
                     self.monitor.progress_made(position)
                     self._visit = (goal.copy(), search.goal_visible[rank])
+                    if leave is not None:
+                        record["move_at_once"] = True
+                        self._leave = None
                     return Plan(path, views, goal.copy(), record)
                 self.monitor.goal_failed(goal)
             self._plan_failed(position, record, f"no goal reachable ({result.reason})")

@@ -36,12 +36,15 @@ class MoveChecker:
 
     def is_free(self, start: np.ndarray, end: np.ndarray) -> bool:
         """Whether the move from ``start`` to ``end`` may be sent (always, with
-        ``check_moves_on_map`` off): it keeps the clearance on the newest planner view
-        (:meth:`keeps_clearance`) and passes the scan checks
+        ``check_moves_on_map`` off): it does not end in a blocked ball (a refused move's
+        target), keeps the clearance on the newest planner view (:meth:`keeps_clearance`)
+        and passes the scan checks
         (:meth:`~naruto_agent.naruto.scan_checks.NarutoScanChecks.check_move`)."""
         if not self.config.check_moves_on_map:
             return True
         self.agent_map.refresh()
+        if self.agent_map.blocked.holds(end):
+            return False
         if not self.keeps_clearance(start, end):
             return False
         return self.scan_checks.check_move(start, end)

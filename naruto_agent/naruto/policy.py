@@ -69,10 +69,11 @@ from naruto_agent.policies.layers import Layer
 from naruto_agent.policies.registry import register_policy
 from naruto_agent.policies.watchdog import StallEvent, StallWatchdogConfig
 
-#: The agent's stall watchdog: a look-around at a goal (up to 10 views at 10 degrees a step)
-#: takes up to about 40 steps and learns all along; a stay that learns nothing is still a
-#: stall after one window.
-STALL_WATCHDOG = StallWatchdogConfig(max_stay_steps=45)
+#: The agent's stall watchdog: the default settings, so that no stay lasts over 30 steps. A
+#: look-around that still learns (8 views alternately 20 degrees up and down take 25 steps,
+#: a goal's up to 10 views longer) is cut short after ``max_stay_steps`` for the next goal;
+#: a stay that learns nothing is a stall after one window.
+STALL_WATCHDOG = StallWatchdogConfig()
 
 #: The phases whose seconds ``NarutoPolicy.timings`` holds.
 PHASES = ("mapping", "planner_view", "goal_search", "rrt", "control")
@@ -229,12 +230,20 @@ class NarutoPolicy(Policy):
         self._integrate(observation)
 
     def recover_from_stall(self, event: StallEvent) -> str:
-        """Cut the plan in progress short and plan a recovery that moves (a wander to
-        reachable space away from where the agent has been, or a retreat along its
-        trajectory) at once."""
+        """Cut the plan in progress short and plan again at once: after a stay that kept
+        learning (``"lingering"``, a long look-around) the next goal of a normal plan past
+        the stay (the goal search weighs what the cut look-around left unseen); after any
+        other stall a recovery that moves (a wander to reachable space away from where the
+        agent has been, or a retreat along its trajectory)."""
         self.machine.interrupt()
-        self.monitor.request_recovery()
         self._stalled = True
+        if event.kind == "lingering":
+            # Past every place of the stay's window, by a step more than the stay radius.
+            radius = self.stall_watchdog.config.radius_m + self.context.max_translation_m
+            spots = event.position if event.window is None else event.window
+            self.goal_planner.leave(spots, radius)
+            return "look-around cut short: next goal away from the stay"
+        self.monitor.request_recovery()
         return "plan cut short: recovery that moves"
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:

@@ -52,7 +52,9 @@ class RecoveryConfig:
             (touching it, on the far side from the agent), the space behind the opening
             rather than 5 cm of it per refusal (0.5 m: half a 1 m window; 0: as a surface).
         look_around_views: headings of the turn in place.
-        look_around_pitch_deg: the look-around alternates looking this much up and down.
+        look_around_pitch_deg: the look-around alternates looking this much up and down (20:
+            three 20-degree steps from one view to the next, 25 steps for 8 views, so that
+            the look-around fits in the stall watchdog's ``max_stay_steps``; 25 took four).
         wander_max_m: the farthest a move to reachable space goes (straight-line distance).
         retreat_m: how far back along its own trajectory the agent retreats.
     """
@@ -66,7 +68,7 @@ class RecoveryConfig:
     blocked_radius_m: float = 0.05
     escape_blocked_radius_m: float = 0.5
     look_around_views: int = 8
-    look_around_pitch_deg: float = 25.0
+    look_around_pitch_deg: float = 20.0
     wander_max_m: float = 3.0
     retreat_m: float = 1.0
 
@@ -240,6 +242,15 @@ class BlockedSpace:
         self.points.append(np.asarray(point, np.float64).copy())
         self.radii.append(self.radius_m if radius_m is None else float(radius_m))
         self.guessed.append(bool(guessed))
+
+    def holds(self, point: np.ndarray) -> bool:
+        """Whether ``point`` lies within a blocked ball's radius (a refused move's target:
+        the SDF's voxels cannot say so when the agent's own voxel is blocked too)."""
+        point = np.asarray(point, np.float64)
+        return any(
+            float(np.linalg.norm(point - centre)) <= radius
+            for centre, radius in zip(self.points, self.radii, strict=True)
+        )
 
     def forget_guesses_near(self, position: np.ndarray, reach_m: float) -> int:
         """Drop the guessed balls that come within ``reach_m`` of ``position``; returns how

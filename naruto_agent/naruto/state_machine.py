@@ -127,6 +127,9 @@ class NarutoStateMachine:
         self.state = State.STAYING
         self.history: list[State] = []
         self.transitions: list[tuple[State, State]] = []
+        #: indices into ``transitions`` of those :meth:`interrupt` made (not the published
+        #: order's own).
+        self.interruptions: list[int] = []
         self.plan: Plan | None = None
         self.collisions = 0
         self._rotations: deque[np.ndarray] = deque()
@@ -139,6 +142,8 @@ class NarutoStateMachine:
         self._path.clear()
         self._rotations.clear()
         self._commanded = None
+        if self.state != State.STAYING:
+            self.interruptions.append(len(self.transitions))
         self._go(State.STAYING)
 
     def _go(self, state: State) -> None:

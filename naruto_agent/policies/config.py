@@ -87,7 +87,7 @@ class FrontierConfig:
             lets a move from the scan's margin through and, once ``max_held_moves`` were
             held at one spot, every move until the agent moves.
         stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
-            recover from them; off by default until the scene suite is re-run with it on.
+            recover from them.
     """
 
     voxel_size_m: float = 0.1
@@ -113,7 +113,7 @@ class FrontierConfig:
     support_below_m: float = 3.0
     support_reach_m: float = 0.3
     guard: ScanGuardConfig = field(default_factory=_frontier_guard)
-    stall_watchdog: bool = False
+    stall_watchdog: bool = True
 
     def __post_init__(self) -> None:
         check_integer("look_around_headings", self.look_around_headings, low=1)
@@ -131,6 +131,10 @@ class RandomConfig:
         max_run_steps: ... to this.
         max_climb: largest vertical component of a run's (unit) direction.
         max_pitch_deg: the camera's pitch is drawn uniformly within +-this per run.
+        sweep_yaw_deg: while walking, the camera swings this far to either side of the
+            run's heading (0: it looks straight ahead) ...
+        sweep_period_steps: ... once every this many steps (16 at 45 degrees: at most
+            18 degrees a step, inside the env's turn limit).
         height_margin_m: runs turn back vertically within this distance of the bounds'
             floor and ceiling.
         avoid_blocked_deg: a new direction after a block is at least this far from the
@@ -143,7 +147,7 @@ class RandomConfig:
             probes the edge at a second, wider radius, and holds (turns in place) for
             ``max_held_moves`` steps before it sends the clear part of the move.
         stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
-            recover from them; off by default until the scene suite is re-run with it on.
+            recover from them.
     """
 
     seed: int | None = None
@@ -151,12 +155,14 @@ class RandomConfig:
     max_run_steps: int = 40
     max_climb: float = 0.3
     max_pitch_deg: float = 30.0
+    sweep_yaw_deg: float = 45.0
+    sweep_period_steps: int = 16
     height_margin_m: float = 0.3
     avoid_blocked_deg: float = 60.0
     max_redraws: int = 8
     sweep_headings: int = 16
     guard: ScanGuardConfig = field(default_factory=_random_guard)
-    stall_watchdog: bool = False
+    stall_watchdog: bool = True
 
     def __post_init__(self) -> None:
         check_integer("min_run_steps", self.min_run_steps, low=1)
@@ -165,6 +171,8 @@ class RandomConfig:
                 f"need 1 <= min_run_steps <= max_run_steps, got {self.min_run_steps}, "
                 f"{self.max_run_steps}"
             )
+        check_number("sweep_yaw_deg", self.sweep_yaw_deg, low=0.0, low_open=False, high=90.0)
+        check_integer("sweep_period_steps", self.sweep_period_steps, low=2)
 
 
 @dataclass

@@ -1,13 +1,13 @@
 """Random exploration that respects collisions: a seeded random walk in straight runs.
 
 The agent picks a random direction (uniform heading, a small random climb), walks along it
-with the camera looking where it goes (a random pitch per run), and picks a new random
-direction when a move is blocked (``info["collided"]``: a surface, the bounds, or a move into
-the open) or when the run's random length is used up. A climb the env refuses as an escape
-(the top of a scan without a ceiling) sets a flight ceiling it turns back under, as the
-bounds' top does. It never keeps pushing against a wall, which is what
-``action_space.sample()`` would do. All randomness comes from its own seeded generator, so
-one seed gives one trajectory.
+with the camera looking where it goes (a random pitch per run, swinging from side to side by
+``sweep_yaw_deg``), and picks a new random direction when a move is blocked
+(``info["collided"]``: a surface, the bounds, or a move into the open) or when the run's
+random length is used up. A climb the env refuses as an escape (the top of a scan without a
+ceiling) sets a flight ceiling it turns back under, as the bounds' top does. It never keeps
+pushing against a wall, which is what ``action_space.sample()`` would do. All randomness
+comes from its own seeded generator, so one seed gives one trajectory.
 
 Where the observation has the depth panorama, the shared open-scan guard
 (:class:`~naruto_agent.guards.ScanGuard`) reads each move's way from it first, as a robot
@@ -76,6 +76,7 @@ class RandomPolicy(Policy):
         self.direction = np.array([1.0, 0.0, 0.0])
         self.pitch = 0.0
         self.steps_left = 0
+        self._sweep_step = 0
         self.turns_after_block = 0
         self.turns_before_block = 0
         self.refused = RefusedMoves()
@@ -98,6 +99,7 @@ class RandomPolicy(Policy):
             self.rng = np.random.default_rng(seed)
         self.turns_after_block = 0
         self.turns_before_block = 0
+        self._sweep_step = 0
         self.guard.reset()
         self.refused.reset()
         self._new_run(np.asarray(observation["pose"], np.float64), blocked=None)
@@ -176,9 +178,23 @@ class RandomPolicy(Policy):
             target = self._checked_target(pose, panorama, target)
         heading = np.array([self.direction[0], self.direction[1], 0.0])
         heading /= max(np.linalg.norm(heading), 1e-9)
+        heading = self._swept(heading)
         look = heading * np.cos(self.pitch) + np.array([0.0, 0.0, np.sin(self.pitch)])
         rotation = look_at_rotation(target, target + look)
         return clip_pose_action(pose_action(make_pose(rotation, target)), self.context.action_space)
+
+    def _swept(self, heading: np.ndarray) -> np.ndarray:
+        """The horizontal look direction: ``heading`` turned by the camera's sweep, which
+        swings ``sweep_yaw_deg`` to either side over ``sweep_period_steps`` steps of a run
+        (a walker that looks only ahead sees nothing new crossing a seen room)."""
+        amplitude = np.deg2rad(self.config.sweep_yaw_deg)
+        if amplitude == 0.0:
+            return heading
+        self._sweep_step += 1
+        yaw = amplitude * np.sin(2.0 * np.pi * self._sweep_step / self.config.sweep_period_steps)
+        cos, sin = np.cos(yaw), np.sin(yaw)
+        return np.array([cos * heading[0] - sin * heading[1], sin * heading[0] + cos * heading[1],
+                         0.0])
 
     def _checked_target(self, pose: np.ndarray, panorama: np.ndarray, target: np.ndarray
                         ) -> np.ndarray:

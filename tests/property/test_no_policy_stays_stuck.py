@@ -17,8 +17,8 @@ from hypothesis import Phase, example, given, settings
 from hypothesis import strategies as st
 
 import naruto_gym  # noqa: F401
-from naruto_agent.naruto.policy import STALL_WATCHDOG
 from naruto_agent.policies import EnvContext, make_policy
+from naruto_agent.policies.watchdog import longest_stay
 from tests.property.open_scans import FLOORS, real_scan_like, scannet_like_scan
 
 POLICIES = ["naruto", "frontier", "random", "passive"]
@@ -26,10 +26,9 @@ STEPS = 120
 #: Least path in the last quarter (metres): more than a step (turning on the spot to look
 #: around is part of exploring, circling in place is not).
 MIN_LAST_QUARTER_PATH_M = 0.15
-#: The longest a policy may stay within ``STAY_RADIUS_M`` while coverage is below
-#: ``COVERED``; NARUTO's look-around at a goal (up to 10 views, 10 degrees a step) is longer,
-#: so its bound is its watchdog's ``max_stay_steps`` and the steps to walk off.
-MAX_STAY_STEPS = {"naruto": STALL_WATCHDOG.max_stay_steps + 10}
+#: The longest any policy may stay within ``STAY_RADIUS_M`` while coverage is below
+#: ``COVERED`` (NARUTO's look-arounds included: its watchdog cuts one that lasts).
+MAX_STAY_STEPS = 30
 STAY_RADIUS_M = 0.5
 COVERED = 0.9
 
@@ -38,7 +37,7 @@ def _episode(scene, name: str, seed: int, start_z: float | None = None, steps: i
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Path length, coverage and position after every step of one episode (started at height
     ``start_z`` when given, above the env's random start)."""
-    policy = make_policy(name, stall_watchdog=True)
+    policy = make_policy(name)
     env = gym.make("NarutoRecon-v0", scene=scene, image_scale=0.05, coverage_samples=1000,
                    panorama_shape=(32, 64), action_mode=policy.preferred_action_mode,
                    max_episode_steps=steps)
@@ -59,21 +58,6 @@ def _episode(scene, name: str, seed: int, start_z: float | None = None, steps: i
         positions.append(observation["pose"][:3, 3].copy())
     env.close()
     return np.array(path), np.array(coverage), np.array(positions)
-
-
-def longest_stay(positions: np.ndarray, coverage: np.ndarray,
-                 radius_m: float = STAY_RADIUS_M) -> int:
-    """The most steps in a row the agent stayed within ``radius_m`` of where it ended them,
-    counted while coverage was below ``COVERED``."""
-    longest, start = 0, 0
-    for end in range(len(positions)):
-        if coverage[end] >= COVERED:
-            start = end
-            continue
-        while np.linalg.norm(positions[start:end + 1] - positions[end], axis=1).max() > radius_m:
-            start += 1
-        longest = max(longest, end - start)
-    return longest
 
 
 def _keeps_moving(path: np.ndarray, coverage: np.ndarray) -> bool:
@@ -142,8 +126,8 @@ def test_every_policy_keeps_moving_on_real_scan_shapes(
     failures = {}
     for name in POLICIES:
         path, coverage, positions = _episode(scene, name, seed, start_z)
-        stay = longest_stay(positions, coverage)
-        if not _keeps_moving(path, coverage) or stay > MAX_STAY_STEPS.get(name, 30):
+        stay = longest_stay(positions, coverage, STAY_RADIUS_M, COVERED)
+        if not _keeps_moving(path, coverage) or stay > MAX_STAY_STEPS:
             failures[name] = (round(float(path[-1]), 2), round(float(coverage[-1]), 3), stay)
     assert not failures, f"on {scene.name} ({width:.2f} x {depth:.2f} m): {failures}"
 
@@ -154,7 +138,8 @@ def test_the_wall_follower_does_not_spin_in_a_small_low_walled_room():
     198 of 200 steps; its stall watchdog sends it off towards the most open heading."""
     scene = real_scan_like(0, (2.0, 2.4), wall_top_m=1.0, clutter=2)
     path, coverage, positions = _episode(scene, "passive", 0, start_z=0.9)
-    assert longest_stay(positions, coverage) <= 30 and path[-1] > 5.0
+    assert longest_stay(positions, coverage, STAY_RADIUS_M, COVERED) <= MAX_STAY_STEPS
+    assert path[-1] > 5.0
 
 
 @pytest.mark.slow

@@ -137,3 +137,23 @@ def test_shortened_paths_keep_nodes_a_step_apart() -> None:
     assert np.sum(np.linalg.norm(np.diff(short, axis=0), axis=1)) < 0.45
     assert np.all(np.linalg.norm(np.diff(short, axis=0), axis=1) <= 0.1 + 1e-9)
     assert shorten_path(sdf, zigzag, NarutoConfig(shortcut_paths=False)) is zigzag
+
+
+def test_a_plan_asked_to_leave_a_spot_goes_past_it_and_moves_at_once() -> None:
+    """After a stall watchdog cut a look-around short: a goal farther than the radius from
+    the spot, no turn first; the request holds while plans fail and ends with the plan."""
+    sdf, uncertainty = room()
+    parts = make_parts(sdf=sdf, uncertainty=uncertainty,
+                       config=NarutoConfig(initial_look_around=False, **ANYWHERE))
+    start = np.array([2.0, 1.5, 1.5])
+    near = parts.planner.plan(start, frame=1)
+    parts.planner.leave(start, 2.5)  # the whole room lies within 2.5 m of the start
+    plan = parts.planner.plan(start, frame=2)
+    assert np.linalg.norm(near.goal - start) < 2.5
+    assert plan is None and parts.monitor.failed_plans == 1
+    parts.planner.leave(start, 0.6)
+    plan = parts.planner.plan(start, frame=3)
+    assert np.linalg.norm(plan.goal - start) > 0.6
+    assert plan.info["leaving"] and plan.info["move_at_once"]
+    again = parts.planner.plan(start, frame=4)
+    assert "leaving" not in again.info and "move_at_once" not in again.info

@@ -112,6 +112,16 @@ def test_blocked_points_read_as_obstacles() -> None:
     assert np.all(sdf.values == 0.5)  # the input is left alone
 
 
+def test_blocked_space_holds_the_points_within_a_ball() -> None:
+    blocked = BlockedSpace(radius_m=0.05)
+    assert not blocked.holds(np.zeros(3))
+    blocked.add(np.array([1.0, 1.0, 1.0]))
+    blocked.add(np.array([2.0, 1.0, 1.0]), 0.3)
+    assert blocked.holds(np.array([1.04, 1.0, 1.0]))
+    assert not blocked.holds(np.array([1.06, 1.0, 1.0]))
+    assert blocked.holds(np.array([2.0, 1.29, 1.0]))
+
+
 def test_blocked_space_forgets_only_guesses_near_a_point() -> None:
     """What the agent blocked on its own readings can be forgotten near a point; what the
     env refused, and guesses farther away, stay."""

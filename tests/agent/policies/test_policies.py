@@ -20,6 +20,7 @@ from naruto_agent.policies import (
     pose_action,
     subsample_poses,
 )
+from naruto_gym.geometry.transforms import pose_from_position_quaternion
 from tests.agent.synthetic_panoramas import floor_panorama
 
 CHEAP = {"image_scale": 0.1, "panorama_shape": (16, 32), "coverage_samples": 3000}
@@ -129,6 +130,36 @@ def test_random_picks_a_new_direction_away_from_a_block():
     policy.act(observation, {"collided": True})
     assert policy.turns_after_block == 1
     assert float(policy.direction @ first) < np.cos(np.deg2rad(60.0)) + 1e-9
+
+
+def test_random_walk_sweeps_its_camera_from_side_to_side_within_the_turn_limit():
+    """The camera swings up to ``sweep_yaw_deg`` either side of the run's heading (a look
+    only ahead sees nothing new crossing a seen room); 0 looks straight ahead."""
+
+    def yaw_offsets(**settings):
+        policy = RandomPolicy(seed=5, min_run_steps=60, max_run_steps=60, stall_watchdog=False,
+                              **settings)  # the pose is held: no stall recovery
+        policy.bind(_context())
+        pose = np.eye(4)
+        pose[:3, 3] = (2.5, 2.5, 1.5)
+        observation = {"pose": pose.astype(np.float32)}
+        policy.reset(observation, {}, seed=5)
+        heading = np.arctan2(policy.direction[1], policy.direction[0])
+        offsets = []
+        for _ in range(32):
+            action = policy.act(observation, {"collided": False})
+            looks = pose_from_position_quaternion(action[:3], action[3:])[:3, 2]  # viewing axis
+            yaw = np.arctan2(looks[1], looks[0]) - heading
+            offsets.append(np.degrees(np.arctan2(np.sin(yaw), np.cos(yaw))))
+        return np.array(offsets)
+
+    swept = yaw_offsets()
+    assert swept.max() > 40.0 and swept.min() < -40.0
+    assert np.abs(swept).max() <= 45.0 + 1e-3
+    assert np.abs(np.diff(swept)).max() <= 20.0  # inside the env's turn limit
+    assert np.abs(yaw_offsets(sweep_yaw_deg=0.0)).max() < 1e-3
+    with pytest.raises(ValueError, match="sweep_period_steps"):
+        RandomPolicy(sweep_period_steps=1)
 
 
 def test_random_walk_does_not_push_against_walls_and_is_seeded():

@@ -16,6 +16,7 @@ from naruto_agent.policies import (
     make_policy,
     pose_action,
 )
+from naruto_agent.policies.watchdog import longest_stay
 
 
 def _feed(watchdog: StallWatchdog, positions, refused=False, progress=None):
@@ -55,6 +56,47 @@ def test_oscillating_between_two_poses_is_a_stall():
     assert kinds and kinds[0] == "oscillation"
 
 
+def test_walking_about_within_the_radius_is_a_stall_only_once_the_stay_lasts():
+    """A random walk bouncing between the walls of a corner: 0.1 m steps back and forth along
+    0.4 m stay within 0.5 m but walk 2 m a window; the walk's own rules get
+    ``max_stay_steps`` to lead it away, then it is an oscillation."""
+    config = StallWatchdogConfig(window_steps=20, max_stay_steps=24)
+    watchdog = StallWatchdog(config)
+    bounce = [np.array([0.1 * k, 0.0, 1.0]) for k in (0, 1, 2, 3, 4, 3, 2, 1)]
+    events = _feed(watchdog, bounce * 4)
+    fired = [(i, event.kind) for i, event in enumerate(events) if event is not None]
+    assert fired == [(23, "oscillation")]
+
+
+def test_a_stay_goes_on_across_a_recovery_that_did_not_leave():
+    """A look-around that keeps learning is cut at ``max_stay_steps``; when the agent is
+    still there once the window has filled again, the stay counts from where it began, so
+    the next trigger comes at once (not ``max_stay_steps`` later)."""
+    watchdog = StallWatchdog(StallWatchdogConfig(window_steps=20, max_stay_steps=24))
+    events = _feed(watchdog, [np.zeros(3)] * 60, progress=lambda i: float(2**i))
+    fired = [(i, event.kind) for i, event in enumerate(events) if event is not None]
+    assert fired == [(23, "lingering"), (43, "lingering")]
+
+
+def test_creeping_less_than_a_walk_is_still_a_spin():
+    """Steps of 2 cm (1 m would take 50) are standing, not walking."""
+    watchdog = StallWatchdog(StallWatchdogConfig(window_steps=20, min_walk_m=1.0))
+    creep = [np.array([0.02 * (k % 5), 0.0, 1.0]) for k in range(20)]
+    events = _feed(watchdog, creep)
+    assert events[-1] is not None and events[-1].kind == "spin"
+
+
+def test_longest_stay_counts_steps_within_the_radius_below_the_coverage_bound():
+    """0.3 m steps, a stand of 30 steps at x = 3 m (steps 10-39), 0.3 m steps again: the
+    step before the stand lies within 0.5 m of it, the steps after leave at once."""
+    x = [0.3 * i for i in range(10)] + [3.0] * 30 + [3.0 + 0.3 * i for i in range(1, 11)]
+    positions = np.stack([x, np.zeros(len(x)), np.ones(len(x))], axis=1)
+    assert longest_stay(positions, np.full(len(x), 0.5)) == 30
+    assert longest_stay(positions, np.full(len(x), 0.95)) == 0  # covered: no stall
+    with pytest.raises(ValueError, match="one coverage per position"):
+        longest_stay(positions, np.full(10, 0.5))
+
+
 def test_a_look_around_that_learns_is_no_stall_until_it_lingers():
     config = StallWatchdogConfig(window_steps=20, max_stay_steps=24)
     watchdog = StallWatchdog(config)
@@ -71,6 +113,7 @@ def test_a_look_around_that_learns_is_no_stall_until_it_lingers():
         dict(refused_share=1.5),
         dict(max_stay_steps=5),
         dict(min_progress_gain=-1.0),
+        dict(min_walk_m=0.0),
     ],
 )
 def test_bad_settings_are_refused_with_the_field_named(bad):
@@ -168,13 +211,38 @@ def test_every_shipped_policy_recovers_from_a_stall_and_moves_again(name):
     env.close()
 
 
-@pytest.mark.parametrize(
-    ("name", "default"),
-    [("passive", True), ("random", False), ("frontier", False), ("naruto", False)],
-)
-def test_the_watchdog_is_a_setting_of_every_shipped_policy(name, default):
-    """On by default for the wall follower (its own rules miss spinning in place), opt-in for
-    the others; ``stall_watchdog=`` turns it on or off either way."""
-    assert (make_policy(name).stall_watchdog is not None) is default
-    flipped = make_policy(name, stall_watchdog=not default)
-    assert (flipped.stall_watchdog is not None) is (not default)
+@pytest.mark.parametrize("name", ["passive", "random", "frontier", "naruto"])
+def test_the_watchdog_is_on_in_every_shipped_policy(name):
+    """On by default, with the default settings (no stay over 30 steps); the setting
+    ``stall_watchdog=False`` turns it off."""
+    watchdog = make_policy(name).stall_watchdog
+    assert watchdog is not None and watchdog.config == StallWatchdogConfig()
+    assert make_policy(name, stall_watchdog=False).stall_watchdog is None
+
+
+def test_naruto_cuts_a_long_look_around_short_for_a_goal_away_from_it():
+    """NARUTO's first look-around (8 views, alternately up and down) learns all along but
+    lasts over 30 steps: the watchdog cuts it at ``max_stay_steps`` as lingering, and the
+    next plan goes, without a turn first, to a goal past the stay radius."""
+    policy = make_policy("naruto", mapper_kind="tsdf")
+    env = gym.make(
+        "NarutoRecon-v0",
+        scene="replica_like_room",
+        image_scale=0.05,
+        coverage_samples=500,
+        action_mode=policy.preferred_action_mode,
+    )
+    policy.bind(EnvContext.from_env(env, max_episode_steps=200))
+    observation, info = env.reset(seed=3)
+    policy.reset(observation, info, seed=3)
+    start = observation["pose"][:3, 3].copy()
+    positions = []
+    for _ in range(StallWatchdogConfig().max_stay_steps + 8):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+        positions.append(observation["pose"][:3, 3].copy())
+    event = policy.stall_events[0]
+    assert (event.kind, event.step) == ("lingering", StallWatchdogConfig().max_stay_steps)
+    assert "away from the stay" in event.recovery
+    assert any(plan.get("leaving") and plan.get("move_at_once") for plan in policy.plans)
+    assert np.linalg.norm(positions[-1] - start) > 0.5
+    env.close()

@@ -1,0 +1,245 @@
+"""Stall check on open scans: does any shipped policy stay put while there is still to see?
+
+Runs every policy (each with its stall watchdog, as shipped) on the open variants of the
+catalogue (``NAME:no_ceiling+holes``: no ceiling, holes in the floor and walls) and of a few
+scenes of the suite's test split (``procedural:small:SEED:no_ceiling+holes``), and reports per
+episode:
+
+* the longest stay: the most steps in a row within 0.5 m of where the agent ended them while
+  coverage was below 90 % (:func:`naruto_agent.policies.watchdog.longest_stay`; the issue's
+  bound is 30 steps);
+* final coverage, path length, the watchdog's triggers by kind and its stalled steps.
+
+and per scene whether NARUTO walked at least frontier's path or covered more.
+
+It is resumable: every finished episode is written at once into ``stall_check.json`` under
+``--output-dir`` (with its table, ``stall_check.md``), and a rerun skips the episodes found
+there. Example::
+
+    nice -n 10 python benchmarks/stall_check.py
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from naruto_agent.benchmark.records import write_json_atomic
+from naruto_agent.cli_args import dataclass_parser
+
+RESULT_FILE = "stall_check.json"
+#: The episodes' table, written beside the result file (the open-scans page includes it).
+TABLE_FILE = "stall_check.md"
+#: The longest stay the issue allows (steps within ``STAY_RADIUS_M`` below ``COVERED``).
+MAX_STAY_STEPS = 30
+STAY_RADIUS_M = 0.5
+COVERED = 0.9
+
+
+@dataclass
+class Args:
+    """Arguments of the stall check (each field is a ``--flag``)."""
+
+    scenes: list[str] = field(
+        default_factory=lambda: [
+            "replica_like_room:no_ceiling+holes",
+            "two_rooms:no_ceiling+holes",
+            "procedural:small:1000000:no_ceiling+holes",
+            "procedural:small:1000001:no_ceiling+holes",
+            "procedural:small:1000002:no_ceiling+holes",
+            "apartment:no_ceiling+holes",
+        ]
+    )
+    """open scenes (catalogue and suite test scenes with openings), in the order run"""
+    policies: list[str] = field(default_factory=lambda: ["passive", "random", "frontier", "naruto"])
+    """policies to run, each with its default settings (watchdog included)"""
+    seeds: list[int] = field(default_factory=lambda: [0])
+    """episode seeds"""
+    max_episode_steps: int = 300
+    """length of every episode"""
+    image_scale: float = 0.125
+    """camera resolution factor (0.125: 85 x 150, as the behaviour fingerprint)"""
+    output_dir: str = "benchmarks/results/open_scans"
+    """folder of stall_check.json"""
+
+
+def run_episode(scene: str, policy_name: str, seed: int, args: Args) -> dict[str, Any]:
+    """One episode; what the check reports of it."""
+    import gymnasium as gym
+
+    import naruto_gym  # noqa: F401
+    from naruto_agent.episode_loop import StepRecords, run_episode_loop
+    from naruto_agent.policies import make_policy
+    from naruto_agent.policies.watchdog import longest_stay
+
+    policy = make_policy(policy_name)
+    env = gym.make(
+        "NarutoRecon-v0",
+        scene=scene,
+        action_mode=policy.preferred_action_mode,
+        image_scale=args.image_scale,
+        max_episode_steps=args.max_episode_steps,
+    )
+    records = StepRecords()
+    clock = time.perf_counter()
+    run_episode_loop(env, policy, args.max_episode_steps, seed, [records])
+    seconds = time.perf_counter() - clock
+    positions = np.asarray(records.positions[1:])
+    coverage = np.asarray(records.coverage[1:])
+    steps = np.linalg.norm(np.diff(np.asarray(records.positions), axis=0), axis=1)
+    kinds: dict[str, int] = {}
+    for event in policy.stall_events:
+        kinds[event.kind] = kinds.get(event.kind, 0) + 1
+    result = {
+        "scene": scene,
+        "policy": policy_name,
+        "seed": seed,
+        "steps": int(len(coverage)),
+        "image_scale": args.image_scale,
+        "longest_stay_steps": longest_stay(positions, coverage, STAY_RADIUS_M, COVERED),
+        "coverage": round(float(coverage[-1]), 4),
+        "path_m": round(float(steps.sum()), 3),
+        "stall_events": kinds,
+        "stalled_steps": int(policy.stalled_steps),
+        "refusals": dict(records.collisions),
+        "seconds": round(seconds, 1),
+    }
+    env.close()
+    policy.close()
+    return result
+
+
+def summary(episodes: list[dict[str, Any]]) -> dict[str, Any]:
+    """The issue's two tests over the episodes run: the stays over ``MAX_STAY_STEPS``, and
+    per scene and seed NARUTO's path and coverage against frontier's."""
+    long_stays = [
+        f"{e['policy']}@{e['scene']}#{e['seed']}: {e['longest_stay_steps']}"
+        for e in episodes
+        if e["longest_stay_steps"] > MAX_STAY_STEPS
+    ]
+    by_key = {(e["scene"], e["seed"], e["policy"]): e for e in episodes}
+    versus = []
+    for (scene, seed, policy), naruto in sorted(by_key.items()):
+        frontier = by_key.get((scene, seed, "frontier"))
+        if policy != "naruto" or frontier is None:
+            continue
+        versus.append(
+            {
+                "scene": scene,
+                "seed": seed,
+                "naruto_path_m": naruto["path_m"],
+                "frontier_path_m": frontier["path_m"],
+                "naruto_coverage": naruto["coverage"],
+                "frontier_coverage": frontier["coverage"],
+                "holds": naruto["path_m"] >= frontier["path_m"]
+                or naruto["coverage"] > frontier["coverage"],
+            }
+        )
+    return {"stays_over_limit": long_stays, "naruto_vs_frontier": versus}
+
+
+def table(episodes: list[dict[str, Any]]) -> str:
+    """The episodes as a Markdown table, by scene then policy, and one line per scene on
+    NARUTO against frontier."""
+    lines = [
+        "| Scene | Policy | Longest stay (steps) | Coverage (%) | Path (m) | Watchdog triggers |",
+        "|---|---|---|---|---|---|",
+    ]
+    for e in sorted(episodes, key=lambda e: (e["scene"], e["seed"], e["policy"])):
+        kinds = e["stall_events"]
+        triggers = ", ".join(f"{kind} {count}" for kind, count in sorted(kinds.items()))
+        lines.append(
+            f"| {e['scene']} | {e['policy']} | {e['longest_stay_steps']} | "
+            f"{100 * e['coverage']:.1f} | {e['path_m']:.1f} | {triggers or 'none'} |"
+        )
+    lines.append("")
+    for row in summary(episodes)["naruto_vs_frontier"]:
+        verdict = "holds" if row["holds"] else "does not hold"
+        lines.append(
+            f"* `{row['scene']}`: NARUTO {row['naruto_path_m']:.1f} m, "
+            f"{100 * row['naruto_coverage']:.1f} % against frontier's "
+            f"{row['frontier_path_m']:.1f} m, {100 * row['frontier_coverage']:.1f} % "
+            f"(a longer path or more coverage: {verdict})"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def machine() -> dict[str, Any]:
+    """Where the check ran (timings are of a shared, loaded machine unless said otherwise)."""
+    return {
+        "host": platform.node(),
+        "processor": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+        "python": platform.python_version(),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = Args(
+        **vars(dataclass_parser(Args, description=__doc__.split("\n\n")[0]).parse_args(argv))
+    )
+    path = Path(args.output_dir) / RESULT_FILE
+    have = {_key(e) for e in _read(path)}
+    for scene in args.scenes:
+        for seed in args.seeds:
+            for policy in args.policies:
+                if (scene, policy, seed, args.max_episode_steps, args.image_scale) in have:
+                    continue
+                print(f"{policy} on {scene}, seed {seed}", flush=True)
+                episode = run_episode(scene, policy, seed, args)
+                episode["load_average"] = [round(v, 2) for v in os.getloadavg()]
+                print(
+                    f"  stay {episode['longest_stay_steps']}, coverage "
+                    f"{100 * episode['coverage']:.1f} %, path {episode['path_m']:.1f} m, "
+                    f"{episode['seconds']:.0f} s",
+                    flush=True,
+                )
+                _write(path, args, [episode])
+    result = _write(path, args, [])
+    print(json.dumps(result, indent=1))
+    return 1 if result["stays_over_limit"] else 0
+
+
+def _key(episode: dict[str, Any]) -> tuple:
+    return (
+        episode["scene"],
+        episode["policy"],
+        episode["seed"],
+        episode["steps"],
+        episode["image_scale"],
+    )
+
+
+def _read(path: Path) -> list[dict[str, Any]]:
+    return json.loads(path.read_text())["episodes"] if path.is_file() else []
+
+
+def _write(path: Path, args: Args, new: list[dict[str, Any]]) -> dict[str, Any]:
+    """Add ``new`` to the episodes in the file as it is now (a second run of the script, say
+    for another policy, may have added some meanwhile) and write it; returns the summary."""
+    episodes = {_key(e): e for e in _read(path)}
+    episodes.update({_key(e): e for e in new})
+    result = summary(list(episodes.values()))
+    write_json_atomic(
+        path,
+        {
+            "args": asdict(args),
+            "machine": machine(),
+            "episodes": list(episodes.values()),
+            "summary": result,
+        },
+    )
+    (path.parent / TABLE_FILE).write_text(table(list(episodes.values())))
+    return result
+
+
+if __name__ == "__main__":
+    sys.exit(main())
