@@ -54,7 +54,8 @@ class RecoveryConfig:
         look_around_views: headings of the turn in place.
         look_around_pitch_deg: the look-around alternates looking this much up and down (20:
             three 20-degree steps from one view to the next, 25 steps for 8 views, so that
-            the look-around fits in the stall watchdog's ``max_stay_steps``; 25 took four).
+            the look-around fits in the stall watchdog's ``max_stay_steps``; 25 degrees
+            needs four steps a view).
         wander_max_m: the farthest a move to reachable space goes (straight-line distance).
         retreat_m: how far back along its own trajectory the agent retreats.
     """

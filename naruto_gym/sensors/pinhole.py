@@ -188,18 +188,7 @@ class RgbdRenderer:
     def rasterizer(self) -> PinholeRasterizer:
         """The pinhole rasterizer of the ray caster's triangles (built on first use)."""
         if self._rasterizer is None:
-            camera = self.camera
-            self._rasterizer = PinholeRasterizer(
-                self.raycaster.vertices,
-                self.raycaster.faces,
-                camera.width,
-                camera.height,
-                camera.fx,
-                camera.fy,
-                camera.cx,
-                camera.cy,
-                threads=self.threads,
-            )
+            self._rasterizer = self._new_rasterizer(self.threads)
         return self._rasterizer
 
     def render_depth(self, camera_to_world: np.ndarray) -> np.ndarray:
@@ -297,24 +286,26 @@ class RgbdRenderer:
         if self.frame_backend == "raster":
             self._frame_rasterizers(count)
 
+    def _new_rasterizer(self, threads: int) -> PinholeRasterizer:
+        """A rasterizer of the ray caster's triangles for this renderer's camera."""
+        camera = self.camera
+        return PinholeRasterizer(
+            self.raycaster.vertices,
+            self.raycaster.faces,
+            camera.width,
+            camera.height,
+            camera.fx,
+            camera.fy,
+            camera.cx,
+            camera.cy,
+            threads=threads,
+        )
+
     def _frame_rasterizers(self, count: int) -> list[PinholeRasterizer]:
         """``count`` single-threaded rasterizers of this renderer's mesh (scratch space is per
         rasterizer, so each thread needs its own), built on first use."""
         while len(self._workers) < count:
-            camera = self.camera
-            self._workers.append(
-                PinholeRasterizer(
-                    self.raycaster.vertices,
-                    self.raycaster.faces,
-                    camera.width,
-                    camera.height,
-                    camera.fx,
-                    camera.fy,
-                    camera.cx,
-                    camera.cy,
-                    threads=1,
-                )
-            )
+            self._workers.append(self._new_rasterizer(1))
         return self._workers[:count]
 
     def shade(self, triangle_ids: np.ndarray, barycentric_uv: np.ndarray) -> np.ndarray:
