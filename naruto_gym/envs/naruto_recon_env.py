@@ -426,6 +426,12 @@ class NarutoReconEnv(gym.Env):
         return compose_frame(top_down, self._rgb, self._depth, self.settings.max_depth_m)
 
     # -- internals -----------------------------------------------------------------------
+    def close(self) -> None:
+        """Stop the reference reconstruction's background fusion (``reconstruct=True``)."""
+        if self.reconstruction is not None:
+            self.reconstruction.close()
+        super().close()
+
     def _validated_action(self, action: Any) -> Any:
         action_mode = self.settings.action_mode
         if action_mode == "discrete":

@@ -11,12 +11,14 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import trimesh
 
+from naruto_gym.evaluation.background_fusion import BackgroundFusion
 from naruto_gym.evaluation.culling import (
     DEFAULT_CULL_DEPTH_SCALE,
     DEFAULT_CULL_EVERY,
@@ -35,6 +37,7 @@ from naruto_gym.evaluation.metrics import (
 from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper
 from naruto_gym.scenes.mesh_scene import Scene
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
+from naruto_gym.utils.threads import default_thread_count
 
 MAD_NEEDS_SDF_NOTE = "no mad_cm: it needs the map's signed distance, pass sdf=..."
 NO_CULLING_NOTE = "not culled: no poses given (pass the trajectory's poses to cull)"
@@ -164,6 +167,11 @@ class EpisodeReconstruction:
         truncation_m: TSDF truncation (8 cm).
         max_depth_m: fusion depth range (5 m).
         device: Open3D device for fusion, ``"auto"`` by default.
+        fuse_in_background: fuse on a background thread
+            (:mod:`~naruto_gym.evaluation.background_fusion`), so that the episode's steps
+            do not wait for it; ``None`` (default): where the process may use more than one
+            thread (:func:`~naruto_gym.utils.threads.default_thread_count`). Frames are
+            checked at once and fused in order, so the scores are the same either way.
 
     Usage (what an env does)::
 
@@ -179,31 +187,74 @@ class EpisodeReconstruction:
         truncation_m: float = 0.08,
         max_depth_m: float = 5.0,
         device: str = "auto",
+        fuse_in_background: bool | None = None,
     ) -> None:
         self.camera = camera
-        self.mapper = TsdfFusionMapper(
+        self._mapper = TsdfFusionMapper(
             voxel_size_m=voxel_size_m,
             truncation_m=truncation_m,
             max_depth_m=max_depth_m,
             device=device,
         )
+        if fuse_in_background is None:
+            fuse_in_background = default_thread_count() > 1
+        self._background = BackgroundFusion(self._mapper.fuse) if fuse_in_background else None
+        self._fusion_seconds = 0.0
         self._poses: list[np.ndarray] = []
         # Checkpoints re-score a growing trajectory: culling reuses the earlier verdicts.
         self._cull_cache = CullingCache()
 
+    @property
+    def fuses_in_background(self) -> bool:
+        """Whether frames are fused on a background thread."""
+        return self._background is not None
+
+    @property
+    def mapper(self) -> TsdfFusionMapper:
+        """The reference mapper, with every frame added so far fused."""
+        if self._background is not None:
+            self._background.wait()
+        return self._mapper
+
+    @property
+    def fusion_seconds(self) -> float:
+        """Seconds spent fusing frames so far, in whichever thread fused them."""
+        background = self._background.busy_seconds if self._background is not None else 0.0
+        return self._fusion_seconds + background
+
     def reset(self) -> None:
         """Start a new episode."""
-        self.mapper.reset()
+        if self._background is not None:
+            try:
+                self._background.wait()
+            except Exception:  # noqa: BLE001 - the failed episode's map is being discarded
+                pass
+        self._mapper.reset()
         self._poses = []
         self._cull_cache.clear()
+
+    def close(self) -> None:
+        """Fuse what is queued and stop the background thread (the object stays usable)."""
+        if self._background is not None:
+            self._background.close()
 
     def add_frame(
         self, rgb: np.ndarray | None, depth: np.ndarray, camera_to_world: np.ndarray
     ) -> None:
-        """Fuse one frame and remember its pose (for culling and trajectory length)."""
-        pose = np.array(camera_to_world, dtype=np.float64)
-        self.mapper.integrate(rgb, depth, pose, self.camera)
-        self._poses.append(pose)
+        """Fuse one frame and remember its pose (for culling and trajectory length).
+
+        The frame is checked (and copied) at once, so a bad frame raises here and the
+        caller may reuse its buffers; with ``fuse_in_background`` a failure of the fusion
+        itself is raised at the next call.
+        """
+        frame = self._mapper.prepare_frame(rgb, depth, camera_to_world, self.camera)
+        if self._background is not None:
+            self._background.submit(frame)
+        else:
+            start = time.perf_counter()
+            self._mapper.fuse(frame)
+            self._fusion_seconds += time.perf_counter() - start
+        self._poses.append(np.array(camera_to_world, dtype=np.float64))
 
     @property
     def poses(self) -> np.ndarray:

@@ -14,6 +14,7 @@ voxel size, so ``truncation_m / voxel_size_m`` need not be an integer.
 from __future__ import annotations
 
 import os
+from typing import NamedTuple
 
 import numpy as np
 import open3d as o3d
@@ -22,6 +23,16 @@ import trimesh
 
 from naruto_gym.evaluation.tsdf_kernels import behind_surface_bounds
 from naruto_gym.sensors.pinhole import PinholeCamera
+
+
+class PreparedFrame(NamedTuple):
+    """A checked frame in the form Open3D fuses: float colour in [0, 1], depth with invalid
+    pixels at 0, the camera-to-world pose and the 3x3 intrinsic matrix."""
+
+    colour: np.ndarray
+    depth: np.ndarray
+    camera_to_world: np.ndarray
+    intrinsic: np.ndarray
 
 
 def resolve_open3d_device(device: str = "auto") -> o3c.Device:
@@ -138,6 +149,22 @@ class TsdfFusionMapper:
             camera_to_world: 4x4 pose, OpenCV camera axes.
             camera: intrinsics of the frame (its size must match ``depth``).
         """
+        self.fuse(self.prepare_frame(rgb, depth, camera_to_world, camera))
+
+    def prepare_frame(
+        self,
+        rgb: np.ndarray | None,
+        depth: np.ndarray,
+        camera_to_world: np.ndarray,
+        camera: PinholeCamera,
+    ) -> PreparedFrame | None:
+        """Check one frame and convert it to what :meth:`fuse` takes (arrays of its own, so
+        the caller may overwrite its buffers at once); ``None`` when no depth is in range.
+
+        Raises:
+            ValueError: the frame's shapes do not match the camera, or the pose is not a
+                finite 4x4 matrix.
+        """
         depth = np.asarray(depth, dtype=np.float32)
         if depth.shape != (camera.height, camera.width):
             raise ValueError(
@@ -152,16 +179,22 @@ class TsdfFusionMapper:
                 raise ValueError(f"rgb has shape {rgb.shape}, expected {(*depth.shape, 3)}")
             # Open3D fuses float depth only together with float colour.
             colour = rgb.astype(np.float32) / 255.0
-        pose = np.asarray(camera_to_world, dtype=np.float64)
+        pose = np.array(camera_to_world, dtype=np.float64)
         if pose.shape != (4, 4) or not np.isfinite(pose).all():
             raise ValueError(f"camera_to_world must be a finite 4x4 matrix, got {pose.shape}")
         depth = np.where(np.isfinite(depth) & (depth > 0.0), depth, 0.0).astype(np.float32)
         if not ((depth > 0.0) & (depth <= self.max_depth_m)).any():
-            return  # nothing within range to fuse; still a valid call (facing empty space)
-        extrinsic = o3c.Tensor(np.linalg.inv(pose), o3c.float64)
-        intrinsic = o3c.Tensor(camera.matrix, o3c.float64)
-        depth_image = o3d.t.geometry.Image(o3c.Tensor(depth)).to(self.device)
-        colour_image = o3d.t.geometry.Image(o3c.Tensor(colour)).to(self.device)
+            return None  # nothing within range to fuse; still a valid frame (empty space)
+        return PreparedFrame(colour, depth, pose, np.asarray(camera.matrix, dtype=np.float64))
+
+    def fuse(self, frame: PreparedFrame | None) -> None:
+        """Fuse a frame :meth:`prepare_frame` made (``None``: nothing to fuse)."""
+        if frame is None:
+            return
+        extrinsic = o3c.Tensor(np.linalg.inv(frame.camera_to_world), o3c.float64)
+        intrinsic = o3c.Tensor(frame.intrinsic, o3c.float64)
+        depth_image = o3d.t.geometry.Image(o3c.Tensor(frame.depth)).to(self.device)
+        colour_image = o3d.t.geometry.Image(o3c.Tensor(frame.colour)).to(self.device)
         try:
             blocks = self._grid.compute_unique_block_coordinates(
                 depth_image, intrinsic, extrinsic, 1.0, self.max_depth_m, self._trunc_multiplier

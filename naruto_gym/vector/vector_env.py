@@ -329,7 +329,10 @@ class NarutoReconVectorEnv(BatchedEnvBase):
         self._clearances[i] = np.nan
         self._steps[i] = 0
         if self.reconstruct:
-            self._reconstructions[i] = EpisodeReconstruction(self.camera)
+            # Agents share the process's threads already: fuse in the step's thread.
+            self._reconstructions[i] = EpisodeReconstruction(
+                self.camera, fuse_in_background=False
+            )
 
     def _reconstruction_metrics(self, i: int) -> dict[str, Any]:
         return self._pool[i].reconstruction_metrics(self._reconstructions[i])
