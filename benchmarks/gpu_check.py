@@ -43,6 +43,7 @@ TESTS = (
     "tests/agent/mapping/test_mapping_fixed_shape.py",
     "tests/agent/mapping/test_mapping_backends.py",
     "tests/agent/mapping/test_mapping_encoding.py",
+    "tests/agent/mapping/test_mapping_cuda_graphs.py",
 )
 
 

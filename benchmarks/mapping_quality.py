@@ -125,17 +125,27 @@ def time_iteration(
     rgb, depth = renderer.render(poses[0])
     results: dict[str, float] = {}
     variants = {
-        "batched hash grid (published 43 samples)": (None, None, "torch"),
-        "batched hash grid (samples > 0.2 m behind depth skipped)": (0.2, None, "torch"),
-        "plain per-level hash grid (published 43 samples)": (None, NaiveHashGridEncoding, "torch"),
+        "batched hash grid (published 43 samples)": (None, None, "torch", False),
+        "batched hash grid (samples > 0.2 m behind depth skipped)": (0.2, None, "torch", False),
+        "plain per-level hash grid (published 43 samples)": (
+            None, NaiveHashGridEncoding, "torch", False
+        ),
     }
     if fast_path_runs(args.device):
-        variants["fast path, Triton (published 43 samples)"] = (None, None, "triton")
-        variants["fast path, Triton (samples > 0.2 m behind depth masked)"] = (0.2, None, "triton")
-    for name, (cull, encoding, backend) in variants.items():
+        variants["fast path, Triton, eager (published 43 samples)"] = (
+            None, None, "triton", False
+        )
+        variants["fast path, Triton, CUDA graph (published 43 samples)"] = (
+            None, None, "triton", True
+        )
+        variants["fast path, Triton, CUDA graph (samples > 0.2 m behind depth masked)"] = (
+            0.2, None, "triton", True
+        )
+    for name, (cull, encoding, backend, graphs) in variants.items():
         config = NeuralMapperConfig(
             device=args.device,
             backend=backend,
+            cuda_graphs=graphs,
             seed=args.seed,
             first_frame_iterations=0,
             cull_behind_depth_m=cull,
@@ -154,8 +164,9 @@ def time_iteration(
             if mapper.device.type == "cuda":
                 torch.cuda.synchronize()
             durations.append(time.perf_counter() - start)
-        results[name] = float(np.median(durations[2:]))  # the first two warm up
-        print(f"  {name}: {results[name] * 1e3:.1f} ms per iteration", flush=True)
+        results[name] = float(np.median(durations[2:]))  # the first two warm up (and capture)
+        status = f" (CUDA graph: {mapper.cuda_graph_status})" if graphs else ""
+        print(f"  {name}: {results[name] * 1e3:.1f} ms per iteration{status}", flush=True)
     return results
 
 

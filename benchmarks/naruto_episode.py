@@ -561,6 +561,7 @@ def main(args: Args) -> dict:
         if args.mapper_kind == "neural"
         else None,
         "neural_mapper_backend": getattr(policy.mapper, "backend", None),
+        "neural_mapper_cuda_graphs": getattr(policy.mapper, "cuda_graph_status", None),
         "mapping_iterations": int(getattr(getattr(policy.mapper, "stats", None), "iterations", 0)),
         "time_per_step_detail_ms": detail_ms,
         "published_v100_ms_per_frame": PUBLISHED_MS_PER_FRAME,

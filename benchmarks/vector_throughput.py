@@ -64,7 +64,7 @@ from naruto_gym.sensors.kernels import fill_world_rays
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import default_thread_count
 from naruto_gym.vector import NarutoReconVectorEnv, make_vector_env
-from naruto_gym.vector.sharded import default_workers
+from naruto_gym.vector.sharded import StepTimes, default_workers
 
 # The Replica sample (research-only, beside the repository) for the full-resolution rows.
 REPLICA_MESH = Path(__file__).resolve().parents[1].parent / "shared/scenes/replica_office0/mesh.ply"
@@ -112,6 +112,9 @@ class Args:
     hd_scene: str = ""
     """scene of the 680 x 1200 single-env rows (default: the Replica sample beside the
     repository, else the default room)"""
+    scaling_async_all_counts: bool = True
+    """time AsyncVectorEnv at every power of two up to each point's CPUs (else only with
+    one worker per CPU, the fastest so far)"""
     parts: list[str] = field(default_factory=lambda: ["table", "scaling"])
     """which parts to run: table (every row above the scaling table, the goals included)
     and scaling (the scaling table)"""
@@ -147,6 +150,8 @@ def time_vector(
     for _ in range(3):
         env.step(rng.integers(0, 10, n))
     rays_before = getattr(env, "rays_cast", 0)
+    if hasattr(env, "step_times"):  # a sharded env: split the timed steps only
+        env.step_times = StepTimes()
     steps, started = 0, time.perf_counter()
     while time.perf_counter() - started < seconds or steps < min_steps:
         env.step(rng.integers(0, 10, n))
@@ -155,7 +160,23 @@ def time_vector(
     result = {"steps_per_s": steps * n / elapsed, "load": load()}
     if hasattr(env, "rays_cast"):
         result["rays_per_s"] = (env.rays_cast - rays_before) / elapsed
+    if hasattr(env, "step_times"):
+        result["split_ms_per_step"] = env.step_times.per_step_ms()
     return result
+
+
+def physical_cores(cpus: list[int]) -> int:
+    """Physical cores under ``cpus`` (SMT siblings count once), from Linux's topology files;
+    ``len(cpus)`` where they are missing."""
+    cores = set()
+    for cpu in cpus:
+        topology = Path(f"/sys/devices/system/cpu/cpu{cpu}/topology")
+        try:
+            cores.add(((topology / "physical_package_id").read_text().strip(),
+                       (topology / "core_id").read_text().strip()))
+        except OSError:
+            return len(cpus)
+    return len(cores)
 
 
 def time_single(seconds: float, episode_steps: int, **extra: Any) -> dict[str, float]:
@@ -240,7 +261,9 @@ def scaling_point(spec: dict[str, Any]) -> dict[str, Any]:
     the full-resolution single env where asked."""
     threads = default_thread_count()
     n = spec["num_envs"]
-    point: dict[str, Any] = {"cores": spec["cores"], "default_threads": threads,
+    cpus = sorted(os.sched_getaffinity(0))
+    point: dict[str, Any] = {"cores": spec["cores"], "cpus": cpus,
+                             "physical_cores": physical_cores(cpus), "default_threads": threads,
                              "default_workers": default_workers(n, threads), "batched": {},
                              "async": {}}
     for workers in [None, *spec["workers"]]:
@@ -292,7 +315,8 @@ def scaling_table(args: Args) -> dict[str, Any]:
             "workers": [w for w in args.scaling_workers if w <= count],
             # Async workers up to the CPU count: powers of two, and the count itself.
             "async_workers": sorted({w for w in (1, 2, 4, 8, 16, 32, 64) if w <= count}
-                                    | {count}) if not args.quick else [count],
+                                    | {count})
+            if args.scaling_async_all_counts and not args.quick else [count],
             "hd_scene": hd_scene if count in (1, 2, machine) else "",
         }
         point = pinned(count, spec)
@@ -312,7 +336,11 @@ def scaling_table(args: Args) -> dict[str, Any]:
               + f"; best async ({point['best_async_workers']} workers) {best_async:.0f} steps/s"
               f" -> {point['ratio_default_vs_best_async']:.2f}x"
               + (f"; single env 680 x 1200: {hd['frames_per_s']:.1f} frames/s" if hd else "")
-              + f" (load {load()})")
+              + f" (load {load()}; {point['physical_cores']} physical cores)")
+        for name, row in point["batched"].items():
+            if row.get("split_ms_per_step"):
+                print(f"      {name} workers, ms per step: " + ", ".join(
+                    f"{part} {value:.2f}" for part, value in row["split_ms_per_step"].items()))
     two = next((p for p in points if p["cores"] == 2), None)
     for point in points:
         if two is not None:

@@ -82,6 +82,10 @@ class NeuralMapperConfig:
             function in a few launches (:mod:`naruto_agent.mapping.triton_kernels`; CUDA,
             ``pip install triton``); "auto" (default) takes Triton on a CUDA GPU where it is
             installed, PyTorch everywhere else. A GPU speed-up.
+        cuda_graphs: with the Triton path on a GPU, record each iteration once as a CUDA
+            graph and replay it (:mod:`naruto_agent.mapping.cuda_graphs`): one launch
+            instead of a few hundred; where capturing fails, a warning and the eager path.
+            A GPU speed-up.
         seed: seeds the parameter initialisation and every ray draw.
         tune_cpu_allocator: on a CPU, let glibc keep freed tensor memory for reuse
             (:mod:`naruto_agent.mapping.cpu_allocator`; process-wide: an iteration no
@@ -141,6 +145,7 @@ class NeuralMapperConfig:
 
     device: str = "auto"
     backend: Literal["auto", "torch", "triton"] = "auto"
+    cuda_graphs: bool = True
     seed: int = 0
     tune_cpu_allocator: bool = True
 

@@ -29,6 +29,7 @@ from naruto_agent.mapping.backends import resolve_backend
 from naruto_agent.mapping.base import check_bounds, check_frame, resolve_device
 from naruto_agent.mapping.config import NeuralMapperConfig
 from naruto_agent.mapping.cpu_allocator import keep_freed_memory_for_reuse
+from naruto_agent.mapping.cuda_graphs import CapturedIterations
 from naruto_agent.mapping.encoding import HashGridEncoding
 from naruto_agent.mapping.field import NeuralField
 from naruto_agent.mapping.keyframes import KeyframeRays
@@ -143,9 +144,21 @@ class NeuralMapper:
             self.config.uncertainty_init,
             self.config.uncertainty_min_variance,
         ).to(self._device)
-        self.optimiser = self._adam(self.field.parameters(), self.config.learning_rate)
+        graphs = (
+            self.config.cuda_graphs
+            and self._device.type == "cuda"
+            and self.field.backend == "triton"
+        )
+        self.optimiser = self._adam(
+            self.field.parameters(), self.config.learning_rate, capturable=graphs
+        )
         self.uncertainty_optimiser = self._adam(
-            self.uncertainty.parameters(), self.config.uncertainty_learning_rate
+            self.uncertainty.parameters(), self.config.uncertainty_learning_rate, capturable=graphs
+        )
+        self._captured = (
+            CapturedIterations(self._iteration, [self.optimiser, self.uncertainty_optimiser])
+            if graphs
+            else None
         )
         self.keyframes = KeyframeRays(self._device)
         self.generator = torch.Generator(device=self._device).manual_seed(self.config.seed)
@@ -178,13 +191,15 @@ class NeuralMapper:
         warnings.warn(f"{error}; the neural mapper uses the PyTorch path", stacklevel=3)
         self.field.backend = "torch"
 
-    def _adam(self, parameters, lr: float) -> torch.optim.Optimizer:  # noqa: ANN001
-        # Co-SLAM's betas; the fused kernel when this torch has it for the device.
+    def _adam(self, parameters, lr: float, capturable: bool = False) -> torch.optim.Optimizer:  # noqa: ANN001
+        # Co-SLAM's betas; the fused kernel when this torch has it for the device;
+        # ``capturable`` keeps its step count on the device, as a CUDA graph needs.
         parameters = list(parameters)
+        extra = {"capturable": True} if capturable else {}
         try:
-            return torch.optim.Adam(parameters, lr=lr, betas=(0.9, 0.99), fused=True)
+            return torch.optim.Adam(parameters, lr=lr, betas=(0.9, 0.99), fused=True, **extra)
         except (RuntimeError, TypeError, ValueError):
-            return torch.optim.Adam(parameters, lr=lr, betas=(0.9, 0.99))
+            return torch.optim.Adam(parameters, lr=lr, betas=(0.9, 0.99), **extra)
 
     @property
     def device(self) -> torch.device:
@@ -428,6 +443,22 @@ class NeuralMapper:
 
     def train_iteration(self, rays: RayBatch) -> dict[str, float]:
         """One optimisation step on a batch of rays; returns the loss values."""
+        replayed = self._captured.run(rays) if self._captured is not None else None
+        if replayed is not None:
+            names, values = replayed
+        else:
+            self.optimiser.zero_grad(set_to_none=True)
+            self.uncertainty_optimiser.zero_grad(set_to_none=True)
+            names, values = self._iteration(rays, True, self.generator)
+        # One transfer for all the values (each float() of a device tensor waits on it).
+        return dict(zip(names, values.tolist(), strict=True))
+
+    def _iteration(
+        self, rays: RayBatch, update: bool, generator: torch.Generator | None = None
+    ) -> tuple[list[str], torch.Tensor]:
+        """Render ``rays``, back-propagate the losses and (with ``update``) step both
+        optimisers; the loss names and values (stacked, on the device, total last).
+        ``generator=None`` draws from the default generator (what a CUDA graph replays)."""
         cfg = self.config
         fixed = self.field.backend == "triton"
         output = render_rays(
@@ -435,24 +466,31 @@ class NeuralMapper:
             rays,
             cfg,
             self.uncertainty,
-            self.generator,
+            generator,
             perturb=cfg.perturb,
             fixed_shape=fixed,
         )
         losses = mapping_losses(output, rays, cfg, fixed_shape=fixed)
         if cfg.smoothness_weight > 0:
-            losses["smoothness"] = smoothness_loss(
-                self.field, self._bounds_tensor, cfg, self.generator
-            )
+            losses["smoothness"] = smoothness_loss(self.field, self._bounds_tensor, cfg, generator)
         total = weighted_total(losses, cfg)
-        self.optimiser.zero_grad(set_to_none=True)
-        self.uncertainty_optimiser.zero_grad(set_to_none=True)
         total.backward()
-        self.optimiser.step()
-        self.uncertainty_optimiser.step()
-        # One transfer for all the values (each float() of a device tensor waits on it).
-        values = torch.stack([*losses.values(), total]).detach().tolist()
-        return dict(zip([*losses, "total"], values, strict=True))
+        if update:
+            self.optimiser.step()
+            self.uncertainty_optimiser.step()
+        return [*losses, "total"], torch.stack([*losses.values(), total]).detach()
+
+    @property
+    def cuda_graph_status(self) -> str:
+        """Whether iterations replay as CUDA graphs: "off" (not asked for, or not the fast
+        path on a GPU), "waiting" (no batch size captured yet), "replaying (sizes ...)", or
+        "failed: <why>" (they run eagerly)."""
+        if self._captured is None:
+            return "off"
+        if self._captured.failure is not None:
+            return f"failed: {self._captured.failure}"
+        sizes = self._captured.captured_sizes
+        return f"replaying (sizes {sizes})" if sizes else "waiting"
 
     # -- queries --------------------------------------------------------------------------
     @torch.no_grad()
@@ -576,6 +614,13 @@ class NeuralMapper:
         if "keyframes" in state:
             self.keyframes.load_state_dict(state["keyframes"])
         self._plan = None
+        if self._captured is not None:
+            # The graphs hold the replaced optimiser states; a saved state may come from an
+            # optimiser that was not capturable.
+            for optimiser in (self.optimiser, self.uncertainty_optimiser):
+                for group in optimiser.param_groups:
+                    group["capturable"] = True
+            self._captured.clear()
 
     @classmethod
     def from_state_dict(cls, state: dict[str, Any], device: str = "auto") -> NeuralMapper:

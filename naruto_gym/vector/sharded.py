@@ -20,9 +20,11 @@ import multiprocessing
 import os
 import pickle
 import signal
+import time
 import traceback
 import weakref
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -162,11 +164,13 @@ def _answer(
         buffers.write(observations, start, stop)
         return packer.pack({"infos": infos})
     if command == "step":
+        started = time.perf_counter()
         observations, rewards, terminated, truncated, infos = env.step(payload)
         buffers.write(observations, start, stop)
-        return packer.pack(
+        packed = packer.pack(
             {"rewards": rewards, "terminated": terminated, "truncated": truncated, "infos": infos}
         )
+        return time.perf_counter() - started, packed
     if command == "poses":
         return env.poses
     if command == "rays_cast":
@@ -174,6 +178,45 @@ def _answer(
     if command == "spaces":
         return env.single_action_space
     raise ValueError(f"unknown command {command!r}")
+
+
+@dataclass
+class StepTimes:
+    """Where the wall time of the sharded steps went, summed over ``steps`` steps: what
+    limits scaling over processes.
+
+    ``seconds`` is each step as the caller saw it. ``slowest_worker_s`` adds up each step's
+    slowest worker's own time (stepping its share, writing its observations, packing its
+    infos) and ``mean_worker_s`` the workers' mean of it: their ratio is the imbalance
+    between shares. ``caller_s`` is the calling process's own work after the answers came
+    (merging the infos, copying the observations out of shared memory). The rest,
+    ``seconds - slowest_worker_s - caller_s``, is the hand-over: sending the actions,
+    waking the workers, the answers through the pipes.
+    """
+
+    steps: int = 0
+    seconds: float = 0.0
+    slowest_worker_s: float = 0.0
+    mean_worker_s: float = 0.0
+    caller_s: float = 0.0
+
+    @property
+    def handover_s(self) -> float:
+        """Seconds neither a worker's stepping nor the caller's merge and copy."""
+        return self.seconds - self.slowest_worker_s - self.caller_s
+
+    def per_step_ms(self) -> dict[str, float]:
+        """Each part in milliseconds per step (empty before the first step)."""
+        if self.steps == 0:
+            return {}
+        parts = {
+            "step": self.seconds,
+            "slowest_worker": self.slowest_worker_s,
+            "mean_worker": self.mean_worker_s,
+            "caller": self.caller_s,
+            "handover": self.handover_s,
+        }
+        return {name: 1000.0 * value / self.steps for name, value in parts.items()}
 
 
 class ShardedAgents:
@@ -223,6 +266,7 @@ class ShardedAgents:
         self.buffers = SharedObservations(observation_space, self.num_envs, context)
         self.threads = max(1, int(threads))
         self._unpacker = InfoUnpacker(workers)
+        self.step_times = StepTimes()
         self._connections: list[Any] = []
         self._processes: list[Any] = []
         self.closed = False
@@ -343,11 +387,22 @@ class ShardedAgents:
         return self.buffers.copy(self.threads), merge_shard_infos(parts, self.num_envs)
 
     def step(self, actions: np.ndarray) -> tuple[Any, ...]:
-        """Step every agent with its action."""
+        """Step every agent with its action (timed into :attr:`step_times`)."""
+        started = time.perf_counter()
         answers = self.call("step", [actions[start:stop] for start, stop in self.bounds])
-        merged = self._unpacker.merge(answers, self.bounds, self.num_envs)
+        answered = time.perf_counter()
+        busy = [seconds for seconds, _ in answers]
+        merged = self._unpacker.merge([packed for _, packed in answers], self.bounds, self.num_envs)
+        observations = self.buffers.copy(self.threads)
+        finished = time.perf_counter()
+        times = self.step_times
+        times.steps += 1
+        times.seconds += finished - started
+        times.slowest_worker_s += max(busy)
+        times.mean_worker_s += sum(busy) / len(busy)
+        times.caller_s += finished - answered
         return (
-            self.buffers.copy(self.threads),
+            observations,
             merged["rewards"],
             merged["terminated"],
             merged["truncated"],

@@ -17,7 +17,12 @@ from gymnasium.vector import AutoresetMode
 
 from naruto_gym.envs.scene_runtime import observation_space
 from naruto_gym.vector.base import BatchedEnvBase
-from naruto_gym.vector.sharded import ShardedAgents, resolve_workers, several_scenes
+from naruto_gym.vector.sharded import (
+    ShardedAgents,
+    StepTimes,
+    resolve_workers,
+    several_scenes,
+)
 from naruto_gym.vector.vector_env import NarutoReconVectorEnv
 
 __all__ = ["ShardedVectorEnv"]
@@ -105,6 +110,18 @@ class ShardedVectorEnv(BatchedEnvBase):
         """Whether the worker processes were stopped (by ``close()``, or by a failure or a
         ``KeyboardInterrupt`` while they stepped)."""
         return self._agents.closed
+
+    @property
+    def step_times(self) -> StepTimes:
+        """Where the steps' wall time went so far: the slowest worker's stepping, the
+        hand-over through the pipes and this process's merge and copy
+        (:class:`~naruto_gym.vector.sharded.StepTimes`); assign a new ``StepTimes()`` to
+        start over."""
+        return self._agents.step_times
+
+    @step_times.setter
+    def step_times(self, times: StepTimes) -> None:
+        self._agents.step_times = times
 
     @property
     def poses(self) -> np.ndarray:

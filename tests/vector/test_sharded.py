@@ -14,7 +14,7 @@ import pytest
 
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.vector import NarutoReconVectorEnv, ShardedVectorEnv, make_vector_env
-from naruto_gym.vector.sharded import WorkerError
+from naruto_gym.vector.sharded import StepTimes, WorkerError
 from tests.process_checks import alive
 
 TINY = {
@@ -70,6 +70,26 @@ def test_close_stops_the_workers_and_leaves_no_shared_memory(env_and_shm):
     assert_gone(pids, shm_before)
     with pytest.raises(RuntimeError, match="closed"):
         env.step(np.array([0, 1, 2]))
+
+
+def test_step_times_split_the_step_between_workers_handover_and_caller():
+    env = ShardedVectorEnv(4, workers=2, max_episode_steps=50, **TINY)
+    try:
+        env.reset(seed=0)
+        assert env.step_times.steps == 0  # resets are not counted
+        for _ in range(5):
+            env.step(np.array([0, 1, 2, 3]))
+        times = env.step_times
+        assert times.steps == 5
+        assert 0.0 < times.mean_worker_s <= times.slowest_worker_s < times.seconds
+        assert 0.0 < times.caller_s < times.seconds and times.handover_s > 0.0
+        ms = times.per_step_ms()
+        assert ms["step"] == pytest.approx(ms["slowest_worker"] + ms["caller"] + ms["handover"])
+        env.step_times = StepTimes()  # start over
+        env.step(np.array([0, 1, 2, 3]))
+        assert env.step_times.steps == 1 and StepTimes().per_step_ms() == {}
+    finally:
+        env.close()
 
 
 def test_bad_input_in_a_worker_is_raised_with_its_traceback_and_the_env_stays_usable():
