@@ -67,6 +67,7 @@ from naruto_agent.episode_loop import (  # noqa: E402
 )
 from naruto_agent.mapping import NeuralMapper  # noqa: E402
 from naruto_agent.naruto import NarutoPolicy  # noqa: E402
+from naruto_gym.evaluation import EpisodeReconstruction  # noqa: E402
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # NARUTO paper (Feng et al., CVPR 2024), Replica room0 on a V100: per-frame averages.
@@ -110,6 +111,9 @@ class Args:
     env_kwargs: str = ""
     """JSON object of extra env arguments, e.g. '{"pinhole_backend": "auto"}' (the
     rasterised frames: a tenth of the CPU of the ray cast at 680 x 1200)"""
+    reference_fusion: str = "auto"
+    """the reference TSDF's fusion: "auto" (the env's choice: a background thread where the
+    process has a second thread), "background" or "inline" (in the step)"""
     passive_reference: bool = False
     """neural mapper: after the episode, map its frames passively (same mapper settings, no
     active sampling) in this process, and report the episode's time as a ratio to it"""
@@ -451,6 +455,14 @@ def main(args: Args) -> dict:
         **env_kwargs,
     )
     base = env.unwrapped
+    if args.reference_fusion != "auto":
+        if args.reference_fusion not in ("background", "inline"):
+            raise SystemExit(
+                f"--reference-fusion {args.reference_fusion!r}: use auto, background or inline"
+            )
+        base.reconstruction = EpisodeReconstruction(
+            base.camera, fuse_in_background=args.reference_fusion == "background"
+        )
     policy = NarutoPolicy(mapper_kind=args.mapper_kind, device=args.device, **settings)
     tag = args.tag or (
         f"{SceneSpec(args.scene).label}_{args.mapper_kind}_{args.max_episode_steps}steps"
@@ -566,6 +578,7 @@ def main(args: Args) -> dict:
         "time_per_step_detail_ms": detail_ms,
         "published_v100_ms_per_frame": PUBLISHED_MS_PER_FRAME,
         "reset_s": reset_s,
+        "env_reset_s": seconds["reset_env"],
         # The reference fusion's own time; with a background thread, reference_tsdf above is
         # only what the episode waited for it (checks, copies, a full queue).
         "reference_fusion_s": base.reconstruction.fusion_seconds

@@ -165,6 +165,14 @@ def time_vector(
     return result
 
 
+def thread_count(pid: int) -> int | None:
+    """Threads of process ``pid`` (Linux), or None where /proc does not say."""
+    try:
+        return len(os.listdir(f"/proc/{pid}/task"))
+    except OSError:
+        return None
+
+
 def physical_cores(cpus: list[int]) -> int:
     """Physical cores under ``cpus`` (SMT siblings count once), from Linux's topology files;
     ``len(cpus)`` where they are missing."""
@@ -271,8 +279,10 @@ def scaling_point(spec: dict[str, Any]) -> dict[str, Any]:
             continue  # the default row times it
         env = make_vector_env(n, workers=workers, max_episode_steps=spec["episode_steps"],
                                    **env_kwargs(64, False))
-        point["batched"]["default" if workers is None else str(workers)] = time_vector(
-            env, spec["seconds"])
+        row = time_vector(env, spec["seconds"])
+        if hasattr(env, "worker_pids"):  # threads each worker process runs (all pools)
+            row["worker_threads"] = [thread_count(pid) for pid in env.worker_pids]
+        point["batched"]["default" if workers is None else str(workers)] = row
         env.close()
     for workers in spec["async_workers"]:
         env = gym.make_vec("NarutoRecon-v0", num_envs=workers, vectorization_mode="async",
@@ -340,7 +350,8 @@ def scaling_table(args: Args) -> dict[str, Any]:
         for name, row in point["batched"].items():
             if row.get("split_ms_per_step"):
                 print(f"      {name} workers, ms per step: " + ", ".join(
-                    f"{part} {value:.2f}" for part, value in row["split_ms_per_step"].items()))
+                    f"{part} {value:.2f}" for part, value in row["split_ms_per_step"].items())
+                    + f"; threads per worker {row.get('worker_threads')}")
     two = next((p for p in points if p["cores"] == 2), None)
     for point in points:
         if two is not None:

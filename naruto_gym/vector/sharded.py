@@ -17,6 +17,7 @@ down; so are they on ``close()``, a ``KeyboardInterrupt`` in the caller (the wor
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.connection
 import os
 import pickle
 import signal
@@ -188,8 +189,9 @@ class StepTimes:
     ``seconds`` is each step as the caller saw it. ``slowest_worker_s`` adds up each step's
     slowest worker's own time (stepping its share, writing its observations, packing its
     infos) and ``mean_worker_s`` the workers' mean of it: their ratio is the imbalance
-    between shares. ``caller_s`` is the calling process's own work after the answers came
-    (merging the infos, copying the observations out of shared memory). The rest,
+    between shares. ``caller_s`` is the calling process's own work after the last answer
+    came (copying that worker's observations out of shared memory, merging the infos; the
+    other shares are copied while the slower workers still step). The rest,
     ``seconds - slowest_worker_s - caller_s``, is the hand-over: sending the actions,
     waking the workers, the answers through the pipes.
     """
@@ -310,17 +312,23 @@ class ShardedAgents:
 
     # -- commands --------------------------------------------------------------------------
     def call(
-        self, command: str, payloads: Sequence[Any] | None = None, only: Sequence[int] | None = None
+        self,
+        command: str,
+        payloads: Sequence[Any] | None = None,
+        only: Sequence[int] | None = None,
+        on_answer: Callable[[int], None] | None = None,
     ) -> list[Any]:
         """Send ``command`` (with each worker's payload) to the workers (all, or ``only``)
-        and return their answers in order; a failure is raised (see :meth:`_raise`)."""
+        and return their answers in order; a failure is raised (see :meth:`_raise`).
+        ``on_answer(k)`` runs as soon as worker ``k`` has answered without an error, while
+        the others may still be at work."""
         if self.closed:
             raise RuntimeError("the batched env's worker processes are closed: make a new env")
         chosen = list(range(self.workers)) if only is None else list(only)
         try:
             for k in chosen:
                 self._connections[k].send((command, None if payloads is None else payloads[k]))
-            answers, failure = self._gather(chosen)
+            answers, failure = self._gather(chosen, on_answer)
         except BaseException:  # a dead pipe or Ctrl-C: stop them all
             self.close()
             raise
@@ -328,30 +336,34 @@ class ShardedAgents:
             self._raise(*failure)
         return answers
 
-    def _gather(self, chosen: Sequence[int]) -> tuple[list[Any], tuple | None]:
-        """Every chosen worker's answer, and the first failure ``(worker, sent error, died)``
-        (all answers are read first, so that the pipes stay in step)."""
-        answers, failure = [], None
-        for k in chosen:
-            try:
-                status, answer = self._connections[k].recv()
-            except (EOFError, OSError):
-                status, answer = (
-                    "error",
-                    (
-                        None,
-                        "EOFError",
-                        "the worker process died",
-                        f"exit code {self._processes[k].exitcode}",
-                    ),
-                )
-                died = True
-            else:
-                died = False
-            if status == "error" and (failure is None or died):
-                failure = (k, answer, died)
-            answers.append(answer)
-        return answers, failure
+    def _gather(
+        self, chosen: Sequence[int], on_answer: Callable[[int], None] | None = None
+    ) -> tuple[list[Any], tuple | None]:
+        """Every chosen worker's answer (taken in the order they come), and the first
+        failure ``(worker, sent error, died)`` (all answers are read first, so that the
+        pipes stay in step)."""
+        answers: dict[int, Any] = {}
+        failures: dict[int, tuple] = {}
+        waiting = {self._connections[k]: k for k in chosen}
+        while waiting:
+            for connection in multiprocessing.connection.wait(list(waiting)):
+                k = waiting.pop(connection)
+                try:
+                    status, answer = connection.recv()
+                except (EOFError, OSError):
+                    exit_code = self._processes[k].exitcode
+                    answer = (None, "EOFError", "the worker process died", f"exit code {exit_code}")
+                    failures[k] = (k, answer, True)
+                else:
+                    if status == "error":
+                        failures[k] = (k, answer, False)
+                    elif on_answer is not None and not failures:
+                        on_answer(k)
+                answers[k] = answer
+        failure = None
+        if failures:  # a dead worker first, else the lowest-numbered failure
+            failure = min(failures.values(), key=lambda entry: (not entry[2], entry[0]))
+        return [answers[k] for k in chosen], failure
 
     def _raise(self, k: int, sent: tuple, died: bool) -> None:
         """Raise a worker's failure in the caller. Bad input (a ``ValueError`` or
@@ -389,18 +401,25 @@ class ShardedAgents:
     def step(self, actions: np.ndarray) -> tuple[Any, ...]:
         """Step every agent with its action (timed into :attr:`step_times`)."""
         started = time.perf_counter()
-        answers = self.call("step", [actions[start:stop] for start, stop in self.bounds])
-        answered = time.perf_counter()
+        observations = self.buffers.empty()
+        answered = [started]
+
+        def copy_share(k: int) -> None:  # while the other workers still step
+            answered[0] = time.perf_counter()
+            self.buffers.copy_rows(observations, *self.bounds[k])
+
+        answers = self.call(
+            "step", [actions[start:stop] for start, stop in self.bounds], on_answer=copy_share
+        )
         busy = [seconds for seconds, _ in answers]
         merged = self._unpacker.merge([packed for _, packed in answers], self.bounds, self.num_envs)
-        observations = self.buffers.copy(self.threads)
         finished = time.perf_counter()
         times = self.step_times
         times.steps += 1
         times.seconds += finished - started
         times.slowest_worker_s += max(busy)
         times.mean_worker_s += sum(busy) / len(busy)
-        times.caller_s += finished - answered
+        times.caller_s += finished - answered[0]
         return (
             observations,
             merged["rewards"],

@@ -69,6 +69,16 @@ class SharedObservations:
         for key, array in self.arrays.items():
             array[start:stop] = observations[key]
 
+    def empty(self) -> dict[str, np.ndarray]:
+        """New (uninitialised) arrays of the buffers' shapes, for :meth:`copy_rows`."""
+        return {key: np.empty(shape, dtype) for key, (shape, dtype) in self.layout.items()}
+
+    def copy_rows(self, target: dict[str, np.ndarray], start: int, stop: int) -> None:
+        """Copy agents ``start:stop`` (a worker's share, once it has written them) into
+        ``target``, so that the caller copies each share while the others still step."""
+        for key, array in self.arrays.items():
+            target[key][start:stop] = array[start:stop]
+
     def copy(self, threads: int = 1) -> dict[str, np.ndarray]:
         """New arrays holding every agent's observation (what the env hands out: the shared
         memory is written again next step), copied in up to ``threads`` threads."""
