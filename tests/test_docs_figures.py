@@ -330,9 +330,9 @@ FIGURES: tuple[Figure, ...] = (
     # The GPU and 16-core figures (one H200 machine)
     Figure(
         "docs/benchmarks/mapping.md",
-        r"\| fast path, Triton \(published 43 samples\) \| \*\*([\d.]+)\*\*",
+        r"\| fast path, Triton, CUDA graph \(published 43 samples\) \| \*\*([\d.]+)\*\*",
         _GPU_ITERATION,
-        "iteration_speed_s.fast path, Triton (published 43 samples)",
+        "iteration_speed_s.fast path, Triton, CUDA graph (published 43 samples)",
         "{:.1f}",
         1e3,
     ),
