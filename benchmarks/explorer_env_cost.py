@@ -61,7 +61,7 @@ class Args:
     """bare env steps of one configuration before the next takes its turn"""
     train: bool = True
     """also time PPO training end to end in the before and after configurations"""
-    output_file: str = "benchmarks/results/explorer_short/env_configs.json"
+    output_file: str = "benchmarks/results/explorer_candidates/env_configs.json"
     """JSON written (replaced)"""
 
 

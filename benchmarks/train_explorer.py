@@ -58,6 +58,7 @@ from naruto_gym.rl.explorer_env import EXPLORER_ENV, shared_train_mix, train_mix
 from naruto_gym.rl.explorer_sb3 import ExplorerFeaturesExtractor
 from naruto_gym.rl.goal_actions import VectorGoalActions
 from naruto_gym.rl.sb3 import Sb3VecEnv
+from naruto_gym.utils.threads import default_thread_count
 from naruto_gym.vector import make_vector_env
 
 
@@ -91,10 +92,11 @@ class Args:
     """size of the features extractor's output"""
     seed: int = 0
     """seed of the envs and of PPO"""
-    torch_threads: int = 1
-    """torch threads (the env uses the other core)"""
-    env_threads: int = 1
-    """threads of the env's compiled loops"""
+    torch_threads: int | None = None
+    """torch threads (None: every CPU this process may use; the learner and the env take
+    turns, so each gets them all)"""
+    env_threads: int | None = None
+    """threads of the env's compiled loops (None: every CPU this process may use)"""
     shared_scenes: bool = True
     """agents in groups on shared scenes, each kept for episodes_per_scene episodes (a scene
     built once for many episodes, a group's rays cast in one call); --no-shared-scenes: every
@@ -182,7 +184,7 @@ def env_settings(args: Args) -> dict[str, Any]:
     """The batched env's settings: the explorer's, the threads and the panorama band."""
     return {
         **EXPLORER_ENV,
-        "threads": args.env_threads,
+        "threads": args.env_threads or default_thread_count(),
         "panorama_horizon_deg": args.panorama_horizon_deg,
     }
 
@@ -408,7 +410,7 @@ def main(args: Args) -> dict[str, Any]:
             f"--max-episode-steps ({args.max_episode_steps}) must be a multiple "
             f"of --steps-per-goal ({args.steps_per_goal})"
         )
-    torch.set_num_threads(args.torch_threads)
+    torch.set_num_threads(args.torch_threads or default_thread_count())
     venv, bare, chain = make_env(args)
     venv.seed(args.seed)
     checkpoint = latest_checkpoint(output_dir) if args.resume else None

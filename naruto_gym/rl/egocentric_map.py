@@ -351,6 +351,15 @@ class VectorEgocentricMapObservation(gym.vector.VectorWrapper):
         return self._observe(observations), infos
 
     def step(self, actions: Any):
+        observations, rewards, terminations, truncations, infos = self.advance(actions)
+        return self.map_builder.observe(observations), rewards, terminations, truncations, infos
+
+    def advance(self, actions: Any):
+        """:meth:`step` without the learning observation: the env steps and every agent's
+        map takes the new frame, and the env's own observations come back. For a caller that
+        takes several steps per decision and reads the observation after the last one only
+        (:class:`~naruto_gym.rl.goal_actions.VectorGoalActions`): cropping the maps is most of
+        a step's map work."""
         observations, rewards, terminations, truncations, infos = self.env.step(actions)
         starts = np.flatnonzero(np.asarray(infos["_step"]) & (np.asarray(infos["step"]) == 0))
         if "final_obs" in infos and len(starts):
@@ -364,7 +373,8 @@ class VectorEgocentricMapObservation(gym.vector.VectorWrapper):
             infos["final_obs"] = final
         if len(starts):
             self.map_builder.reset(starts, np.asarray(observations["pose"])[starts])
-        return self._observe(observations), rewards, terminations, truncations, infos
+        self.map_builder.update(observations)
+        return observations, rewards, terminations, truncations, infos
 
     def _observe(self, observations: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         self.map_builder.update(observations)

@@ -565,8 +565,13 @@ class VectorGoalActions(gym.vector.VectorWrapper):
         self.walker.set_actions(np.asarray(actions))
         total = np.zeros(self.num_envs)
         refusals = np.zeros(self.num_envs, np.int64)
+        # The map wrapper's advance skips the learning observation of the steps before the
+        # last one (nobody reads it); a wrapper between the two hides it: step then.
+        advance = getattr(self.env, "advance", None)
         for step in range(self.steps_per_goal):
-            observations, rewards, terminations, truncations, infos = self.env.step(
+            last = step == self.steps_per_goal - 1
+            take_step = self.env.step if last or advance is None else advance
+            observations, rewards, terminations, truncations, infos = take_step(
                 self.walker.next_moves()
             )
             total += rewards

@@ -319,3 +319,43 @@ def test_the_nearest_candidate_turns_at_a_goal_only_as_far_as_it_needs():
         assert coverage[-1] > coverage[0] + 0.1  # it goes somewhere new
     finally:
         env.close()
+
+
+class _PassThrough(gym.vector.VectorWrapper):
+    """A wrapper between the goal and the map wrappers: it hides the map's ``advance``."""
+
+
+def test_steps_inside_a_goal_skip_the_observation_and_change_nothing():
+    """The goal wrapper's inner steps use the map's ``advance`` (no learning observation);
+    with a wrapper between them it steps instead: the same observations, rewards and maps,
+    across an episode end."""
+
+    def chain(hidden: bool) -> VectorGoalActions:
+        maps = VectorEgocentricMapObservation(
+            NarutoReconVectorEnv(
+                3, scene="procedural:room", max_episode_steps=40, autoreset_mode="SameStep", **ENV
+            )
+        )
+        return VectorGoalActions(_PassThrough(maps) if hidden else maps, steps_per_goal=10)
+
+    fast, plain = chain(False), chain(True)
+    try:
+        assert hasattr(fast.env, "advance") and not hasattr(plain.env, "advance")
+        runs = {}
+        for name, envs in (("fast", fast), ("plain", plain)):
+            observations, _ = envs.reset(seed=5)
+            rng = np.random.default_rng(1)
+            steps = [observations]
+            for _ in range(6):  # 60 steps per agent: one episode end
+                observations, rewards, terminated, truncated, _ = envs.step(
+                    rng.integers(0, envs.single_action_space.n, 3)
+                )
+                steps.append({**observations, "reward": rewards, "done": terminated | truncated})
+            runs[name] = steps
+        assert any(step["done"].any() for step in runs["fast"][1:])
+        for fast_step, plain_step in zip(runs["fast"], runs["plain"], strict=True):
+            for key, value in plain_step.items():
+                np.testing.assert_array_equal(fast_step[key], value, err_msg=key)
+    finally:
+        fast.close()
+        plain.close()
