@@ -2,11 +2,12 @@
 other policies. Results: docs/benchmarks/explorer.md
 
 Reads the episode records of ``input_dir`` (the benchmark's ``--output-dir``) and writes
-``output_dir/evaluation.json``: per policy and scene, the mean final coverage and the area
+``output_dir/output_name``: per policy and scene, the mean final coverage and the area
 under the coverage curve (the mean coverage over the episode's steps, as
 ``benchmarks/explorer_scripted_check.py`` computes it) over the seeds, refused moves per 100
 steps, and the paired difference of the areas of ``--policy`` and every other policy over the
-(scene, seed) pairs both ran, with a 95 % bootstrap interval.
+(scene, seed) pairs both ran, with the leaderboard's 95 % bootstrap interval (scenes
+resampled, then seeds inside each scene). ``--scene-prefix`` keeps one size class.
 
     python benchmarks/explorer_eval_summary.py --input-dir runs/explorer_eval \\
         --output-dir benchmarks/results/explorer_candidates
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from naruto_agent.benchmark.efficiency import mean_over_steps
+from naruto_agent.benchmark.statistics import paired_comparison
 from naruto_agent.cli_args import parse_dataclass_args
 
 
@@ -33,15 +35,19 @@ class Args:
     """the policy compared with every other"""
     bootstrap: int = 10_000
     """bootstrap resamples of the paired differences"""
+    scene_prefix: str = ""
+    """only the scenes whose name starts with this (e.g. procedural_flat: the apartments)"""
     output_dir: str = "benchmarks/results/explorer_candidates"
     """output folder"""
+    output_name: str = "evaluation.json"
+    """file written in output_dir"""
 
 
 def main(args: Args) -> dict[str, Any]:
     episodes: dict[tuple[str, str, int], dict[str, float]] = {}
     for path in sorted(Path(args.input_dir, "records").glob("*/*/seed*.json")):
         record = json.loads(path.read_text())
-        if record.get("status") != "ok":
+        if record.get("status") != "ok" or not record["scene"].startswith(args.scene_prefix):
             continue
         steps = int(record["config"]["steps"])
         episodes[(record["policy"], record["scene"], int(record["seed"]))] = {
@@ -71,33 +77,26 @@ def main(args: Args) -> dict[str, Any]:
             ),
             "episodes": len(every),
         }
-    rng = np.random.default_rng(0)
     paired: dict[str, Any] = {}
+    mine = {(s, seed): v["auc"] for (p, s, seed), v in episodes.items() if p == args.policy}
     for other in policies:
         if other == args.policy:
             continue
-        keys = [
-            (s, seed)
-            for (p, s, seed) in episodes
-            if p == args.policy and (other, s, seed) in episodes
-        ]
-        if not keys:
+        theirs = {(s, seed): v["auc"] for (p, s, seed), v in episodes.items() if p == other}
+        overall = paired_comparison(mine, theirs, resamples=args.bootstrap)["overall"]
+        if not overall["n"]:
             continue
-        differences = np.array(
-            [episodes[(args.policy, *k)]["auc"] - episodes[(other, *k)]["auc"] for k in keys]
-        )
-        draws = rng.integers(0, len(differences), (args.bootstrap, len(differences)))
-        means = differences[draws].mean(axis=1)
         paired[other] = {
-            "pairs": len(keys),
-            "mean_auc_difference": round(float(differences.mean()), 4),
-            "interval_95": [round(float(v), 4) for v in np.percentile(means, [2.5, 97.5])],
+            "pairs": overall["n"],
+            "scenes": overall["scenes"],
+            "mean_auc_difference": round(overall["mean"], 4),
+            "interval_95": [round(overall["low"], 4), round(overall["high"], 4)],
         }
     result = {"input_dir": args.input_dir, "table": table, "paired_with": args.policy}
     result["paired"] = paired
     output_dir = Path(args.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
-    (output_dir / "evaluation.json").write_text(json.dumps(result, indent=1))
+    (output_dir / args.output_name).write_text(json.dumps(result, indent=1))
     print(json.dumps({"mean": {p: v["mean_auc"] for p, v in table.items()}, **paired}, indent=1))
     return result
 

@@ -227,4 +227,39 @@ def follow_path(
         return (TURN_LEFT if error > 0 else TURN_RIGHT), WALKING
     if move_is_safe(grid, origin, cell_m, pose, MOVE_FORWARD, step_m, inflate):
         return MOVE_FORWARD, WALKING
+    # Facing the carrot within half a turn, the step may still end in a cell beside the path
+    # that is not traversable (where the path turns by a corner): a sideways step that is
+    # safe and brings the path's next cell nearer follows the path instead. Turning and
+    # re-planning there would face the same carrot from the same spot again.
+    following = best + 1 if best + 1 < length else best
+    nx = origin[0] + (path[following, 0] + 0.5) * cell_m
+    ny = origin[1] + (path[following, 1] + 0.5) * cell_m
+    side = _sideways_towards(grid, origin, cell_m, pose, nx, ny, step_m, inflate)
+    if side >= 0:
+        return side, WALKING
     return TURN_LEFT, REPLAN
+
+
+@numba.njit(**_JIT)
+def _sideways_towards(
+    grid: np.ndarray,
+    origin: np.ndarray,
+    cell_m: float,
+    pose: np.ndarray,
+    cx: float,
+    cy: float,
+    step_m: float,
+    inflate: int,
+) -> int:
+    """The safe sideways move (left or right) that brings the agent nearest to world
+    ``(cx, cy)``, if it brings it nearer at all; else -1."""
+    x, y = pose[0, 3], pose[1, 3]
+    yaw = _heading(pose)
+    fx, fy = np.cos(yaw), np.sin(yaw)
+    best, best_d = -1, (cx - x) ** 2 + (cy - y) ** 2
+    for k in range(2):
+        move, mx, my = (MOVE_LEFT, -fy, fx) if k == 0 else (MOVE_RIGHT, fy, -fx)
+        d = (cx - x - step_m * mx) ** 2 + (cy - y - step_m * my) ** 2
+        if d < best_d - 1e-12 and move_is_safe(grid, origin, cell_m, pose, move, step_m, inflate):
+            best, best_d = move, d
+    return best

@@ -19,6 +19,7 @@ from naruto_gym.rl.goal_candidates import (
 )
 from naruto_gym.rl.goal_planner import (
     MOVE_FORWARD,
+    MOVE_RIGHT,
     REACHED,
     TURN_LEFT,
     WALKING,
@@ -105,6 +106,26 @@ def test_following_a_path_turns_towards_it_then_moves_forward():
     assert follow_path(
         grid, ORIGIN, 0.1, at_goal, path, length, walked, 0.1, np.deg2rad(20), 1
     ) == (TURN_LEFT, REACHED)
+
+
+def test_where_the_path_turns_by_a_corner_a_sideways_step_follows_it():
+    """Facing the carrot within half a turn, a forward step that ends beside the path in an
+    inflated cell would make the walker turn and re-plan the same path forever (an explorer
+    episode spun in place for 340 steps so): it steps sideways onto the path instead."""
+    grid = np.zeros((4, 40, 40), np.uint8)
+    grid[FREE, 1:39, 1:39] = 255
+    grid[OCCUPIED, 21, 22] = 255  # (21, 20) lies within the inflation, row 19 does not
+    path = np.zeros((256, 2), np.int64)
+    cells = [(20, 20), (20, 19), (21, 19), (22, 19), (23, 19), (24, 19), (25, 19), (26, 19)]
+    path[: len(cells)] = cells
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # optical axis +x
+    pose[:2, 3] = [2.05, 2.005]  # just inside cell (20, 20)
+    cursor = np.zeros(1, np.int64)
+    move, status = follow_path(grid, ORIGIN, 0.1, pose, path, len(cells), cursor, 0.1,
+                               np.deg2rad(15), 2)  # fmt: skip
+    assert (move, status) == (MOVE_RIGHT, WALKING)
+    assert traversable(grid, 20, 19, 2) and not traversable(grid, 21, 20, 2)
 
 
 def _coarse(grid: np.ndarray, factor: int = 4) -> np.ndarray:
