@@ -77,6 +77,8 @@ WALK_HEIGHT_M = 1.3
 WALK_HEIGHT_TOLERANCE_M = 0.25
 #: Steps between two searches for candidates while the walker has none.
 IDLE_SEARCH_EVERY = 4
+#: Lowest camera height above what is below it that an idle walker steps down to.
+IDLE_LOWEST_M = 0.6
 
 
 def _wrap(angle: float) -> float:
@@ -150,6 +152,7 @@ class GoalWalker:
         self.primitives = np.full(n, -1, np.int64)  # -1: walking to a candidate
         self.phases = np.full(n, IDLE, np.int64)
         self.idle_steps = np.zeros(n, np.int64)
+        self.idle_turns = np.zeros(n, np.int64)  # idle moves since the last goal
         self.wandering = np.zeros(n, bool)  # walking to a place with no candidate in view
         self.last_moves = np.full(n, -1, np.int64)  # the walking move sent last, and from where
         self.last_positions = np.zeros((n, 2))
@@ -188,6 +191,7 @@ class GoalWalker:
         self.lengths[envs] = 0
         self.tables[envs] = 0.0
         self.counts[envs] = 0
+        self.idle_turns[envs] = 0
 
     def refresh_candidates(self, envs: np.ndarray | None = None) -> np.ndarray:
         """Find the candidates of ``envs`` (default all) on their maps as they are now;
@@ -254,6 +258,7 @@ class GoalWalker:
         self.targets[i] = self.centres[i, slot]
         self.target_clusters[i] = self.clusters[i, slot]
         self.phases[i] = WALK
+        self.idle_turns[i] = 0
         self._plan(i, self.viewpoints[i, slot])
 
     def _wander(self, i: int) -> None:
@@ -274,6 +279,7 @@ class GoalWalker:
         self.targets[i] = goal
         self.phases[i] = WALK
         self.idle_steps[i] = 0
+        self.idle_turns[i] = 0
         self._plan(i, goal)
 
     def _plan(self, i: int, goal: np.ndarray) -> None:
@@ -348,11 +354,11 @@ class GoalWalker:
             if self.phases[i] == IDLE:
                 self.idle_steps[i] += 1
                 if self.idle_steps[i] % IDLE_SEARCH_EVERY:
-                    return TURN_LEFT
+                    return self._idle_move(i)
                 self._refresh(i)
                 self._go_to(i, 0)
                 if self.phases[i] == IDLE:
-                    return TURN_LEFT
+                    return self._idle_move(i)
             if self.phases[i] == GIVEN_UP:
                 self._finish(i)
                 continue
@@ -377,6 +383,19 @@ class GoalWalker:
             self._finish(i)
         return TURN_LEFT
 
+    def _idle_move(self, i: int) -> int:
+        """Turning in place with nothing in reach; after a full turn, a step down where the
+        space below allows: an agent standing over furniture walks its slice of the map
+        above the doorways' lintels, where every room looks closed (the slice restarts
+        lower on the way down)."""
+        below = self.map.clearance_down[i]
+        self.idle_turns[i] += 1
+        if self._idle_descent(i) and below > max(
+            IDLE_LOWEST_M, self.step_m + VERTICAL_MARGIN_M
+        ):
+            return MOVE_DOWN
+        return TURN_LEFT
+
     def _height_move(self, i: int) -> int:
         """A vertical move towards the walking height, or -1 (at it, or the floor unknown)."""
         below, above = self.map.clearance_down[i], self.map.clearance_up[i]
@@ -384,11 +403,19 @@ class GoalWalker:
             return -1
         if below > WALK_HEIGHT_M + WALK_HEIGHT_TOLERANCE_M:
             return MOVE_DOWN
-        if below < WALK_HEIGHT_M - WALK_HEIGHT_TOLERANCE_M and above > (
-            self.step_m + VERTICAL_MARGIN_M
+        if (
+            below < WALK_HEIGHT_M - WALK_HEIGHT_TOLERANCE_M
+            and above > self.step_m + VERTICAL_MARGIN_M
+            and not self._idle_descent(i)
         ):
             return MOVE_UP
         return -1
+
+    def _idle_descent(self, i: int) -> bool:
+        """Whether the walker has turned a full turn with nothing in reach (it then steps
+        down, see :meth:`_idle_move`, until a goal shows)."""
+        full_turn = int(np.ceil(2.0 * np.pi / max(self.turn_rad, 1e-6)))
+        return self.phases[i] == IDLE and self.idle_turns[i] > full_turn
 
     def _walk(self, i: int) -> int:
         """The walking move, or -1 once at the viewpoint (phase FACE) or given up."""

@@ -8,9 +8,20 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from naruto_gym.rl.egocentric_map import EgocentricMapObservation, VectorEgocentricMapObservation
+from naruto_gym.rl.egocentric_map import (
+    EgocentricMapBuilder,
+    EgocentricMapObservation,
+    VectorEgocentricMapObservation,
+)
 from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL
-from naruto_gym.rl.goal_actions import FACE, GoalActions, VectorGoalActions
+from naruto_gym.rl.goal_actions import (
+    FACE,
+    MOVE_DOWN,
+    MOVE_UP,
+    GoalActions,
+    GoalWalker,
+    VectorGoalActions,
+)
 from naruto_gym.rl.goal_candidates import (
     CANDIDATE_FEATURES,
     find_candidates,
@@ -22,6 +33,7 @@ from naruto_gym.rl.goal_planner import (
     MOVE_RIGHT,
     REACHED,
     TURN_LEFT,
+    TURN_RIGHT,
     WALKING,
     follow_path,
     plan_path,
@@ -380,3 +392,37 @@ def test_steps_inside_a_goal_skip_the_observation_and_change_nothing():
     finally:
         fast.close()
         plain.close()
+
+
+def test_an_idle_walker_over_furniture_steps_down_after_a_full_turn():
+    """Nothing in reach and the floor (a table top, say) 1.1 m below: above the doorways'
+    lintels every room looks closed. After a full turn in place the walker steps down, and
+    its walking-height rule does not lift it back while it has no goal."""
+    builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
+    walker = GoalWalker(builder, step_m=0.1, turn_rad=np.deg2rad(20))
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # level, optical axis +x
+    pose[:3, 3] = [1.0, 1.0, 2.3]
+    builder.reset(np.zeros(1, np.int64), pose[None])
+    walker.reset()
+    panorama = np.zeros((32, 64), np.float32)  # no surface around at the agent's height
+    moves = []
+    for _ in range(30):
+        panorama[0], panorama[-1] = 2.65 - pose[2, 3], pose[2, 3] - 1.2  # ceiling, table top
+        builder.update({
+            "depth": np.zeros((1, 16, 16), np.float32),
+            "pose": pose[None].copy(),
+            "panorama": panorama[None].copy(),
+        })  # fmt: skip
+        move = int(walker.next_moves()[0])
+        moves.append(move)
+        if move in (TURN_LEFT, TURN_RIGHT):  # the env's turn of 20 degrees about +z
+            angle = np.deg2rad(20) * (1 if move == TURN_LEFT else -1)
+            turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
+                             [0, 0, 1]])  # fmt: skip
+            pose[:3, :3] = turn @ pose[:3, :3]
+        elif move == MOVE_DOWN:
+            pose[2, 3] -= 0.1
+    first_down = moves.index(MOVE_DOWN)
+    assert first_down >= 18 and set(moves[:first_down]) <= {TURN_LEFT, TURN_RIGHT}  # a turn
+    assert MOVE_UP not in moves and pose[2, 3] < 2.1  # below the lintels, and not back up
