@@ -58,7 +58,6 @@ class CapturedIterations:
         self._seen: Counter[int] = Counter()
         self.failure: str | None = None
         """Why capturing failed (every iteration then runs eagerly), or None."""
-        self.replays = 0
 
     @property
     def captured_sizes(self) -> list[int]:
@@ -96,7 +95,6 @@ class CapturedIterations:
         for target, source in zip(_tensors(captured.inputs), _tensors(rays), strict=True):
             target.copy_(source)
         captured.graph.replay()
-        self.replays += 1
         return captured.names, captured.values
 
     def _capture(self, rays: RayBatch) -> _Captured:

@@ -141,6 +141,23 @@ def _cell_of(grid_origin: np.ndarray, cell_m: float, x: float, y: float) -> tupl
 
 
 @numba.njit(**_JIT)
+def _move_direction(pose: np.ndarray, action: int) -> tuple[float, float]:
+    """The unit horizontal direction of a move (forward, backward, left, right) from
+    ``pose``; (0, 0) for any other action."""
+    yaw = _heading(pose)
+    fx, fy = np.cos(yaw), np.sin(yaw)
+    if action == MOVE_FORWARD:
+        return fx, fy
+    if action == MOVE_BACKWARD:
+        return -fx, -fy
+    if action == MOVE_LEFT:
+        return -fy, fx
+    if action == MOVE_RIGHT:
+        return fy, -fx
+    return 0.0, 0.0
+
+
+@numba.njit(**_JIT)
 def move_is_safe(
     grid: np.ndarray,
     origin: np.ndarray,
@@ -152,18 +169,9 @@ def move_is_safe(
 ) -> bool:
     """Whether a horizontal move (forward, backward, left, right) of ``step_m`` ends in the
     agent's own cell or in a traversable one; other actions are always safe here."""
-    yaw = _heading(pose)
-    fx, fy = np.cos(yaw), np.sin(yaw)
-    if action == MOVE_FORWARD:
-        mx, my = fx, fy
-    elif action == MOVE_BACKWARD:
-        mx, my = -fx, -fy
-    elif action == MOVE_LEFT:
-        mx, my = -fy, fx
-    elif action == MOVE_RIGHT:
-        mx, my = fy, -fx
-    else:
+    if action not in (MOVE_FORWARD, MOVE_BACKWARD, MOVE_LEFT, MOVE_RIGHT):
         return True
+    mx, my = _move_direction(pose, action)
     here = _cell_of(origin, cell_m, pose[0, 3], pose[1, 3])
     there = _cell_of(origin, cell_m, pose[0, 3] + step_m * mx, pose[1, 3] + step_m * my)
     return there == here or traversable(grid, there[0], there[1], inflate)
@@ -254,11 +262,9 @@ def _sideways_towards(
     """The safe sideways move (left or right) that brings the agent nearest to world
     ``(cx, cy)``, if it brings it nearer at all; else -1."""
     x, y = pose[0, 3], pose[1, 3]
-    yaw = _heading(pose)
-    fx, fy = np.cos(yaw), np.sin(yaw)
     best, best_d = -1, (cx - x) ** 2 + (cy - y) ** 2
-    for k in range(2):
-        move, mx, my = (MOVE_LEFT, -fy, fx) if k == 0 else (MOVE_RIGHT, fy, -fx)
+    for move in (MOVE_LEFT, MOVE_RIGHT):
+        mx, my = _move_direction(pose, move)
         d = (cx - x - step_m * mx) ** 2 + (cy - y - step_m * my) ** 2
         if d < best_d - 1e-12 and move_is_safe(grid, origin, cell_m, pose, move, step_m, inflate):
             best, best_d = move, d

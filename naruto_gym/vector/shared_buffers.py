@@ -82,15 +82,13 @@ class SharedObservations:
     def copy(self, threads: int = 1) -> dict[str, np.ndarray]:
         """New arrays holding every agent's observation (what the env hands out: the shared
         memory is written again next step), copied in up to ``threads`` threads."""
-        fresh = {key: np.empty_like(array) for key, array in self.arrays.items()}
+        fresh = self.empty()
         total = sum(array.nbytes for array in fresh.values())
         parts = max(1, min(threads, self.num_envs, total // _MIN_COPY_BYTES_PER_THREAD))
         bounds = np.linspace(0, self.num_envs, parts + 1).astype(np.int64)
 
         def copy_part(k: int) -> None:
-            part = slice(bounds[k], bounds[k + 1])
-            for key, array in self.arrays.items():
-                fresh[key][part] = array[part]
+            self.copy_rows(fresh, int(bounds[k]), int(bounds[k + 1]))
 
         run_parallel(copy_part, parts)
         return fresh

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from naruto_agent.mapping import NeuralMapperConfig
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
 from naruto_gym.scenes.mesh_scene import Scene, scene_from_trimesh
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
@@ -61,3 +62,25 @@ def room_renderer(room: Scene, small_camera: PinholeCamera) -> RgbdRenderer:
 @pytest.fixture(scope="session")
 def room_bounds(room: Scene) -> np.ndarray:
     return room.bounds + np.array([[-0.1], [0.1]])
+
+
+def tiny_mapper_config(**overrides) -> NeuralMapperConfig:
+    """A neural mapper small enough for a few iterations in a test (a coarse 6-level hash
+    grid, 24 + 6 rays an iteration, two iterations a step); ``overrides`` replace fields."""
+    settings = dict(
+        hash_levels=6,
+        hash_log2_table_size=11,
+        hash_finest_voxel_m=0.1,
+        first_frame_iterations=2,
+        iterations_per_step=2,
+        rays_per_iteration=24,
+        current_frame_rays=6,
+        active_top_rays=8,
+        active_oversample=2,
+        keyframe_pixel_fraction=0.05,
+        smoothness_points=4,
+        device="cpu",
+        seed=0,
+    )
+    settings.update(overrides)
+    return NeuralMapperConfig(**settings)

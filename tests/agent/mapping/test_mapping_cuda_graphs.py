@@ -10,27 +10,16 @@ import torch
 from naruto_agent.mapping import NeuralMapper, NeuralMapperConfig
 from naruto_agent.mapping.rendering import RayBatch
 
+from .conftest import orbit_poses, tiny_mapper_config
+
 CUDA = torch.cuda.is_available()
 needs_cuda = pytest.mark.skipif(not CUDA, reason="needs a CUDA device")
 
 
 def config(**overrides) -> NeuralMapperConfig:
-    settings = dict(
-        hash_levels=6,
-        hash_log2_table_size=11,
-        hash_finest_voxel_m=0.1,
-        first_frame_iterations=2,
-        iterations_per_step=2,
-        rays_per_iteration=256,
-        current_frame_rays=32,
-        active_top_rays=64,
-        active_oversample=2,
-        keyframe_pixel_fraction=0.05,
-        smoothness_points=4,
-        seed=0,
+    return tiny_mapper_config(
+        **{"rays_per_iteration": 256, "current_frame_rays": 32, "active_top_rays": 64, **overrides}
     )
-    settings.update(overrides)
-    return NeuralMapperConfig(**settings)
 
 
 def fixed_rays(count: int, device: torch.device, seed: int) -> RayBatch:
@@ -86,8 +75,6 @@ def test_replayed_iterations_equal_eager_ones_without_random_draws(room_bounds, 
 @needs_cuda
 def test_a_mapping_run_with_graphs_learns_the_room(room_bounds, small_camera, room_renderer):
     pytest.importorskip("triton")
-    from tests.agent.mapping.conftest import orbit_poses
-
     finals = {}
     for graphs in (True, False):
         mapper = NeuralMapper(
