@@ -107,6 +107,7 @@ def memory_run(args: Args) -> dict[str, Any]:
         1, scene="procedural:room", max_episode_steps=args.max_episode_steps,
         action_mode="discrete",
         camera=CAMERA, panorama_shape=None, coverage_samples=args.coverage_samples,
+        pinhole_backend="auto",
     )
     rng = np.random.default_rng(0)
     env.reset(seed=0)

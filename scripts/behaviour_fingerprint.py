@@ -127,10 +127,13 @@ def policy_episode(policy_name: str, scene: str, steps: int, seed: int) -> dict[
 
 
 def batched_env(num_envs: int, steps: int, seed: int) -> dict[str, Any]:
-    """Checksums of the batched env's observations over a fixed-seed run."""
+    """Checksums of the batched env's observations over a fixed-seed run, its frames drawn
+    as RL draws them (``pinhole_backend="auto"``)."""
     from naruto_gym.vector import NarutoReconVectorEnv
 
-    env = NarutoReconVectorEnv(num_envs, action_mode="discrete", image_scale=0.1)
+    env = NarutoReconVectorEnv(
+        num_envs, action_mode="discrete", image_scale=0.1, pinhole_backend="auto"
+    )
     env.action_space.seed(seed)
     observations, _ = env.reset(seed=seed)
     hashes = [digest(*(observations[key] for key in sorted(observations)))]

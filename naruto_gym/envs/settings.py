@@ -16,17 +16,14 @@ from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import resolve_threads
 
-#: How one env makes its pinhole frames by default: the reference ray cast, so that a default
-#: ``NarutoReconEnv`` gives the frames every published figure and the behaviour fingerprint
-#: were made with.
+#: How an env makes its pinhole frames by default, one env or batched: the reference ray cast,
+#: so that a default env gives the frames every published figure and the behaviour
+#: fingerprint were made with. ``"auto"`` (the rasterizer where it is cheaper) is the setting
+#: for throughput, which the learning entry points (``naruto_gym.rl``) pass: the rasterizer's
+#: depths differ from the ray cast's by float rounding (and, at exact edge ties, by another
+#: triangle), which flips decisions of the frontier and NARUTO policies, so fixed-seed
+#: episodes take other paths with it (docs/environment.md, "Pinhole backends").
 PINHOLE_BACKEND = "raycast"
-#: How the batched env makes them by default: ``"auto"``, the rasterizer where it is cheaper,
-#: as RL wants throughput. The two defaults stay apart because the rasterizer's depths differ
-#: from the ray cast's by float rounding (and, at exact edge ties, by another triangle), and
-#: that flips decisions of the frontier and NARUTO policies: with ``"auto"`` as the single
-#: env's default their fixed-seed episodes take other paths (docs/environment.md, "Pinhole
-#: backends").
-BATCHED_PINHOLE_BACKEND = "auto"
 
 
 @dataclass(frozen=True)

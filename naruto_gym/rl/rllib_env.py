@@ -50,7 +50,9 @@ def make_rllib_env(config: Mapping[str, Any]) -> gym.Env | gym.vector.VectorEnv:
             ``depth`` (``"float"``, the default, or ``"uint8"``), ``top_down_map`` (default
             False), ``flatten`` (default True), ``num_envs`` (set by RLlib's vector entry
             point); any other key is passed to ``gymnasium.make`` / ``make_vec`` (for example
-            ``scene``, ``action_mode``, ``camera``, ``max_episode_steps``).
+            ``scene``, ``action_mode``, ``camera``, ``max_episode_steps``);
+            ``pinhole_backend`` defaults to ``"auto"`` (the rasterizer where cheaper), the
+            setting for throughput.
 
     Returns:
         A ``gym.Env`` without ``num_envs``, else a ``gym.vector.VectorEnv`` of the batched env.
@@ -66,6 +68,7 @@ def make_rllib_env(config: Mapping[str, Any]) -> gym.Env | gym.vector.VectorEnv:
     }
     flatten = bool(options.pop("flatten", True))
     num_envs = options.pop("num_envs", None)
+    options.setdefault("pinhole_backend", "auto")
     if num_envs is None:
         env = for_learning(gym.make(env_id, **options), **learning)
         if not flatten:

@@ -20,7 +20,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from naruto_gym.envs.settings import BATCHED_PINHOLE_BACKEND, EnvSettings
+from naruto_gym.envs.settings import EnvSettings
 from naruto_gym.envs.validation import check_keyword_names, check_vector_keywords
 from naruto_gym.geometry.transforms import validate_pose
 from naruto_gym.sensors.panorama import EquirectangularCamera
@@ -94,7 +94,6 @@ class BatchedEnvBase(gym.vector.VectorEnv):
         self.num_envs = int(num_envs)
         self.max_episode_steps = max_episode_steps
         self.render_mode = None
-        env_kwargs = {"pinhole_backend": BATCHED_PINHOLE_BACKEND, **env_kwargs}
         self.reconstruct = bool(env_kwargs.pop("reconstruct", False))
         check_keyword_names(env_kwargs, accepted_keywords(), owner)
         self.settings = EnvSettings(**env_kwargs)

@@ -91,12 +91,12 @@ class NarutoReconVectorEnv(BatchedEnvBase):
       / ``info["final_info"]``, as Stable-Baselines3 expects).
     * ``scene_cache_size``: generated scenes kept in memory for reuse (stream scenes only;
       a ``SharedSceneStreams`` group holds its current scene besides).
-    * ``pinhole_backend``: as for ``NarutoReconEnv``, but ``"auto"`` by default: the
-      rasterizer up to ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED`` triangles per pixel (a
-      higher limit than for one frame, as drawing many frames at once pays off on denser
-      meshes), else the ray cast: the single env's reference frames up to float rounding of
-      the depths and exact edge ties. Pass ``"raycast"`` for frames equal bit for bit to a
-      default ``NarutoReconEnv``'s.
+    * ``pinhole_backend``: as for ``NarutoReconEnv`` (default ``"raycast"``, the reference
+      frames). ``"auto"`` is the setting for throughput (the learning entry points of
+      ``naruto_gym.rl`` pass it): the rasterizer up to
+      ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED`` triangles per pixel (a higher limit than
+      for one frame, as drawing many frames at once pays off on denser meshes), else the ray
+      cast; its depths are the reference's up to float rounding and exact edge ties.
     * ``threads``: CPUs the env's compiled loops use (None: the ``NARUTO_GYM_THREADS``
       environment variable, else every CPU the process may run on; see
       :func:`~naruto_gym.utils.threads.default_thread_count`).

@@ -10,7 +10,7 @@ import inspect
 import pytest
 
 from naruto_gym.envs.naruto_recon_env import NarutoReconEnv
-from naruto_gym.envs.settings import BATCHED_PINHOLE_BACKEND, PINHOLE_BACKEND, EnvSettings
+from naruto_gym.envs.settings import PINHOLE_BACKEND, EnvSettings
 from naruto_gym.vector import NarutoReconVectorEnv
 from tests.property.scenes import CHEAP, small_room
 
@@ -34,15 +34,14 @@ def test_the_env_keeps_no_copy_of_a_setting():
         env.settings.max_translation_m = 1.0  # frozen: one value for the env's life
 
 
-def test_the_batched_env_reads_the_same_settings_and_its_own_pinhole_default():
+def test_the_batched_env_reads_the_same_settings_with_the_same_defaults():
     vector = NarutoReconVectorEnv(2, scene=small_room(), **CHEAP)
     single = NarutoReconEnv(small_room(), **CHEAP)
-    assert PINHOLE_BACKEND == "raycast" and BATCHED_PINHOLE_BACKEND == "auto"
-    assert single.settings.pinhole_backend == PINHOLE_BACKEND
-    assert vector.settings.pinhole_backend == BATCHED_PINHOLE_BACKEND
-    assert dataclasses.replace(
-        vector.settings, pinhole_backend=PINHOLE_BACKEND, threads=None
-    ) == dataclasses.replace(single.settings, threads=None)
+    assert PINHOLE_BACKEND == "raycast"
+    assert single.settings.pinhole_backend == vector.settings.pinhole_backend == PINHOLE_BACKEND
+    assert dataclasses.replace(vector.settings, threads=None) == dataclasses.replace(
+        single.settings, threads=None
+    )
     for name in FIELDS:
         if name != "camera":  # the batched env's camera is the scaled one, made once
             assert name not in vars(vector), f"the batched env copies the setting {name}"

@@ -25,7 +25,6 @@ SMALL = {
     "camera": PinholeCamera(40, 30, 20, 20, 19.5, 14.5),
     "coverage_samples": 3000,
     "panorama_shape": None,
-    "pinhole_backend": "raycast",  # the single env's default (the batched env's is "auto")
 }
 
 

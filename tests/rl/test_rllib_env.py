@@ -35,8 +35,13 @@ def test_with_num_envs_it_is_the_batched_env_with_flat_float_observations():
             observations, rewards, terminated, truncated, _ = envs.step(envs.action_space.sample())
         assert observations.shape == (3, envs.single_observation_space.shape[0])
         assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+        # Learning wants throughput: frames rasterized where cheaper unless told otherwise.
+        assert envs.unwrapped.settings.pinhole_backend == "auto"
     finally:
         envs.close()
+    reference = make_rllib_env({**CONFIG, "num_envs": 2, "pinhole_backend": "raycast"})
+    assert reference.unwrapped.settings.pinhole_backend == "raycast"
+    reference.close()
 
 
 def test_without_num_envs_it_is_one_env_with_the_same_observation_space():

@@ -36,6 +36,7 @@ def save_tiny_model(venv, path) -> None:
 
 def test_adapter_steps_like_sb3_expects():
     venv = make_sb3_vec_env(3, size=32, top_down_map=True, **SETTINGS)
+    assert venv.env.unwrapped.settings.pinhole_backend == "auto"  # learning wants throughput
     observations = venv.reset()
     assert venv.observation_space.contains({k: v[0] for k, v in observations.items()})
     for _ in range(5):

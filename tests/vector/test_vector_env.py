@@ -28,7 +28,6 @@ SMALL: dict[str, Any] = {
     "camera": PinholeCamera(24, 24, 12, 12, 11.5, 11.5),
     "coverage_samples": 3000,
     "panorama_shape": (8, 16),
-    "pinhole_backend": "raycast",  # the single env's default (the batched env's is "auto")
 }
 
 
@@ -164,8 +163,8 @@ def test_matches_sync_with_rasterized_frames(split, workers):
     )
 
 
-def test_default_frames_are_rasterized_where_cheaper():
-    settings = {k: v for k, v in SMALL.items() if k != "pinhole_backend"}
+def test_auto_frames_are_rasterized_where_cheaper():
+    settings = {**SMALL, "pinhole_backend": "auto"}
     settings["camera"] = PinholeCamera(16, 16, 8, 8, 7.5, 7.5)
     vector = NarutoReconVectorEnv(2, **settings)
     # 16 x 16 pixels: more than 16 triangles of the default room per pixel, so ray cast.
@@ -173,12 +172,7 @@ def test_default_frames_are_rasterized_where_cheaper():
     # 24 x 24: 7 per pixel, rasterized when drawn many at once, ray-cast one at a time.
     settings["camera"] = PinholeCamera(24, 24, 12, 12, 11.5, 11.5)
     assert NarutoReconVectorEnv(2, **settings).scene_runtimes[0].renderer.frame_backend == "raster"
-    single = gym.make(
-        "NarutoRecon-v0",
-        pinhole_backend="auto",
-        **{k: v for k, v in settings.items() if k != "camera"},
-        camera=settings["camera"],
-    )
+    single = gym.make("NarutoRecon-v0", **settings)
     assert single.unwrapped.renderer.frame_backend == "raycast"
     single.close()
     settings["camera"] = PinholeCamera(64, 64, 32, 32, 31.5, 31.5)
