@@ -16,6 +16,8 @@ from naruto_gym.rl.egocentric_map import (
 from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL
 from naruto_gym.rl.goal_actions import (
     FACE,
+    LOOK_DOWN,
+    LOOK_UP,
     MOVE_DOWN,
     MOVE_UP,
     GoalActions,
@@ -343,12 +345,16 @@ def test_the_nearest_candidate_turns_at_a_goal_only_as_far_as_it_needs():
             _, _, _, _, info = env.step(0)
             coverage.append(info["coverage"])
         turns: dict[tuple[int, int], int] = {}
-        for phase, *cluster in moves.phases:
-            if phase == FACE:
+        glances: dict[tuple[int, int], list[int]] = {}
+        for move, (phase, *cluster) in zip(moves.moves, moves.phases, strict=True):
+            if phase == FACE and move in (TURN_LEFT, TURN_RIGHT):
                 turns[tuple(cluster)] = turns.get(tuple(cluster), 0) + 1
+            if phase == FACE and move in (LOOK_DOWN, LOOK_UP):
+                glances.setdefault(tuple(cluster), []).append(move)
         # At a goal the walker turns towards the cluster: half a turn at most (9 steps of
-        # 20 degrees), never a full spin.
+        # 20 degrees), never a full spin; then it glances down once and levels again.
         assert len(turns) >= 2 and max(turns.values()) <= 9
+        assert glances and all(sent == [LOOK_DOWN, LOOK_UP] for sent in glances.values())
         assert coverage[-1] > coverage[0] + 0.1  # it goes somewhere new
     finally:
         env.close()
@@ -399,7 +405,8 @@ def test_an_idle_walker_over_furniture_steps_down_after_a_full_turn():
     lintels every room looks closed. After a full turn in place the walker steps down, and
     its walking-height rule does not lift it back while it has no goal."""
     builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
-    walker = GoalWalker(builder, step_m=0.1, turn_rad=np.deg2rad(20))
+    # No glance at a goal: this test's pose turns and sinks but never pitches.
+    walker = GoalWalker(builder, step_m=0.1, turn_rad=np.deg2rad(20), glance_steps=0)
     pose = np.eye(4)
     pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # level, optical axis +x
     pose[:3, 3] = [1.0, 1.0, 2.3]
@@ -426,3 +433,10 @@ def test_an_idle_walker_over_furniture_steps_down_after_a_full_turn():
     first_down = moves.index(MOVE_DOWN)
     assert first_down >= 18 and set(moves[:first_down]) <= {TURN_LEFT, TURN_RIGHT}  # a turn
     assert MOVE_UP not in moves and pose[2, 3] < 2.1  # below the lintels, and not back up
+
+
+@pytest.mark.parametrize("glance_steps", [-1, 1.5])
+def test_a_glance_that_is_not_a_whole_count_is_refused(glance_steps):
+    builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
+    with pytest.raises(ValueError, match="glance_steps"):
+        GoalWalker(builder, glance_steps=glance_steps)
