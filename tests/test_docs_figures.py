@@ -54,6 +54,8 @@ _PPO = f"{RESULTS}/ppo_rooms_map"
 _GPU_ITERATION = f"{RESULTS}/gpu_h200/mapping_iteration.json"
 _GPU_EPISODE = f"{RESULTS}/gpu_h200/naruto_episode_office0_neural_triton_400steps.json"
 _GPU_SCALING = f"{RESULTS}/gpu_h200/vector_scaling_16cpu.json"
+_EXPLORER = f"{RESULTS}/explorer_candidates"
+_EXPLORER_PAGE = "docs/benchmarks/explorer.md"
 _BOARD = "docs/benchmarks/leaderboard.md"  # generated from the suite run's folder
 _MEAN_STD = "{mean:.1f} ± {std:.1f}"
 _ROOM = "rows[scene=replica_like_room]"
@@ -65,6 +67,22 @@ def _board(section: str, policy: str, interval: bool = True) -> str:
     and its interval, or the mean alone."""
     cell = r"([\d.]+ \[[\d.]+, [\d.]+\])" if interval else r"([\d.]+) \["
     return rf"(?s)\n## {re.escape(section)}\n.*?\n\| {policy} \| \d+ \| \d+ \| [^|]+ \| {cell}"
+
+
+def _explorer_figures(label: str, result: str) -> tuple[Figure, ...]:
+    """The explorer page's table row ``label`` (final coverage / area for each policy, the
+    paired differences with their intervals) against ``evaluation_{result}.json``."""
+    source = f"{_EXPLORER}/evaluation_{result}.json"
+    row = rf"\| {re.escape(label)} \| "
+    number = r"[-+\d.]+"
+    cells = [
+        (rf"{row}([\d.]+) / ", "table.explorer.mean_final", "{:.1f}", 100.0),
+        (rf"{row}[\d.]+ / ([\d.]+) \|", "table.explorer.mean_auc", "{:.3f}", 1.0),
+        (rf"{row}(?:[^|]*\| ){{3}}\**\+([\d.]+)", "paired.frontier.mean_auc_difference", "{:.3f}", 1.0),
+        (rf"{row}(?:[^|]*\| ){{3}}[^[]*\[({number}),", "paired.frontier.interval_95[0]", "{:.3f}", 1.0),
+        (rf"{row}(?:[^|]*\| ){{4}}\**\+([\d.]+)", "paired.random.mean_auc_difference", "{:.3f}", 1.0),
+    ]
+    return tuple(Figure(_EXPLORER_PAGE, pattern, source, key, fmt, scale) for pattern, key, fmt, scale in cells)
 
 
 FIGURES: tuple[Figure, ...] = (
@@ -374,6 +392,24 @@ FIGURES: tuple[Figure, ...] = (
         "scaling.points[cores=16].ratio_default_vs_best_async",
         "{:.2f}",
     ),
+    Figure(
+        _INDEX,
+        r"\+([\d.]+) \[[-\d.]+, [\d.]+\] over frontier on the closed small",
+        f"{_EXPLORER}/evaluation_closed_small.json",
+        "paired.frontier.mean_auc_difference",
+        "{:.3f}",
+    ),
+    Figure(
+        _INDEX,
+        r"over frontier on the closed small class, \+([\d.]+) \[",
+        f"{_EXPLORER}/evaluation_closed_apartment.json",
+        "paired.frontier.mean_auc_difference",
+        "{:.3f}",
+    ),
+    *_explorer_figures("small, closed (24)", "closed_small"),
+    *_explorer_figures("apartment, closed (24)", "closed_apartment"),
+    *_explorer_figures("small, open (24)", "open_small"),
+    *_explorer_figures("apartment, open (8)", "open_apartment"),
 )
 
 _STEP = re.compile(r"(?P<name>[^.\[\]]+)|\[(?P<index>\d+)\]|\[(?P<match>[^\]]+)\]|\.")
