@@ -39,9 +39,10 @@ from naruto_gym.rl.egocentric_map_kernels import (
     MAP_CHANNELS,
     OCCUPIED,
     crop_all,
-    update_grid,
+    update_grids,
 )
 from naruto_gym.sensors.panorama import EquirectangularCamera
+from naruto_gym.utils.threads import resolve_threads, run_parallel
 
 __all__ = [
     "LAYERS",
@@ -81,6 +82,8 @@ class EgocentricMapBuilder:
         depth_stride: every n-th pixel of the depth frame is projected.
         panorama_stride: every n-th panorama column is read at a step (in turn, so
             successive steps read them all).
+        threads: threads a batch's agents are split between (None: every CPU this process may
+            use, see :func:`~naruto_gym.utils.threads.default_thread_count`).
 
     Raises:
         ValueError: a size or distance that is not positive, or no panorama.
@@ -100,6 +103,7 @@ class EgocentricMapBuilder:
         horizon_deg: float = 30.0,
         depth_stride: int = 2,
         panorama_stride: int = 4,
+        threads: int | None = None,
     ) -> None:
         if panorama_shape is None:
             raise ValueError(
@@ -126,6 +130,7 @@ class EgocentricMapBuilder:
         self.max_depth_m = float(max_depth_m)
         self.depth_stride = int(depth_stride)
         self.panorama_stride = int(panorama_stride)
+        self.threads = resolve_threads(threads)
         side = int(np.ceil(world_m / cell_m / far_factor)) * far_factor
         self.grids = np.zeros((self.num_envs, len(LAYERS), side, side), np.uint8)
         self.coarse = np.zeros(
@@ -210,37 +215,53 @@ class EgocentricMapBuilder:
                 "the egocentric map got an observation before its episode's "
                 "reset: call reset(envs, poses) at every episode start"
             )
-        poses = np.asarray(observations["pose"], np.float64)
-        depth = observations.get("depth")
+        poses = np.ascontiguousarray(observations["pose"], np.float64)
         panorama = observations["panorama"]
-        empty = np.zeros((0, 0), np.float32)
-        for row, i in enumerate(envs):
-            if abs(poses[row][2, 3] - self.slice_heights[i]) > 0.5 * self.band_m:
-                self.grids[i, [OCCUPIED, FREE]] = 0
-                self.coarse[i, [OCCUPIED, FREE]] = 0
-                self.slice_heights[i] = poses[row][2, 3]
-                self.slice_restarts[i] += 1
-            frame = empty if depth is None else np.ascontiguousarray(depth[row], np.float32)
-            update_grid(
-                self.grids[i],
-                self.coarse[i],
+        moved = np.abs(poses[:, 2, 3] - self.slice_heights[envs]) > 0.5 * self.band_m
+        for row in np.flatnonzero(moved):
+            i = envs[row]
+            self.grids[i, [OCCUPIED, FREE]] = 0
+            self.coarse[i, [OCCUPIED, FREE]] = 0
+            self.slice_heights[i] = poses[row, 2, 3]
+            self.slice_restarts[i] += 1
+        depth = observations.get("depth")
+        depths = (
+            np.zeros((len(envs), 0, 0), np.float32)
+            if depth is None
+            else np.ascontiguousarray(depth, np.float32)
+        )
+        panoramas = np.ascontiguousarray(panorama, np.float32)
+        phases = self.steps[envs].copy()
+        # Agents in contiguous parts, one compiled call per part, the parts in threads.
+        parts = max(1, min(self.threads, len(envs)))
+        bounds = np.linspace(0, len(envs), parts + 1).astype(np.int64)
+
+        def update_part(part: int) -> None:
+            update_grids(
+                self.grids,
+                self.coarse,
                 self.far_factor,
-                self.origins[i],
+                self.origins,
                 self.cell_m,
-                poses[row],
-                frame,
+                poses,
+                depths,
                 self._intrinsics,
                 self.depth_stride,
-                np.ascontiguousarray(panorama[row], np.float32),
+                panoramas,
                 self._panorama_directions,
                 self._rows[0],
                 self._rows[1],
                 self.panorama_stride,
                 self.band_m,
-                int(self.steps[i]),
+                phases,
+                envs,
+                int(bounds[part]),
+                int(bounds[part + 1]),
             )
-            self.poses[i] = poses[row]
-            self.steps[i] += 1
+
+        run_parallel(update_part, parts)
+        self.poses[envs] = poses
+        self.steps[envs] += 1
         top, bottom = panorama[:, 0], panorama[:, -1]
         self.clearance_up[envs] = np.where((top > 0).all(axis=1), top.min(axis=1), 0.0)
         self.clearance_down[envs] = np.where((bottom > 0).all(axis=1), bottom.min(axis=1), 0.0)

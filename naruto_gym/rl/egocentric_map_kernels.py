@@ -186,6 +186,54 @@ def crop_scale(
 
 
 @numba.njit(**_JIT)
+def update_grids(
+    grids: np.ndarray,
+    coarse: np.ndarray,
+    factor: int,
+    origins: np.ndarray,
+    cell_m: float,
+    poses: np.ndarray,
+    depths: np.ndarray,
+    intrinsics: np.ndarray,
+    depth_stride: int,
+    panoramas: np.ndarray,
+    panorama_directions: np.ndarray,
+    row_low: int,
+    row_high: int,
+    panorama_stride: int,
+    band_m: float,
+    phases: np.ndarray,
+    envs: np.ndarray,
+    first: int,
+    last: int,
+) -> None:
+    """:func:`update_grid` for the rows ``first`` to ``last`` (exclusive) of a batch: row
+    ``k`` is agent ``envs[k]``'s observation (``poses[k]``, ``depths[k]`` (``(n, 0, 0)``
+    when absent), ``panoramas[k]``) at its step ``phases[k]``. Rows write only their own
+    agent's grids, so disjoint ranges run in parallel threads."""
+    for k in range(first, last):
+        i = envs[k]
+        update_grid(
+            grids[i],
+            coarse[i],
+            factor,
+            origins[i],
+            cell_m,
+            poses[k],
+            depths[k],
+            intrinsics,
+            depth_stride,
+            panoramas[k],
+            panorama_directions,
+            row_low,
+            row_high,
+            panorama_stride,
+            band_m,
+            phases[k],
+        )
+
+
+@numba.njit(**_JIT)
 def crop_all(
     grids: np.ndarray,
     coarse: np.ndarray,

@@ -173,3 +173,26 @@ def test_batched_env_maps_the_final_observation_and_restarts_the_map():
         assert env.map_builder.steps.tolist() == [1, 1]
     finally:
         env.close()
+
+
+def test_a_batch_split_between_threads_builds_the_maps_of_one_agent_at_a_time():
+    """Agents are updated in parts, one compiled call per part in threads: the same maps as
+    updating each agent alone, also for a subset of the agents given out of order."""
+    env = NarutoReconVectorEnv(5, max_episode_steps=50, **ENV)
+    observations, _ = env.reset(seed=3)
+    batched = EgocentricMapBuilder(5, CAMERA, PANORAMA, threads=3)
+    alone = EgocentricMapBuilder(5, CAMERA, PANORAMA, threads=1)
+    for builder in (batched, alone):
+        builder.reset(np.arange(5), observations["pose"])
+    rng = np.random.default_rng(3)
+    for step in range(12):
+        observations, *_ = env.step(rng.integers(0, 8, 5))
+        envs = np.arange(5) if step % 3 else np.array([4, 1, 2])
+        batched.update({key: value[envs] for key, value in observations.items()}, envs)
+        for i in envs:
+            alone.update({key: value[[i]] for key, value in observations.items()}, np.array([i]))
+    assert np.array_equal(batched.grids, alone.grids)
+    assert np.array_equal(batched.coarse, alone.coarse)
+    assert np.array_equal(batched.steps, alone.steps) and np.array_equal(batched.poses, alone.poses)
+    assert batched.grids.any()
+    env.close()
