@@ -71,8 +71,10 @@ VERTICAL_MARGIN_M = 0.2
 IDLE, WALK, FACE, GIVEN_UP = 0, 1, 2, 3
 #: Goals the walker may finish within one step (it then turns in place).
 MAX_GOALS_PER_STEP = 3
-#: Height above the floor below (the panorama's bottom row) the walker walks at, and the
-#: tolerance around it: below doorways' lintels, above most furniture.
+#: Height above the floor the walker walks at, and the tolerance around it: below doorways'
+#: lintels, above most furniture. The floor is the lowest surface the panorama's bottom row
+#: (straight down) has hit in the episode, so walking over a table does not lift the agent
+#: above the lintels.
 WALK_HEIGHT_M = 1.3
 WALK_HEIGHT_TOLERANCE_M = 0.25
 #: Steps between two searches for candidates while the walker has none.
@@ -161,6 +163,7 @@ class GoalWalker:
         self.phases = np.full(n, IDLE, np.int64)
         self.idle_steps = np.zeros(n, np.int64)
         self.idle_turns = np.zeros(n, np.int64)  # idle moves since the last goal
+        self.floor_heights = np.full(n, np.inf)  # lowest surface seen straight down
         self.glance_left = np.zeros(n, np.int64)  # look-down moves left of a glance
         self.glanced = np.zeros(n, bool)  # the goal's glance is done
         self.wandering = np.zeros(n, bool)  # walking to a place with no candidate in view
@@ -202,6 +205,7 @@ class GoalWalker:
         self.tables[envs] = 0.0
         self.counts[envs] = 0
         self.idle_turns[envs] = 0
+        self.floor_heights[envs] = np.inf
         self.glance_left[envs] = 0
         self.glanced[envs] = False
 
@@ -421,15 +425,21 @@ class GoalWalker:
         return TURN_LEFT
 
     def _height_move(self, i: int) -> int:
-        """A vertical move towards the walking height, or -1 (at it, or the floor unknown)."""
+        """A vertical move towards the walking height above the floor, or -1 (at it, or
+        nothing seen below yet). It never comes nearer than one step and the vertical margin
+        to the surface below, nor climbs while an idle walker steps down."""
         below, above = self.map.clearance_down[i], self.map.clearance_up[i]
         if below <= 0:
             return -1
-        if below > WALK_HEIGHT_M + WALK_HEIGHT_TOLERANCE_M:
+        z = float(self.map.poses[i][2, 3])
+        self.floor_heights[i] = min(self.floor_heights[i], z - below)
+        height = z - self.floor_heights[i]
+        least = self.step_m + VERTICAL_MARGIN_M
+        if height > WALK_HEIGHT_M + WALK_HEIGHT_TOLERANCE_M and below > least:
             return MOVE_DOWN
         if (
-            below < WALK_HEIGHT_M - WALK_HEIGHT_TOLERANCE_M
-            and above > self.step_m + VERTICAL_MARGIN_M
+            (height < WALK_HEIGHT_M - WALK_HEIGHT_TOLERANCE_M or below < least)
+            and above > least
             and not self._idle_descent(i)
         ):
             return MOVE_UP

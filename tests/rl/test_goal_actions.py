@@ -440,3 +440,29 @@ def test_a_glance_that_is_not_a_whole_count_is_refused(glance_steps):
     builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
     with pytest.raises(ValueError, match="glance_steps"):
         GoalWalker(builder, glance_steps=glance_steps)
+
+
+def test_walking_over_a_table_does_not_lift_the_walker_above_the_lintels():
+    """The walking height is kept above the floor (the lowest surface seen straight down), not
+    above whatever is below now: over a 0.8 m table the walker stays put instead of climbing
+    1.3 m above the table top, where every doorway looks closed."""
+    builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
+    walker = GoalWalker(builder, step_m=0.1, turn_rad=np.deg2rad(20), glance_steps=0)
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # level, optical axis +x
+    pose[:3, 3] = [1.0, 1.0, 1.3]
+    builder.reset(np.zeros(1, np.int64), pose[None])
+    walker.reset()
+    panorama = np.zeros((32, 64), np.float32)
+    moves = []
+    for step in range(12):
+        surface = 0.0 if step < 4 else 0.8  # the floor, then a table top below the agent
+        panorama[0], panorama[-1] = 2.6 - pose[2, 3], pose[2, 3] - surface
+        builder.update({
+            "depth": np.zeros((1, 16, 16), np.float32),
+            "pose": pose[None].copy(),
+            "panorama": panorama[None].copy(),
+        })  # fmt: skip
+        moves.append(int(walker.next_moves()[0]))
+    assert MOVE_UP not in moves and MOVE_DOWN not in moves
+    assert walker.floor_heights[0] == pytest.approx(0.0, abs=1e-6)
