@@ -484,6 +484,14 @@ class GoalWalker:
             self.lengths[i] = 0
             self.phases[i] = FACE
             return -1
+        if (
+            move in (TURN_LEFT, TURN_RIGHT)
+            and self.last_moves[i] == TURN_LEFT + TURN_RIGHT - move
+            and move_is_safe(grid, origin, cell_m, pose, MOVE_FORWARD, self.step_m, self.inflate)
+        ):
+            # Turning back the way it turned last: the carrot lies between two headings a
+            # turn apart, each a hair beyond half a turn off it. Walk on instead.
+            return MOVE_FORWARD
         return int(move)
 
     def _finish(self, i: int) -> None:

@@ -20,6 +20,7 @@ from naruto_gym.rl.goal_actions import (
     LOOK_UP,
     MOVE_DOWN,
     MOVE_UP,
+    WALK,
     GoalActions,
     GoalWalker,
     VectorGoalActions,
@@ -466,3 +467,28 @@ def test_walking_over_a_table_does_not_lift_the_walker_above_the_lintels():
         moves.append(int(walker.next_moves()[0]))
     assert MOVE_UP not in moves and MOVE_DOWN not in moves
     assert walker.floor_heights[0] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_walker_turning_back_the_way_it_turned_last_walks_on():
+    """A carrot between two headings a turn apart, each a hair beyond half a turn off it,
+    made the walker turn left and right in place for 240 steps of an explorer episode: after a
+    turn, the opposite turn becomes a forward step where that is safe."""
+    builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
+    walker = GoalWalker(builder, step_m=0.1, turn_rad=np.deg2rad(20), glance_steps=0)
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # level, optical axis +x
+    pose[:3, 3] = [2.05, 2.05, 1.3]
+    builder.reset(np.zeros(1, np.int64), pose[None])
+    walker.reset()
+    builder.grids[0, FREE] = 255  # open floor all around
+    builder.poses[0] = pose
+    start = np.floor((pose[:2, 3] - builder.origins[0]) / builder.cell_m).astype(np.int64)
+    cells = [start + [k, -round(k * np.tan(np.deg2rad(16)))] for k in range(15)]  # 16 deg right
+    walker.paths[0, : len(cells)] = cells
+    walker.lengths[0] = len(cells)
+    walker.phases[0], walker.wandering[0], walker.cursors[0] = WALK, False, 0
+    walker.last_moves[0] = -1
+    first = int(walker.next_moves()[0])
+    assert first in (TURN_LEFT, TURN_RIGHT)  # the carrot is more than half a turn off
+    walker.cursors[0], walker.last_moves[0] = 0, TURN_LEFT + TURN_RIGHT - first
+    assert int(walker.next_moves()[0]) == MOVE_FORWARD  # it turned the other way last
