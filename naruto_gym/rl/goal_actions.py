@@ -162,7 +162,7 @@ class GoalWalker:
         self.primitives = np.full(n, -1, np.int64)  # -1: walking to a candidate
         self.phases = np.full(n, IDLE, np.int64)
         self.idle_steps = np.zeros(n, np.int64)
-        self.idle_turns = np.zeros(n, np.int64)  # idle moves since the last goal
+        self.idle_turns = np.zeros(n, np.int64)  # moves with no candidate (idle or wandering)
         self.floor_heights = np.full(n, np.inf)  # lowest surface seen straight down
         self.glance_left = np.zeros(n, np.int64)  # look-down moves left of a glance
         self.glanced = np.zeros(n, bool)  # the goal's glance is done
@@ -296,7 +296,6 @@ class GoalWalker:
         self.targets[i] = goal
         self.phases[i] = WALK
         self.idle_steps[i] = 0
-        self.idle_turns[i] = 0
         self._plan(i, goal)
 
     def _plan(self, i: int, goal: np.ndarray) -> None:
@@ -388,6 +387,10 @@ class GoalWalker:
                     self._refresh(i)  # a candidate found on the way ends the wander
                     if self.counts[i] > 0:
                         self._go_to(i, 0)
+                if self.wandering[i]:
+                    self.idle_turns[i] += 1
+                    if self._descends(i):
+                        return MOVE_DOWN
             if self.phases[i] == WALK:
                 move = self._walk(i)
                 if move >= 0:
@@ -418,11 +421,16 @@ class GoalWalker:
         space below allows: an agent standing over furniture walks its slice of the map
         above the doorways' lintels, where every room looks closed (the slice restarts
         lower on the way down)."""
-        below = self.map.clearance_down[i]
         self.idle_turns[i] += 1
-        if self._idle_descent(i) and below > max(IDLE_LOWEST_M, self.step_m + VERTICAL_MARGIN_M):
-            return MOVE_DOWN
-        return TURN_LEFT
+        return MOVE_DOWN if self._descends(i) else TURN_LEFT
+
+    def _descends(self, i: int) -> bool:
+        """Whether to step down now: a full turn's worth of moves with nothing in reach, and
+        room below."""
+        below = self.map.clearance_down[i]
+        return self._idle_descent(i) and below > max(
+            IDLE_LOWEST_M, self.step_m + VERTICAL_MARGIN_M
+        )
 
     def _height_move(self, i: int) -> int:
         """A vertical move towards the walking height above the floor, or -1 (at it, or
@@ -446,10 +454,15 @@ class GoalWalker:
         return -1
 
     def _idle_descent(self, i: int) -> bool:
-        """Whether the walker has turned a full turn with nothing in reach (it then steps
-        down, see :meth:`_idle_move`, until a goal shows)."""
+        """Whether the walker has spent a full turn's worth of moves with nothing in reach,
+        turning in place or wandering (it then steps down, see :meth:`_descends`, until a
+        goal shows): over furniture, the floor it keeps its height above may be the
+        furniture's top, never having seen the floor."""
         full_turn = int(np.ceil(2.0 * np.pi / max(self.turn_rad, 1e-6)))
-        return self.phases[i] == IDLE and self.idle_turns[i] > full_turn
+        nothing_in_reach = self.phases[i] == IDLE or (
+            self.phases[i] == WALK and self.wandering[i]
+        )
+        return nothing_in_reach and self.idle_turns[i] > full_turn
 
     def _walk(self, i: int) -> int:
         """The walking move, or -1 once at the viewpoint (phase FACE) or given up."""
