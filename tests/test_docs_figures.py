@@ -78,11 +78,29 @@ def _explorer_figures(label: str, result: str) -> tuple[Figure, ...]:
     cells = [
         (rf"{row}([\d.]+) / ", "table.explorer.mean_final", "{:.1f}", 100.0),
         (rf"{row}[\d.]+ / ([\d.]+) \|", "table.explorer.mean_auc", "{:.3f}", 1.0),
-        (rf"{row}(?:[^|]*\| ){{3}}\**\+([\d.]+)", "paired.frontier.mean_auc_difference", "{:.3f}", 1.0),
-        (rf"{row}(?:[^|]*\| ){{3}}[^[]*\[({number}),", "paired.frontier.interval_95[0]", "{:.3f}", 1.0),
-        (rf"{row}(?:[^|]*\| ){{4}}\**\+([\d.]+)", "paired.random.mean_auc_difference", "{:.3f}", 1.0),
+        (
+            rf"{row}(?:[^|]*\| ){{3}}\**\+([\d.]+)",
+            "paired.frontier.mean_auc_difference",
+            "{:.3f}",
+            1.0,
+        ),
+        (
+            rf"{row}(?:[^|]*\| ){{3}}[^[]*\[({number}),",
+            "paired.frontier.interval_95[0]",
+            "{:.3f}",
+            1.0,
+        ),
+        (
+            rf"{row}(?:[^|]*\| ){{4}}\**\+([\d.]+)",
+            "paired.random.mean_auc_difference",
+            "{:.3f}",
+            1.0,
+        ),
     ]
-    return tuple(Figure(_EXPLORER_PAGE, pattern, source, key, fmt, scale) for pattern, key, fmt, scale in cells)
+    return tuple(
+        Figure(_EXPLORER_PAGE, pattern, source, key, fmt, scale)
+        for pattern, key, fmt, scale in cells
+    )
 
 
 FIGURES: tuple[Figure, ...] = (
