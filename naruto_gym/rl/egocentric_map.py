@@ -231,7 +231,7 @@ class EgocentricMapBuilder:
             else np.ascontiguousarray(depth, np.float32)
         )
         panoramas = np.ascontiguousarray(panorama, np.float32)
-        phases = self.steps[envs].copy()
+        phases = self.steps[envs]  # a copy (indexed by an array)
         # Agents in contiguous parts, one compiled call per part, the parts in threads.
         parts = max(1, min(self.threads, len(envs)))
         bounds = np.linspace(0, len(envs), parts + 1).astype(np.int64)

@@ -57,6 +57,7 @@ from naruto_gym.rl.goal_planner import (
     move_is_safe,
     plan_path,
 )
+from naruto_gym.utils.checks import check_integer
 
 __all__ = ["GoalActions", "GoalWalker", "VectorGoalActions"]
 
@@ -81,6 +82,8 @@ WALK_HEIGHT_TOLERANCE_M = 0.25
 IDLE_SEARCH_EVERY = 4
 #: Lowest camera height above what is below it that an idle walker steps down to.
 IDLE_LOWEST_M = 0.6
+#: Each turn in place and the turn the other way.
+OPPOSITE_TURN = {TURN_LEFT: TURN_RIGHT, TURN_RIGHT: TURN_LEFT}
 
 
 def _wrap(angle: float) -> float:
@@ -108,9 +111,9 @@ class GoalWalker:
         frontier_m: the same for a cluster of free-space edges only (walked up to).
         max_path: longest path kept (a longer one is followed in parts).
         glance_steps: look-down moves at each viewpoint once the walker faces its cluster
-            (then as many back up to level). A level camera at walking height
-            sees no floor nearer than about 2.6 m (the default camera's half vertical field
-            of view is 29.5 degrees), and floor was most of what the explorer left unseen.
+            (then as many back up to level). A level camera at walking height sees no floor
+            nearer than about 2.6 m (the default camera's half vertical field of view is 29.5
+            degrees).
 
     Raises:
         ValueError: a count or distance that is not positive.
@@ -140,8 +143,7 @@ class GoalWalker:
         ):
             if not value > 0:
                 raise ValueError(f"{name} must be positive, got {value!r}")
-        if int(glance_steps) != glance_steps or glance_steps < 0:
-            raise ValueError(f"glance_steps must be a whole number >= 0, got {glance_steps!r}")
+        check_integer("glance_steps", glance_steps, low=0)
         self.map = map_builder
         self.num_candidates = int(num_candidates)
         self.primitive_actions = bool(primitive_actions)
@@ -162,7 +164,7 @@ class GoalWalker:
         self.primitives = np.full(n, -1, np.int64)  # -1: walking to a candidate
         self.phases = np.full(n, IDLE, np.int64)
         self.idle_steps = np.zeros(n, np.int64)
-        self.idle_turns = np.zeros(n, np.int64)  # moves with no candidate (idle or wandering)
+        self.moves_without_candidate = np.zeros(n, np.int64)  # idle or wandering, since a goal
         self.floor_heights = np.full(n, np.inf)  # lowest surface seen straight down
         self.glance_left = np.zeros(n, np.int64)  # look-down moves left of a glance
         self.glanced = np.zeros(n, bool)  # the goal's glance is done
@@ -204,7 +206,7 @@ class GoalWalker:
         self.lengths[envs] = 0
         self.tables[envs] = 0.0
         self.counts[envs] = 0
-        self.idle_turns[envs] = 0
+        self.moves_without_candidate[envs] = 0
         self.floor_heights[envs] = np.inf
         self.glance_left[envs] = 0
         self.glanced[envs] = False
@@ -275,7 +277,7 @@ class GoalWalker:
         self.targets[i] = self.centres[i, slot]
         self.target_clusters[i] = self.clusters[i, slot]
         self.phases[i] = WALK
-        self.idle_turns[i] = 0
+        self.moves_without_candidate[i] = 0
         self._plan(i, self.viewpoints[i, slot])
 
     def _wander(self, i: int) -> None:
@@ -388,7 +390,7 @@ class GoalWalker:
                     if self.counts[i] > 0:
                         self._go_to(i, 0)
                 if self.wandering[i]:
-                    self.idle_turns[i] += 1
+                    self.moves_without_candidate[i] += 1
                     if self._descends(i):
                         return MOVE_DOWN
             if self.phases[i] == WALK:
@@ -421,16 +423,14 @@ class GoalWalker:
         space below allows: an agent standing over furniture walks its slice of the map
         above the doorways' lintels, where every room looks closed (the slice restarts
         lower on the way down)."""
-        self.idle_turns[i] += 1
+        self.moves_without_candidate[i] += 1
         return MOVE_DOWN if self._descends(i) else TURN_LEFT
 
     def _descends(self, i: int) -> bool:
         """Whether to step down now: a full turn's worth of moves with nothing in reach, and
         room below."""
         below = self.map.clearance_down[i]
-        return self._idle_descent(i) and below > max(
-            IDLE_LOWEST_M, self.step_m + VERTICAL_MARGIN_M
-        )
+        return self._idle_descent(i) and below > max(IDLE_LOWEST_M, self.step_m + VERTICAL_MARGIN_M)
 
     def _height_move(self, i: int) -> int:
         """A vertical move towards the walking height above the floor, or -1 (at it, or
@@ -459,10 +459,8 @@ class GoalWalker:
         goal shows): over furniture, the floor it keeps its height above may be the
         furniture's top, never having seen the floor."""
         full_turn = int(np.ceil(2.0 * np.pi / max(self.turn_rad, 1e-6)))
-        nothing_in_reach = self.phases[i] == IDLE or (
-            self.phases[i] == WALK and self.wandering[i]
-        )
-        return nothing_in_reach and self.idle_turns[i] > full_turn
+        nothing_in_reach = self.phases[i] == IDLE or (self.phases[i] == WALK and self.wandering[i])
+        return nothing_in_reach and self.moves_without_candidate[i] > full_turn
 
     def _walk(self, i: int) -> int:
         """The walking move, or -1 once at the viewpoint (phase FACE) or given up."""
@@ -498,8 +496,8 @@ class GoalWalker:
             self.phases[i] = FACE
             return -1
         if (
-            move in (TURN_LEFT, TURN_RIGHT)
-            and self.last_moves[i] == TURN_LEFT + TURN_RIGHT - move
+            move in OPPOSITE_TURN
+            and self.last_moves[i] == OPPOSITE_TURN[move]
             and move_is_safe(grid, origin, cell_m, pose, MOVE_FORWARD, self.step_m, self.inflate)
         ):
             # Turning back the way it turned last: the carrot lies between two headings a

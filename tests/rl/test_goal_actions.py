@@ -20,6 +20,7 @@ from naruto_gym.rl.goal_actions import (
     LOOK_UP,
     MOVE_DOWN,
     MOVE_UP,
+    OPPOSITE_TURN,
     WALK,
     GoalActions,
     GoalWalker,
@@ -125,8 +126,8 @@ def test_following_a_path_turns_towards_it_then_moves_forward():
 
 def test_where_the_path_turns_by_a_corner_a_sideways_step_follows_it():
     """Facing the carrot within half a turn, a forward step that ends beside the path in an
-    inflated cell would make the walker turn and re-plan the same path forever (an explorer
-    episode spun in place for 340 steps so): it steps sideways onto the path instead."""
+    inflated cell would make the walker turn and re-plan the same path forever: it steps
+    sideways onto the path instead."""
     grid = np.zeros((4, 40, 40), np.uint8)
     grid[FREE, 1:39, 1:39] = 255
     grid[OCCUPIED, 21, 22] = 255  # (21, 20) lies within the inflation, row 19 does not
@@ -401,27 +402,38 @@ def test_steps_inside_a_goal_skip_the_observation_and_change_nothing():
         plain.close()
 
 
+def _level_walker(position: list[float]) -> tuple[EgocentricMapBuilder, GoalWalker, np.ndarray]:
+    """One agent's map and walker (no glance at a goal: these tests' poses never pitch), its
+    camera level at ``position`` with the optical axis along +x, the map reset there."""
+    builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
+    walker = GoalWalker(builder, step_m=0.1, turn_rad=np.deg2rad(20), glance_steps=0)
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]
+    pose[:3, 3] = position
+    builder.reset(np.zeros(1, np.int64), pose[None])
+    walker.reset()
+    return builder, walker, pose
+
+
+def _observe(builder: EgocentricMapBuilder, pose: np.ndarray, panorama: np.ndarray) -> None:
+    """The map takes one observation: ``pose``, ``panorama`` and an empty depth frame."""
+    builder.update({
+        "depth": np.zeros((1, 16, 16), np.float32),
+        "pose": pose[None].copy(),
+        "panorama": panorama[None].copy(),
+    })  # fmt: skip
+
+
 def test_an_idle_walker_over_furniture_steps_down_after_a_full_turn():
     """Nothing in reach and the floor (a table top, say) 1.1 m below: above the doorways'
     lintels every room looks closed. After a full turn in place the walker steps down, and
     its walking-height rule does not lift it back while it has no goal."""
-    builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
-    # No glance at a goal: this test's pose turns and sinks but never pitches.
-    walker = GoalWalker(builder, step_m=0.1, turn_rad=np.deg2rad(20), glance_steps=0)
-    pose = np.eye(4)
-    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # level, optical axis +x
-    pose[:3, 3] = [1.0, 1.0, 2.3]
-    builder.reset(np.zeros(1, np.int64), pose[None])
-    walker.reset()
+    builder, walker, pose = _level_walker([1.0, 1.0, 2.3])
     panorama = np.zeros((32, 64), np.float32)  # no surface around at the agent's height
     moves = []
     for _ in range(30):
         panorama[0], panorama[-1] = 2.65 - pose[2, 3], pose[2, 3] - 1.2  # ceiling, table top
-        builder.update({
-            "depth": np.zeros((1, 16, 16), np.float32),
-            "pose": pose[None].copy(),
-            "panorama": panorama[None].copy(),
-        })  # fmt: skip
+        _observe(builder, pose, panorama)
         move = int(walker.next_moves()[0])
         moves.append(move)
         if move in (TURN_LEFT, TURN_RIGHT):  # the env's turn of 20 degrees about +z
@@ -447,23 +459,13 @@ def test_walking_over_a_table_does_not_lift_the_walker_above_the_lintels():
     """The walking height is kept above the floor (the lowest surface seen straight down), not
     above whatever is below now: over a 0.8 m table the walker stays put instead of climbing
     1.3 m above the table top, where every doorway looks closed."""
-    builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
-    walker = GoalWalker(builder, step_m=0.1, turn_rad=np.deg2rad(20), glance_steps=0)
-    pose = np.eye(4)
-    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # level, optical axis +x
-    pose[:3, 3] = [1.0, 1.0, 1.3]
-    builder.reset(np.zeros(1, np.int64), pose[None])
-    walker.reset()
+    builder, walker, pose = _level_walker([1.0, 1.0, 1.3])
     panorama = np.zeros((32, 64), np.float32)
     moves = []
     for step in range(12):
         surface = 0.0 if step < 4 else 0.8  # the floor, then a table top below the agent
         panorama[0], panorama[-1] = 2.6 - pose[2, 3], pose[2, 3] - surface
-        builder.update({
-            "depth": np.zeros((1, 16, 16), np.float32),
-            "pose": pose[None].copy(),
-            "panorama": panorama[None].copy(),
-        })  # fmt: skip
+        _observe(builder, pose, panorama)
         moves.append(int(walker.next_moves()[0]))
     assert MOVE_UP not in moves and MOVE_DOWN not in moves
     assert walker.floor_heights[0] == pytest.approx(0.0, abs=1e-6)
@@ -471,15 +473,9 @@ def test_walking_over_a_table_does_not_lift_the_walker_above_the_lintels():
 
 def test_a_walker_turning_back_the_way_it_turned_last_walks_on():
     """A carrot between two headings a turn apart, each a hair beyond half a turn off it,
-    made the walker turn left and right in place for 240 steps of an explorer episode: after a
+    would make the walker turn left and right in place for as long as it stood there: after a
     turn, the opposite turn becomes a forward step where that is safe."""
-    builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
-    walker = GoalWalker(builder, step_m=0.1, turn_rad=np.deg2rad(20), glance_steps=0)
-    pose = np.eye(4)
-    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # level, optical axis +x
-    pose[:3, 3] = [2.05, 2.05, 1.3]
-    builder.reset(np.zeros(1, np.int64), pose[None])
-    walker.reset()
+    builder, walker, pose = _level_walker([2.05, 2.05, 1.3])
     builder.grids[0, FREE] = 255  # open floor all around
     builder.poses[0] = pose
     start = np.floor((pose[:2, 3] - builder.origins[0]) / builder.cell_m).astype(np.int64)
@@ -490,5 +486,5 @@ def test_a_walker_turning_back_the_way_it_turned_last_walks_on():
     walker.last_moves[0] = -1
     first = int(walker.next_moves()[0])
     assert first in (TURN_LEFT, TURN_RIGHT)  # the carrot is more than half a turn off
-    walker.cursors[0], walker.last_moves[0] = 0, TURN_LEFT + TURN_RIGHT - first
+    walker.cursors[0], walker.last_moves[0] = 0, OPPOSITE_TURN[first]
     assert int(walker.next_moves()[0]) == MOVE_FORWARD  # it turned the other way last
