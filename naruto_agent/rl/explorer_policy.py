@@ -26,6 +26,7 @@ import numpy as np
 
 from naruto_agent.policies.base import Info, Observation, Policy
 from naruto_agent.policies.registry import register_policy
+from naruto_agent.policies.watchdog import StallEvent
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
 from naruto_gym.rl.goal_actions import GoalWalker
 from naruto_gym.sensors.panorama import EquirectangularCamera
@@ -99,6 +100,8 @@ class MapGoalExplorer(Policy):
         model_path: the SB3 ``.zip`` (its ``.json`` settings beside it); None: the packaged
             checkpoint.
         deterministic: act with the mode of the action distribution (False samples).
+        stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
+            walk out of one (:meth:`recover_from_stall`); False: the model and walker alone.
 
     Raises:
         FileNotFoundError: no ``model_path`` and no packaged checkpoint, or a missing file
@@ -109,7 +112,12 @@ class MapGoalExplorer(Policy):
     action_modes = ("discrete",)
     required_observations = ("depth", "pose", "panorama")
 
-    def __init__(self, model_path: str | None = None, deterministic: bool = False) -> None:
+    def __init__(
+        self,
+        model_path: str | None = None,
+        deterministic: bool = False,
+        stall_watchdog: bool = True,
+    ) -> None:
         super().__init__()
         from stable_baselines3 import PPO
 
@@ -148,9 +156,10 @@ class MapGoalExplorer(Policy):
         self.steps_per_goal = int(self.settings["steps_per_goal"])
         self.map: EgocentricMapBuilder | None = None
         self.walker: GoalWalker | None = None
-        self._step = 0
+        self._until_decision = 0  # steps until the model picks the next action
         self._panorama_stride = (1, 1)
         self._band: EquirectangularCamera | None = None
+        self.use_stall_watchdog(enabled=stall_watchdog)
 
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
         super().reset(observation, info, seed)
@@ -189,7 +198,7 @@ class MapGoalExplorer(Policy):
         )
         self.map.reset(np.zeros(1, np.int64), np.asarray(observation["pose"])[None])
         self.walker.reset()
-        self._step = 0
+        self._until_decision = 0
 
     def _batch(self, observation: Observation) -> dict[str, np.ndarray]:
         rows, columns = self._panorama_stride
@@ -207,10 +216,24 @@ class MapGoalExplorer(Policy):
             raise RuntimeError("call reset() before act()")
         batch = self._batch(observation)
         self.map.update(batch)
-        if self._step % self.steps_per_goal == 0:
+        if self.check_stall(observation, info) is not None:
+            self._until_decision = self.steps_per_goal  # the recovery's walk gets a macro-step
+        elif self._until_decision == 0:
             learning = {key: value[0] for key, value in self.map.observe(batch).items()}
             learning["candidates"] = self.walker.refresh_candidates()[0]
             action, _ = self.model.predict(learning, deterministic=self.deterministic)
             self.walker.set_actions(np.array([int(action)]))
-        self._step += 1
+            self._until_decision = self.steps_per_goal
+        self._until_decision -= 1
         return int(self.walker.next_moves()[0])
+
+    def recover_from_stall(self, event: StallEvent) -> str:
+        """Walk out of the stay: the goal in hand (or a repeated move) is given up for the
+        nearest candidate past the stay's every position by the stay radius and a step, or
+        the reachable place farthest from the trail (:meth:`GoalWalker.leave
+        <naruto_gym.rl.goal_actions.GoalWalker.leave>`); the model picks again a whole
+        macro-step later."""
+        assert self.walker is not None and self.stall_watchdog is not None
+        radius = self.stall_watchdog.config.radius_m + self.context.max_translation_m
+        spots = event.position[None] if event.window is None else event.window
+        return self.walker.leave(0, spots, radius)

@@ -268,8 +268,13 @@ class EgocentricMapBuilder:
 
     def mark_blocked(self, env: int, x: float, y: float) -> None:
         """Mark the cell at world ``(x, y)`` an obstacle for agent ``env``: the env refused a
-        move into it (e.g. out of an open scan's scanned space, where no surface shows)."""
+        move into it (e.g. out of an open scan's scanned space, where no surface shows). The
+        cell the agent stands in is never marked (a short move may end in it): an obstacle
+        there would leave the agent no traversable cell to start a path from."""
         i, j = np.floor((np.array([x, y]) - self.origins[env]) / self.cell_m).astype(int)
+        si, sj = np.floor((self.poses[env][:2, 3] - self.origins[env]) / self.cell_m).astype(int)
+        if (i, j) == (si, sj):
+            return
         if 0 <= i < self.grids.shape[-2] and 0 <= j < self.grids.shape[-1]:
             self.grids[env, OCCUPIED, i, j] = 255
             self.grids[env, FREE, i, j] = 0

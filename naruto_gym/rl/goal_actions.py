@@ -51,11 +51,15 @@ from naruto_gym.rl.goal_planner import (
     MOVE_FORWARD,
     REACHED,
     REPLAN,
+    TRANSLATIONS,
     TURN_LEFT,
     TURN_RIGHT,
+    WALKING,
     follow_path,
     move_is_safe,
+    path_carrot,
     plan_path,
+    step_towards,
 )
 from naruto_gym.utils.checks import check_integer
 
@@ -169,6 +173,8 @@ class GoalWalker:
         self.glance_left = np.zeros(n, np.int64)  # look-down moves left of a glance
         self.glanced = np.zeros(n, bool)  # the goal's glance is done
         self.wandering = np.zeros(n, bool)  # walking to a place with no candidate in view
+        self.leaving = np.zeros(n, bool)  # wandering out of a stay: candidates do not end it
+        self.stays = np.zeros((n, 3))  # a stay left without turning: centre (x, y), radius
         self.last_moves = np.full(n, -1, np.int64)  # the walking move sent last, and from where
         self.last_positions = np.zeros((n, 2))
         self.slice_restarts = np.zeros(n, np.int64)  # the map's count when the goal was set
@@ -201,6 +207,8 @@ class GoalWalker:
         self.done[envs] = False
         self.phases[envs] = IDLE
         self.wandering[envs] = False
+        self.leaving[envs] = False
+        self.stays[envs] = 0.0
         self.last_moves[envs] = -1
         self.primitives[envs] = -1
         self.lengths[envs] = 0
@@ -270,6 +278,8 @@ class GoalWalker:
             slot = 0  # an empty slot: the nearest candidate
         self.slice_restarts[i] = self.map.slice_restarts[i]
         self.glanced[i] = False
+        self.leaving[i] = False
+        self.stays[i] = 0.0
         self.wandering[i] = self.counts[i] == 0
         if self.counts[i] == 0:
             self._wander(i)
@@ -279,6 +289,43 @@ class GoalWalker:
         self.phases[i] = WALK
         self.moves_without_candidate[i] = 0
         self._plan(i, self.viewpoints[i, slot])
+
+    def leave(self, i: int, spots: np.ndarray, radius_m: float) -> str:
+        """Walk agent ``i`` out of a stay (a stall watchdog's recovery): the goal being walked
+        to or faced is given up (its cluster done), a repeated primitive move dropped, and
+        the walker goes to the nearest candidate whose viewpoint lies farther than
+        ``radius_m`` from every one of ``spots`` ((K, 2+) world positions of the stay), else
+        to the reachable place farthest from its trail; returns what it chose, in a few words.
+
+        The walk keeps the goal until it is reached; the next :meth:`set_actions` replaces
+        it as usual.
+        """
+        spots = np.asarray(spots, np.float64).reshape(-1, np.shape(spots)[-1])[:, :2]
+        self.primitives[i] = -1
+        self.glance_left[i] = 0
+        a, b = self.target_clusters[i]
+        if (
+            self.phases[i] in (WALK, FACE)
+            and 0 <= a < self.done.shape[1]
+            and 0 <= b < self.done.shape[2]
+        ):
+            self.done[i, a, b] = True
+        self._refresh(i)
+        for slot in range(int(self.counts[i])):  # ranked by path length: nearest first
+            away = np.linalg.norm(spots - self.viewpoints[i, slot], axis=1)
+            if np.all(away > radius_m):
+                self._go_to(i, slot)
+                self.stays[i] = (*self.map.poses[i][:2, 3], radius_m)
+                return "walk to the nearest candidate past the stay"
+        self.slice_restarts[i] = self.map.slice_restarts[i]
+        self.glanced[i] = False
+        self.wandering[i] = True
+        self._wander(i)
+        self.leaving[i] = self.phases[i] == WALK
+        if self.leaving[i]:
+            self.stays[i] = (*self.map.poses[i][:2, 3], radius_m)
+            return "walk to the reachable place farthest from the trail"
+        return "nothing reachable: turn in place"
 
     def _wander(self, i: int) -> None:
         """No candidate: walk to the reachable place farthest from the trail (the path
@@ -347,7 +394,13 @@ class GoalWalker:
         if np.hypot(*(pose[:2, 3] - self.last_positions[i])) > 0.25 * self.step_m:
             return False
         heading = np.arctan2(pose[1, 2], pose[0, 2])
-        ahead = pose[:2, 3] + self.step_m * np.array([np.cos(heading), np.sin(heading)])
+        direction = np.array([np.cos(heading), np.sin(heading)])
+        standing = np.floor((pose[:2, 3] - self.map.origins[i]) / self.map.cell_m)
+        reach = self.step_m
+        ahead = pose[:2, 3] + reach * direction
+        while np.array_equal(np.floor((ahead - self.map.origins[i]) / self.map.cell_m), standing):
+            reach += 0.5 * self.map.cell_m  # a step shorter than a cell may end in this one
+            ahead = pose[:2, 3] + reach * direction
         self.map.mark_blocked(i, float(ahead[0]), float(ahead[1]))
         return True
 
@@ -368,7 +421,12 @@ class GoalWalker:
         if self.slice_restarts[i] != self.map.slice_restarts[i]:
             # The map restarted at a new height: the goal was found on the old slice.
             self._refresh(i)
-            self._go_to(i, 0)
+            if self.leaving[i]:
+                self.slice_restarts[i] = self.map.slice_restarts[i]
+                self._wander(i)
+                self.leaving[i] = self.phases[i] == WALK
+            else:
+                self._go_to(i, 0)
         if self._refused(i) and self.phases[i] == WALK:
             self.phases[i] = GIVEN_UP
         for _ in range(MAX_GOALS_PER_STEP):
@@ -386,15 +444,18 @@ class GoalWalker:
             if self.phases[i] == WALK and self.wandering[i]:
                 self.idle_steps[i] += 1
                 if self.idle_steps[i] % IDLE_SEARCH_EVERY == 0:
-                    self._refresh(i)  # a candidate found on the way ends the wander
-                    if self.counts[i] > 0:
+                    # A candidate found on the way ends the wander (not one out of a stay).
+                    self._refresh(i)
+                    if self.counts[i] > 0 and not self.leaving[i]:
                         self._go_to(i, 0)
                 if self.wandering[i]:
                     self.moves_without_candidate[i] += 1
                     if self._descends(i):
                         return MOVE_DOWN
             if self.phases[i] == WALK:
-                move = self._walk(i)
+                move = self._leave_move(i) if self.stays[i, 2] > 0 else -1
+                if move < 0:
+                    move = self._walk(i)
                 if move >= 0:
                     return move
             if self.phases[i] == FACE:
@@ -457,10 +518,41 @@ class GoalWalker:
         """Whether the walker has spent a full turn's worth of moves with nothing in reach,
         turning in place or wandering (it then steps down, see :meth:`_descends`, until a
         goal shows): over furniture, the floor it keeps its height above may be the
-        furniture's top, never having seen the floor."""
+        furniture's top, never having seen the floor. A walk out of a stay (:meth:`leave`)
+        has a place to reach and does not count."""
         full_turn = int(np.ceil(2.0 * np.pi / max(self.turn_rad, 1e-6)))
-        nothing_in_reach = self.phases[i] == IDLE or (self.phases[i] == WALK and self.wandering[i])
+        nothing_in_reach = self.phases[i] == IDLE or (
+            self.phases[i] == WALK and self.wandering[i] and not self.leaving[i]
+        )
         return nothing_in_reach and self.moves_without_candidate[i] > full_turn
+
+    def _leave_move(self, i: int) -> int:
+        """A step out of the stay along the path without turning first (forward, backward or
+        sideways, whichever brings the agent nearest to the path's carrot), or -1: out of
+        the stay, the env refused the last step, or no such step brings the carrot nearer
+        (the path is then followed as usual, turning to face it). Turning to face a path
+        that leads behind would take up to half a turn's steps on the spot.
+        """
+        pose = self.map.poses[i]
+        stood = np.hypot(*(pose[:2, 3] - self.last_positions[i])) < 0.25 * self.step_m
+        left = np.hypot(*(pose[:2, 3] - self.stays[i, :2])) > self.stays[i, 2]
+        if left or (self.last_moves[i] in TRANSLATIONS and stood):
+            self.stays[i] = 0.0
+            return -1
+        grid, origin, cell_m = self.map.grids[i], self.map.origins[i], self.map.cell_m
+        carrot, status = path_carrot(
+            grid, origin, cell_m, pose, self.paths[i], self.lengths[i], self.cursors[i],
+            self.inflate,
+        )  # fmt: skip
+        if status != WALKING:
+            return -1
+        x, y = origin + (self.paths[i, carrot] + 0.5) * cell_m
+        move = step_towards(
+            grid, origin, cell_m, pose, x, y, self.step_m, self.inflate, TRANSLATIONS
+        )
+        if move < 0:
+            self.stays[i] = 0.0
+        return int(move)
 
     def _walk(self, i: int) -> int:
         """The walking move, or -1 once at the viewpoint (phase FACE) or given up."""

@@ -26,6 +26,11 @@ TURN_RIGHT = DISCRETE_ACTIONS.index("turn_right")
 WALKING, REPLAN, REACHED = 0, 1, 2
 _JIT = {"cache": True, "nogil": True}
 _NEIGHBOURS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]])
+#: The sideways moves, and every move that translates without turning.
+SIDEWAYS = np.array([MOVE_LEFT, MOVE_RIGHT])
+TRANSLATIONS = np.array([MOVE_FORWARD, MOVE_BACKWARD, MOVE_LEFT, MOVE_RIGHT])
+#: Turns off the carrot up to which a safe forward step is taken instead of a turn.
+WALK_ON_TURNS = 0.75
 #: Path cells ahead of the nearest one the walker may aim at (when it sees them straight).
 LOOKAHEAD = 6
 
@@ -192,6 +197,45 @@ def _straight(grid: np.ndarray, x0: float, y0: float, x1: float, y1: float, infl
 
 
 @numba.njit(**_JIT)
+def path_carrot(
+    grid: np.ndarray,
+    origin: np.ndarray,
+    cell_m: float,
+    pose: np.ndarray,
+    path: np.ndarray,
+    length: int,
+    cursor: np.ndarray,
+    inflate: int,
+) -> tuple[int, int]:
+    """The index of the cell of ``path`` (its first ``length`` cells) to aim at from
+    ``pose`` (the farthest of the next ``LOOKAHEAD`` in a straight safe line), and a status:
+    ``WALKING``, ``REPLAN`` (the path ahead is no longer safe on the updated map) or
+    ``REACHED`` (the index is then -1). ``cursor[0]`` is the path index reached so far
+    (updated)."""
+    x, y = pose[0, 3], pose[1, 3]
+    ax, ay = (x - origin[0]) / cell_m, (y - origin[1]) / cell_m
+    if length <= 1:
+        return -1, REACHED
+    best, best_d = cursor[0], 1e18
+    for k in range(cursor[0], min(cursor[0] + 8, length)):
+        d = (path[k, 0] + 0.5 - ax) ** 2 + (path[k, 1] + 0.5 - ay) ** 2
+        if d < best_d:
+            best, best_d = k, d
+    cursor[0] = best
+    if best == length - 1 and best_d < 1.0:
+        return -1, REACHED
+    for k in range(best + 1, min(best + 6, length)):
+        if not traversable(grid, path[k, 0], path[k, 1], inflate):
+            return -1, REPLAN
+    carrot = best + 1 if best + 1 < length else best
+    for k in range(min(best + LOOKAHEAD, length - 1), best + 1, -1):
+        if _straight(grid, ax, ay, path[k, 0] + 0.5, path[k, 1] + 0.5, inflate):
+            carrot = k
+            break
+    return carrot, WALKING
+
+
+@numba.njit(**_JIT)
 def follow_path(
     grid: np.ndarray,
     origin: np.ndarray,
@@ -208,32 +252,21 @@ def follow_path(
     and a status: ``WALKING``, ``REPLAN`` (the path or the next move is no longer safe on the
     updated map; the action is then a turn in place) or ``REACHED`` (a turn in place).
     ``cursor[0]`` is the path index reached so far (updated)."""
+    carrot, status = path_carrot(grid, origin, cell_m, pose, path, length, cursor, inflate)
+    if status != WALKING:
+        return TURN_LEFT, status
     x, y = pose[0, 3], pose[1, 3]
-    ax, ay = (x - origin[0]) / cell_m, (y - origin[1]) / cell_m
-    if length <= 1:
-        return TURN_LEFT, REACHED
-    best, best_d = cursor[0], 1e18
-    for k in range(cursor[0], min(cursor[0] + 8, length)):
-        d = (path[k, 0] + 0.5 - ax) ** 2 + (path[k, 1] + 0.5 - ay) ** 2
-        if d < best_d:
-            best, best_d = k, d
-    cursor[0] = best
-    if best == length - 1 and best_d < 1.0:
-        return TURN_LEFT, REACHED
-    for k in range(best + 1, min(best + 6, length)):
-        if not traversable(grid, path[k, 0], path[k, 1], inflate):
-            return TURN_LEFT, REPLAN
-    carrot = best + 1 if best + 1 < length else best
-    for k in range(min(best + LOOKAHEAD, length - 1), best + 1, -1):
-        if _straight(grid, ax, ay, path[k, 0] + 0.5, path[k, 1] + 0.5, inflate):
-            carrot = k
-            break
+    best = cursor[0]
     cx = origin[0] + (path[carrot, 0] + 0.5) * cell_m
     cy = origin[1] + (path[carrot, 1] + 0.5) * cell_m
     error = _wrap(np.arctan2(cy - y, cx - x) - _heading(pose))
-    if abs(error) > 0.5 * turn_rad + 1e-6:
+    forward = move_is_safe(grid, origin, cell_m, pose, MOVE_FORWARD, step_m, inflate)
+    # Headings come a whole turn apart: a carrot a little over half a turn off is walked
+    # towards while that is safe (the step still brings it nearer); turning would put it
+    # as far off on the other side, and the next steps would turn back (a zigzag).
+    if abs(error) > (WALK_ON_TURNS if forward else 0.5) * turn_rad + 1e-6:
         return (TURN_LEFT if error > 0 else TURN_RIGHT), WALKING
-    if move_is_safe(grid, origin, cell_m, pose, MOVE_FORWARD, step_m, inflate):
+    if forward:
         return MOVE_FORWARD, WALKING
     # Facing the carrot within half a turn, the step may still end in a cell beside the path
     # that is not traversable (where the path turns by a corner): a sideways step that is
@@ -242,14 +275,14 @@ def follow_path(
     following = best + 1 if best + 1 < length else best
     nx = origin[0] + (path[following, 0] + 0.5) * cell_m
     ny = origin[1] + (path[following, 1] + 0.5) * cell_m
-    side = _sideways_towards(grid, origin, cell_m, pose, nx, ny, step_m, inflate)
+    side = step_towards(grid, origin, cell_m, pose, nx, ny, step_m, inflate, SIDEWAYS)
     if side >= 0:
         return side, WALKING
     return TURN_LEFT, REPLAN
 
 
 @numba.njit(**_JIT)
-def _sideways_towards(
+def step_towards(
     grid: np.ndarray,
     origin: np.ndarray,
     cell_m: float,
@@ -258,12 +291,13 @@ def _sideways_towards(
     cy: float,
     step_m: float,
     inflate: int,
+    moves: np.ndarray,
 ) -> int:
-    """The safe sideways move (left or right) that brings the agent nearest to world
-    ``(cx, cy)``, if it brings it nearer at all; else -1."""
+    """The safe move among ``moves`` (forward, backward, left, right) that brings the agent
+    nearest to world ``(cx, cy)`` without turning, if it brings it nearer at all; else -1."""
     x, y = pose[0, 3], pose[1, 3]
     best, best_d = -1, (cx - x) ** 2 + (cy - y) ** 2
-    for move in (MOVE_LEFT, MOVE_RIGHT):
+    for move in moves:
         mx, my = _move_direction(pose, move)
         d = (cx - x - step_m * mx) ** 2 + (cy - y - step_m * my) ** 2
         if d < best_d - 1e-12 and move_is_safe(grid, origin, cell_m, pose, move, step_m, inflate):

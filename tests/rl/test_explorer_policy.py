@@ -15,6 +15,7 @@ from stable_baselines3 import PPO  # noqa: E402
 
 from naruto_agent.policies.base import EnvContext  # noqa: E402
 from naruto_agent.policies.registry import policy_class  # noqa: E402
+from naruto_agent.policies.watchdog import StallWatchdogConfig  # noqa: E402
 from naruto_agent.rl.explorer_policy import (  # noqa: E402
     PACKAGED_MODEL,
     MapGoalExplorer,
@@ -27,6 +28,7 @@ from naruto_gym.rl.explorer_sb3 import (  # noqa: E402
     make_explorer_vec_env,
 )
 from naruto_gym.rl.goal_actions import GoalActions  # noqa: E402
+from naruto_gym.rl.goal_planner import TURN_LEFT  # noqa: E402
 from naruto_gym.sensors.pinhole import PinholeCamera  # noqa: E402
 
 CAMERA = PinholeCamera(16, 16, 8, 8, 7.5, 7.5)
@@ -185,3 +187,35 @@ def test_an_exported_checkpoint_has_no_optimiser_state_and_acts_the_same(model_p
         original.model.predict(observation, deterministic=True)[0],
         small.model.predict(observation, deterministic=True)[0],
     )
+
+
+def test_the_explorer_watches_for_stalls_by_default():
+    assert MapGoalExplorer().stall_watchdog.config == StallWatchdogConfig()
+    assert MapGoalExplorer(stall_watchdog=False).stall_watchdog is None
+
+
+def test_the_explorer_recovers_from_a_stall_and_leaves_the_spot():
+    """Held on one spot (the env is sent a turn in place whatever the explorer asks) until its
+    watchdog fires (within a window); its recovery then walks more than 0.5 m away within 20
+    steps (turns included: the explorer moves in discrete steps)."""
+    policy = MapGoalExplorer()
+    env = gym.make("NarutoRecon-v0", **{**ENV, "scene": "replica_like_room"})
+    policy.bind(EnvContext.from_env(env, max_episode_steps=200))
+    observation, info = env.reset(seed=3)
+    policy.reset(observation, info, seed=3)
+    for _ in range(10):  # under way first
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+    spot = observation["pose"][:3, 3].copy()
+    for _ in range(StallWatchdogConfig().window_steps + 1):
+        action = policy.act(observation, info)
+        if policy.stall_events:
+            break
+        observation, _, _, _, info = env.step(TURN_LEFT)
+    assert len(policy.stall_events) == 1 and policy.stall_events[0].recovery
+    farthest = 0.0
+    for _ in range(20):
+        observation, _, _, _, info = env.step(action)
+        farthest = max(farthest, float(np.linalg.norm(observation["pose"][:3, 3] - spot)))
+        action = policy.act(observation, info)
+    assert farthest > 0.5, policy.stall_events
+    env.close()

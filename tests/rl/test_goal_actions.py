@@ -33,7 +33,9 @@ from naruto_gym.rl.goal_candidates import (
     wander_goal,
 )
 from naruto_gym.rl.goal_planner import (
+    MOVE_BACKWARD,
     MOVE_FORWARD,
+    MOVE_LEFT,
     MOVE_RIGHT,
     REACHED,
     TURN_LEFT,
@@ -122,6 +124,30 @@ def test_following_a_path_turns_towards_it_then_moves_forward():
     assert follow_path(
         grid, ORIGIN, 0.1, at_goal, path, length, walked, 0.1, np.deg2rad(20), 1
     ) == (TURN_LEFT, REACHED)
+
+
+def test_a_carrot_a_little_over_half_a_turn_off_is_walked_to_while_that_is_safe():
+    """Headings come a whole turn apart, so a path between two of them would be walked in a
+    zigzag (turn, step, turn back, step): a carrot up to three quarters of a turn off is
+    walked towards where the step is safe, and turned to where it is not."""
+    grid = np.zeros((4, 40, 40), np.uint8)
+    grid[FREE, 1:39, 1:39] = 255
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]  # optical axis +x
+    pose[:2, 3] = [0.55, 0.55 - 0.6 * np.tan(np.deg2rad(13))]  # the carrot 13 deg left
+    path = np.zeros((256, 2), np.int64)
+    cells = [(5 + k, 5) for k in range(12)]  # along +x, 0.6 m ahead of it the carrot
+    path[: len(cells)] = cells
+
+    def follow(turn_deg: float) -> tuple[int, int]:
+        cursor = np.zeros(1, np.int64)
+        return follow_path(grid, ORIGIN, 0.1, pose, path, len(cells), cursor, 0.1,
+                           np.deg2rad(turn_deg), 1)  # fmt: skip
+
+    assert follow(20) == (MOVE_FORWARD, WALKING)  # 13 degrees: over half a 20-degree turn
+    assert follow(16) == (TURN_LEFT, WALKING)  # over three quarters of a 16-degree turn
+    grid[OCCUPIED, 7, 3] = 255  # the step ahead would end beside an obstacle
+    assert follow(20) == (TURN_LEFT, WALKING)
 
 
 def test_where_the_path_turns_by_a_corner_a_sideways_step_follows_it():
@@ -347,16 +373,17 @@ def test_the_nearest_candidate_turns_at_a_goal_only_as_far_as_it_needs():
             _, _, _, _, info = env.step(0)
             coverage.append(info["coverage"])
         turns: dict[tuple[int, int], int] = {}
-        glances: dict[tuple[int, int], list[int]] = {}
-        for move, (phase, *cluster) in zip(moves.moves, moves.phases, strict=True):
+        glances = []  # each look down at a goal, with the move after it
+        for k, (move, (phase, *cluster)) in enumerate(zip(moves.moves, moves.phases, strict=True)):
             if phase == FACE and move in (TURN_LEFT, TURN_RIGHT):
                 turns[tuple(cluster)] = turns.get(tuple(cluster), 0) + 1
-            if phase == FACE and move in (LOOK_DOWN, LOOK_UP):
-                glances.setdefault(tuple(cluster), []).append(move)
+            if phase == FACE and move == LOOK_DOWN and k + 1 < len(moves.moves):
+                glances.append(moves.moves[k + 1])
         # At a goal the walker turns towards the cluster: half a turn at most (9 steps of
-        # 20 degrees), never a full spin; then it glances down once and levels again.
+        # 20 degrees), never a full spin; then it glances down once and levels again (the
+        # next goal may be set in between: it levels first).
         assert len(turns) >= 2 and max(turns.values()) <= 9
-        assert glances and all(sent == [LOOK_DOWN, LOOK_UP] for sent in glances.values())
+        assert glances and all(after == LOOK_UP for after in glances)
         assert coverage[-1] > coverage[0] + 0.1  # it goes somewhere new
     finally:
         env.close()
@@ -472,14 +499,14 @@ def test_walking_over_a_table_does_not_lift_the_walker_above_the_lintels():
 
 
 def test_a_walker_turning_back_the_way_it_turned_last_walks_on():
-    """A carrot between two headings a turn apart, each a hair beyond half a turn off it,
-    would make the walker turn left and right in place for as long as it stood there: after a
+    """A carrot between two headings a turn apart, each too far off it to walk on, would
+    make the walker turn left and right in place for as long as it stood there: after a
     turn, the opposite turn becomes a forward step where that is safe."""
     builder, walker, pose = _level_walker([2.05, 2.05, 1.3])
     builder.grids[0, FREE] = 255  # open floor all around
     builder.poses[0] = pose
     start = np.floor((pose[:2, 3] - builder.origins[0]) / builder.cell_m).astype(np.int64)
-    cells = [start + [k, -round(k * np.tan(np.deg2rad(16)))] for k in range(15)]  # 16 deg right
+    cells = [start + [k, -round(k * np.tan(np.deg2rad(25)))] for k in range(15)]  # 21 deg right
     walker.paths[0, : len(cells)] = cells
     walker.lengths[0] = len(cells)
     walker.phases[0], walker.wandering[0], walker.cursors[0] = WALK, False, 0
@@ -488,3 +515,61 @@ def test_a_walker_turning_back_the_way_it_turned_last_walks_on():
     assert first in (TURN_LEFT, TURN_RIGHT)  # the carrot is more than half a turn off
     walker.cursors[0], walker.last_moves[0] = 0, OPPOSITE_TURN[first]
     assert int(walker.next_moves()[0]) == MOVE_FORWARD  # it turned the other way last
+
+
+def _set_coarse(builder: EgocentricMapBuilder) -> None:
+    builder.coarse[0] = _coarse(builder.grids[0], builder.far_factor)
+
+
+def test_out_of_a_stay_the_walker_goes_past_it_without_turning_on_the_spot_first():
+    """A stall watchdog's recovery (:meth:`GoalWalker.leave`): the nearest candidate's
+    viewpoint lies within the stay, so the walker takes the next one, 3 m behind it, and
+    steps backward out of the stay instead of turning half a circle on the spot first."""
+    builder, walker, pose = _level_walker([5.05, 5.05, 1.3])
+    origin = builder.origins[0]
+    builder.grids[0, FREE] = 255
+
+    def unseen_block(x: float, y: float) -> None:
+        i, j = np.floor((np.array([x, y]) - origin) / builder.cell_m).astype(int)
+        builder.grids[0, OCCUPIED, i - 1 : i + 2, j - 1 : j + 2] = 255
+        builder.grids[0, FREE, i - 1 : i + 2, j - 1 : j + 2] = 0
+
+    unseen_block(5.05, 5.75)  # 0.7 m to the left: viewed from where it stands
+    unseen_block(2.05, 5.05)  # 3 m behind
+    panorama = np.zeros((32, 64), np.float32)
+    _observe(builder, pose, panorama)
+    _set_coarse(builder)
+    start = pose[:2, 3].copy()
+    walker.refresh_candidates()
+    near = np.hypot(*(walker.centres[0, : walker.counts[0]] - start).T) < 1.0
+    assert near[0] and not near.all()  # the nearest is the block beside it
+    assert np.hypot(*(walker.viewpoints[0, 0] - start)) < 0.6  # viewed from within the stay
+    assert walker.leave(0, start[None], 0.6) == "walk to the nearest candidate past the stay"
+    assert walker.phases[0] == WALK and walker.targets[0][0] < 3.0  # the one behind
+    moves = []
+    while np.hypot(*(pose[:2, 3] - start)) <= 0.6 and len(moves) < 12:
+        move = int(walker.next_moves()[0])
+        moves.append(move)
+        step = {MOVE_FORWARD: (0.1, 0), MOVE_BACKWARD: (-0.1, 0), MOVE_LEFT: (0, 0.1),
+                MOVE_RIGHT: (0, -0.1)}.get(move, (0, 0))  # fmt: skip
+        pose[:2, 3] += step
+        _observe(builder, pose, panorama)
+    assert moves == [MOVE_BACKWARD] * 7
+
+
+def test_a_refused_step_never_blocks_the_cell_the_walker_stands_in():
+    """A step shorter than a cell may end in the cell it started from: the refused step's
+    cell marked blocked would then be the agent's own, and no path could start from it."""
+    builder, walker, pose = _level_walker([5.001, 5.05, 1.3])
+    builder.grids[0, FREE] = 255
+    pose[:3, :3] = [[0, 0, -1], [1, 0, 0], [0, -1, 0]]  # optical axis -x: a 0.1 m step ...
+    pose[0, 3] = 5.099  # ... from near the cell's far side ends in the same cell
+    _observe(builder, pose, np.zeros((32, 64), np.float32))
+    own = tuple(np.floor((pose[:2, 3] - builder.origins[0]) / builder.cell_m).astype(int))
+    walker.last_moves[0], walker.last_positions[0] = MOVE_FORWARD, pose[:2, 3]
+    walker.phases[0] = WALK
+    walker.next_moves()  # sees the forward move refused (it did not move)
+    assert builder.grids[0, OCCUPIED][own] == 0
+    assert builder.grids[0, OCCUPIED, own[0] - 1, own[1]] == 255  # the cell it led into
+    builder.mark_blocked(0, *pose[:2, 3])
+    assert builder.grids[0, OCCUPIED][own] == 0
