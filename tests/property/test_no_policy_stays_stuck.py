@@ -8,6 +8,7 @@ coverage is below 90 %."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 
 import gymnasium as gym
@@ -21,7 +22,10 @@ from naruto_agent.policies import EnvContext, make_policy
 from naruto_agent.policies.watchdog import longest_stay
 from tests.property.open_scans import FLOORS, real_scan_like, scannet_like_scan
 
-POLICIES = ["naruto", "frontier", "random", "passive"]
+#: Every shipped policy; the map-and-goal explorer where Stable-Baselines3 is installed.
+POLICIES = ["naruto", "frontier", "random", "passive"] + (
+    ["explorer"] if importlib.util.find_spec("stable_baselines3") else []
+)
 STEPS = 120
 #: Least path in the last quarter (metres): more than a step (turning on the spot to look
 #: around is part of exploring, circling in place is not).
