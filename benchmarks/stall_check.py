@@ -52,15 +52,21 @@ class Args:
         default_factory=lambda: [
             "replica_like_room:no_ceiling+holes",
             "two_rooms:no_ceiling+holes",
-            "procedural:small:1000000:no_ceiling+holes",
-            "procedural:small:1000001:no_ceiling+holes",
-            "procedural:small:1000002:no_ceiling+holes",
             "apartment:no_ceiling+holes",
+            *(
+                f"procedural:{kind}:{1000000 + k}:no_ceiling+holes"
+                for kind in ("small", "flat")
+                for k in range(8)
+            ),
         ]
     )
-    """open scenes (catalogue and suite test scenes with openings), in the order run"""
-    policies: list[str] = field(default_factory=lambda: ["passive", "random", "frontier", "naruto"])
-    """policies to run, each with its default settings (watchdog included)"""
+    """open scenes, in the order run: the catalogue's two rooms and apartment, and the
+    suite's eight small and eight apartment (``flat``) test scenes"""
+    policies: list[str] = field(
+        default_factory=lambda: ["passive", "random", "frontier", "naruto", "explorer"]
+    )
+    """policies to run, each with its default settings (watchdog included); ``explorer``
+    needs Stable-Baselines3"""
     seeds: list[int] = field(default_factory=lambda: [0])
     """episode seeds"""
     max_episode_steps: int = 300

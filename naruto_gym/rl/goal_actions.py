@@ -419,13 +419,19 @@ class GoalWalker:
         if height >= 0:
             return height
         if self.slice_restarts[i] != self.map.slice_restarts[i]:
-            # The map restarted at a new height: the goal was found on the old slice.
-            self._refresh(i)
-            if self.leaving[i]:
+            # The map restarted at a new height: the goal was found on the old slice. A walk
+            # out of a stay chooses again, still out of the same stay.
+            if self.stays[i, 2] > 0:
+                stay = self.stays[i].copy()
+                self.leave(i, stay[None, :2], stay[2])
+                self.stays[i, :2] = stay[:2]
+            elif self.leaving[i]:
+                self._refresh(i)
                 self.slice_restarts[i] = self.map.slice_restarts[i]
                 self._wander(i)
                 self.leaving[i] = self.phases[i] == WALK
             else:
+                self._refresh(i)
                 self._go_to(i, 0)
         if self._refused(i) and self.phases[i] == WALK:
             self.phases[i] = GIVEN_UP

@@ -521,32 +521,35 @@ def _set_coarse(builder: EgocentricMapBuilder) -> None:
     builder.coarse[0] = _coarse(builder.grids[0], builder.far_factor)
 
 
+def _walker_between_two_blocks() -> tuple[EgocentricMapBuilder, GoalWalker, np.ndarray]:
+    """A walker at (5.05, 5.05) m facing +x on open floor, an unseen block 0.7 m to its left
+    (viewed from where it stands) and one 3 m behind it; candidates found."""
+    builder, walker, pose = _level_walker([5.05, 5.05, 1.3])
+    origin = builder.origins[0]
+    builder.grids[0, FREE] = 255
+    for x, y in ((5.05, 5.75), (2.05, 5.05)):
+        i, j = np.floor((np.array([x, y]) - origin) / builder.cell_m).astype(int)
+        builder.grids[0, OCCUPIED, i - 1 : i + 2, j - 1 : j + 2] = 255
+        builder.grids[0, FREE, i - 1 : i + 2, j - 1 : j + 2] = 0
+    _observe(builder, pose, np.zeros((32, 64), np.float32))
+    _set_coarse(builder)
+    walker.refresh_candidates()
+    return builder, walker, pose
+
+
 def test_out_of_a_stay_the_walker_goes_past_it_without_turning_on_the_spot_first():
     """A stall watchdog's recovery (:meth:`GoalWalker.leave`): the nearest candidate's
     viewpoint lies within the stay, so the walker takes the next one, 3 m behind it, and
     steps backward out of the stay instead of turning half a circle on the spot first."""
-    builder, walker, pose = _level_walker([5.05, 5.05, 1.3])
-    origin = builder.origins[0]
-    builder.grids[0, FREE] = 255
-
-    def unseen_block(x: float, y: float) -> None:
-        i, j = np.floor((np.array([x, y]) - origin) / builder.cell_m).astype(int)
-        builder.grids[0, OCCUPIED, i - 1 : i + 2, j - 1 : j + 2] = 255
-        builder.grids[0, FREE, i - 1 : i + 2, j - 1 : j + 2] = 0
-
-    unseen_block(5.05, 5.75)  # 0.7 m to the left: viewed from where it stands
-    unseen_block(2.05, 5.05)  # 3 m behind
-    panorama = np.zeros((32, 64), np.float32)
-    _observe(builder, pose, panorama)
-    _set_coarse(builder)
+    builder, walker, pose = _walker_between_two_blocks()
     start = pose[:2, 3].copy()
-    walker.refresh_candidates()
     near = np.hypot(*(walker.centres[0, : walker.counts[0]] - start).T) < 1.0
     assert near[0] and not near.all()  # the nearest is the block beside it
     assert np.hypot(*(walker.viewpoints[0, 0] - start)) < 0.6  # viewed from within the stay
     assert walker.leave(0, start[None], 0.6) == "walk to the nearest candidate past the stay"
     assert walker.phases[0] == WALK and walker.targets[0][0] < 3.0  # the one behind
     moves = []
+    panorama = np.zeros((32, 64), np.float32)
     while np.hypot(*(pose[:2, 3] - start)) <= 0.6 and len(moves) < 12:
         move = int(walker.next_moves()[0])
         moves.append(move)
@@ -555,6 +558,19 @@ def test_out_of_a_stay_the_walker_goes_past_it_without_turning_on_the_spot_first
         pose[:2, 3] += step
         _observe(builder, pose, panorama)
     assert moves == [MOVE_BACKWARD] * 7
+
+
+def test_a_walk_out_of_a_stay_stays_one_when_the_map_restarts_at_a_new_height():
+    """The map's slice restarts when the agent changes height (the goal in hand was found on
+    the old slice): a walk out of a stay then chooses again among the candidates past the
+    same stay, not the nearest one."""
+    builder, walker, pose = _walker_between_two_blocks()
+    start = pose[:2, 3].copy()
+    walker.leave(0, start[None], 0.6)
+    builder.slice_restarts[0] += 1
+    assert int(walker.next_moves()[0]) == MOVE_BACKWARD
+    assert walker.phases[0] == WALK and walker.targets[0][0] < 3.0  # still the one behind
+    np.testing.assert_allclose(walker.stays[0], [*start, 0.6])
 
 
 def test_a_refused_step_never_blocks_the_cell_the_walker_stands_in():
