@@ -8,7 +8,7 @@ It builds the egocentric map from the observations it is handed
 (:class:`~naruto_gym.rl.egocentric_map.EgocentricMapBuilder`), finds the candidate goals on
 it, asks the PPO model for one (or a repeated discrete move) every ``steps_per_goal`` steps,
 and walks it with the planner over its own map
-(:class:`~naruto_gym.rl.goal_actions.GoalWalker`): the same observations and actions as in
+(:class:`~naruto_gym.rl.goal_walker.GoalWalker`): the same observations and actions as in
 training, step for step. The training settings (``steps_per_goal``, the number of
 candidates, the map's options, the panorama size) are read from the JSON file saved beside the
 model (``<model>.json``, written by the training script), so a model and its settings cannot
@@ -28,7 +28,7 @@ from naruto_agent.policies.base import Info, Observation, Policy
 from naruto_agent.policies.registry import register_policy
 from naruto_agent.policies.watchdog import StallEvent
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
-from naruto_gym.rl.goal_actions import GoalWalker
+from naruto_gym.rl.goal_walker import GoalWalker
 from naruto_gym.sensors.panorama import EquirectangularCamera
 
 PACKAGED_MODEL = Path(__file__).with_name("checkpoints") / "explorer.zip"
@@ -231,7 +231,7 @@ class MapGoalExplorer(Policy):
         """Walk out of the stay: the goal in hand (or a repeated move) is given up for the
         nearest candidate past the stay's every position by the stay radius and a step, or
         the reachable place farthest from the trail (:meth:`GoalWalker.leave
-        <naruto_gym.rl.goal_actions.GoalWalker.leave>`); the model picks again a whole
+        <naruto_gym.rl.goal_walker.GoalWalker.leave>`); the model picks again a whole
         macro-step later."""
         assert self.walker is not None and self.stall_watchdog is not None
         radius = self.stall_watchdog.config.radius_m + self.context.max_translation_m

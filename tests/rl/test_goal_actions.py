@@ -14,18 +14,7 @@ from naruto_gym.rl.egocentric_map import (
     VectorEgocentricMapObservation,
 )
 from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL
-from naruto_gym.rl.goal_actions import (
-    FACE,
-    LOOK_DOWN,
-    LOOK_UP,
-    MOVE_DOWN,
-    MOVE_UP,
-    OPPOSITE_TURN,
-    WALK,
-    GoalActions,
-    GoalWalker,
-    VectorGoalActions,
-)
+from naruto_gym.rl.goal_actions import GoalActions, VectorGoalActions
 from naruto_gym.rl.goal_candidates import (
     CANDIDATE_FEATURES,
     find_candidates,
@@ -44,6 +33,16 @@ from naruto_gym.rl.goal_planner import (
     follow_path,
     plan_path,
     traversable,
+)
+from naruto_gym.rl.goal_walker import (
+    FACE,
+    LOOK_DOWN,
+    LOOK_UP,
+    MOVE_DOWN,
+    MOVE_UP,
+    OPPOSITE_TURN,
+    WALK,
+    GoalWalker,
 )
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.vector import NarutoReconVectorEnv
