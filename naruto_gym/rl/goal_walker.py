@@ -31,7 +31,7 @@ from naruto_gym.rl.goal_planner import (
     plan_path,
     step_towards,
 )
-from naruto_gym.utils.checks import check_integer
+from naruto_gym.utils.checks import check_integer, check_number
 
 __all__ = ["GoalWalker"]
 
@@ -90,7 +90,8 @@ class GoalWalker:
             degrees).
 
     Raises:
-        ValueError: a count or distance that is not positive.
+        ValueError: a count that is not a positive integer, a distance that is not positive,
+            or a glance that is not a whole count.
     """
 
     def __init__(
@@ -108,15 +109,14 @@ class GoalWalker:
         max_path: int = 512,
         glance_steps: int = 1,
     ) -> None:
-        for name, value in (
+        for name, count in (
             ("num_candidates", num_candidates),
             ("cluster_cells", cluster_cells),
             ("min_targets", min_targets),
-            ("view_m", view_m),
-            ("frontier_m", frontier_m),
         ):
-            if not value > 0:
-                raise ValueError(f"{name} must be positive, got {value!r}")
+            check_integer(name, count)
+        check_number("view_m", view_m, low=0.0)
+        check_number("frontier_m", frontier_m, low=0.0)
         check_integer("glance_steps", glance_steps, low=0)
         self.map = map_builder
         self.num_candidates = int(num_candidates)
