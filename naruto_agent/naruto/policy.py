@@ -238,10 +238,7 @@ class NarutoPolicy(Policy):
         self.machine.interrupt()
         self._stalled = True
         if event.kind == "lingering":
-            # Past every place of the stay's window, by a step more than the stay radius.
-            radius = self.stall_watchdog.config.radius_m + self.context.max_translation_m
-            spots = event.position if event.window is None else event.window
-            self.goal_planner.leave(spots, radius)
+            self.goal_planner.leave(*self.stay_of(event))
             return "look-around cut short: next goal away from the stay"
         self.monitor.request_recovery()
         return "plan cut short: recovery that moves"

@@ -216,6 +216,15 @@ class Policy(ABC):
             event.recovery = self.recover_from_stall(event)
         return event
 
+    def stay_of(self, event: StallEvent) -> tuple[np.ndarray, float]:
+        """Where ``event``'s stay was, ``(n, 3)`` positions (the window the stall was judged
+        on, or its position alone), and how far a recovery must get from every one of them
+        to have left it: the stay radius and one step more."""
+        assert self.stall_watchdog is not None
+        spots = np.asarray(event.position if event.window is None else event.window, np.float64)
+        radius = self.stall_watchdog.config.radius_m + self.context.max_translation_m
+        return spots.reshape(-1, 3), radius
+
     def recover_from_stall(self, event: StallEvent) -> str:
         """Get going again after a stall (a new goal, a new direction, a height change
         inside the scanned space); returns what it did, in a few words, for the record.

@@ -233,7 +233,5 @@ class MapGoalExplorer(Policy):
         the reachable place farthest from the trail (:meth:`GoalWalker.leave
         <naruto_gym.rl.goal_walker.GoalWalker.leave>`); the model picks again a whole
         macro-step later."""
-        assert self.walker is not None and self.stall_watchdog is not None
-        radius = self.stall_watchdog.config.radius_m + self.context.max_translation_m
-        spots = event.position[None] if event.window is None else event.window
-        return self.walker.leave(0, spots, radius)
+        assert self.walker is not None
+        return self.walker.leave(0, *self.stay_of(event))

@@ -266,14 +266,18 @@ class EgocentricMapBuilder:
         self.clearance_up[envs] = np.where((top > 0).all(axis=1), top.min(axis=1), 0.0)
         self.clearance_down[envs] = np.where((bottom > 0).all(axis=1), bottom.min(axis=1), 0.0)
 
+    def cell_of(self, env: int, xy: Any) -> tuple[int, int]:
+        """The fine cell of agent ``env``'s world grid that holds world ``xy`` (x, y)."""
+        i, j = np.floor((np.asarray(xy, np.float64)[:2] - self.origins[env]) / self.cell_m)
+        return int(i), int(j)
+
     def mark_blocked(self, env: int, x: float, y: float) -> None:
         """Mark the cell at world ``(x, y)`` an obstacle for agent ``env``: the env refused a
         move into it (e.g. out of an open scan's scanned space, where no surface shows). The
         cell the agent stands in is never marked (a short move may end in it): an obstacle
         there would leave the agent no traversable cell to start a path from."""
-        i, j = np.floor((np.array([x, y]) - self.origins[env]) / self.cell_m).astype(int)
-        si, sj = np.floor((self.poses[env][:2, 3] - self.origins[env]) / self.cell_m).astype(int)
-        if (i, j) == (si, sj):
+        i, j = self.cell_of(env, (x, y))
+        if (i, j) == self.cell_of(env, self.poses[env][:2, 3]):
             return
         if 0 <= i < self.grids.shape[-2] and 0 <= j < self.grids.shape[-1]:
             self.grids[env, OCCUPIED, i, j] = 255

@@ -264,8 +264,9 @@ class GoalWalker:
         """Walk agent ``i`` out of a stay (a stall watchdog's recovery): the goal being walked
         to or faced is given up (its cluster done), a repeated primitive move dropped, and
         the walker goes to the nearest candidate whose viewpoint lies farther than
-        ``radius_m`` from every one of ``spots`` ((K, 2+) world positions of the stay), else
-        to the reachable place farthest from its trail; returns what it chose, in a few words.
+        ``radius_m`` from every one of ``spots`` ((K, 2+) world positions of the stay, the
+        last where it is centred: where the agent stands when the watchdog fires), else to
+        the reachable place farthest from its trail; returns what it chose, in a few words.
 
         The walk keeps the goal until it is reached; the next :meth:`set_actions` replaces
         it as usual.
@@ -273,35 +274,36 @@ class GoalWalker:
         spots = np.asarray(spots, np.float64).reshape(-1, np.shape(spots)[-1])[:, :2]
         self.primitives[i] = -1
         self.glance_left[i] = 0
-        a, b = self.target_clusters[i]
-        if (
-            self.phases[i] in (WALK, FACE)
-            and 0 <= a < self.done.shape[1]
-            and 0 <= b < self.done.shape[2]
-        ):
-            self.done[i, a, b] = True
+        if self.phases[i] in (WALK, FACE):
+            self._mark_done(i)
         self._refresh(i)
         for slot in range(int(self.counts[i])):  # ranked by path length: nearest first
             away = np.linalg.norm(spots - self.viewpoints[i, slot], axis=1)
             if np.all(away > radius_m):
                 self._go_to(i, slot)
-                self.stays[i] = (*self.map.poses[i][:2, 3], radius_m)
+                self.stays[i] = (*spots[-1], radius_m)
                 return "walk to the nearest candidate past the stay"
-        self.slice_restarts[i] = self.map.slice_restarts[i]
         self.glanced[i] = False
+        if self._wander_away(i):
+            self.stays[i] = (*spots[-1], radius_m)
+            return "walk to the reachable place farthest from the trail"
+        return "nothing reachable: turn in place"
+
+    def _wander_away(self, i: int) -> bool:
+        """Wander out of a stay (on the map's current slice) to the reachable place farthest
+        from the trail, not ended by a candidate found on the way; False: none is reachable
+        (the walker turns in place)."""
+        self.slice_restarts[i] = self.map.slice_restarts[i]
         self.wandering[i] = True
         self._wander(i)
         self.leaving[i] = self.phases[i] == WALK
-        if self.leaving[i]:
-            self.stays[i] = (*self.map.poses[i][:2, 3], radius_m)
-            return "walk to the reachable place farthest from the trail"
-        return "nothing reachable: turn in place"
+        return bool(self.leaving[i])
 
     def _wander(self, i: int) -> None:
         """No candidate: walk to the reachable place farthest from the trail (the path
         lengths of the last search are around the current pose), or turn in place."""
         pose = self.map.poses[i]
-        si, sj = np.floor((pose[:2, 3] - self.map.origins[i]) / self.map.cell_m).astype(int)
+        si, sj = self.map.cell_of(i, pose[:2, 3])
         wi, wj = wander_goal(
             self.map.grids[i], self.map.coarse[i], self.map.far_factor, self._scratch, si, sj,
             self.radius, 3,
@@ -358,17 +360,15 @@ class GoalWalker:
     def _refused(self, i: int) -> bool:
         """Whether the env refused the forward move sent last (the agent did not move): the
         cell it led into is marked blocked on the map, and the goal given up."""
-        if self.last_moves[i] != MOVE_FORWARD:
+        if self.last_moves[i] != MOVE_FORWARD or not self._stood_still(i):
             return False
         pose = self.map.poses[i]
-        if np.hypot(*(pose[:2, 3] - self.last_positions[i])) > 0.25 * self.step_m:
-            return False
         heading = np.arctan2(pose[1, 2], pose[0, 2])
         direction = np.array([np.cos(heading), np.sin(heading)])
-        standing = np.floor((pose[:2, 3] - self.map.origins[i]) / self.map.cell_m)
+        standing = self.map.cell_of(i, pose[:2, 3])
         reach = self.step_m
         ahead = pose[:2, 3] + reach * direction
-        while np.array_equal(np.floor((ahead - self.map.origins[i]) / self.map.cell_m), standing):
+        while self.map.cell_of(i, ahead) == standing:
             reach += 0.5 * self.map.cell_m  # a step shorter than a cell may end in this one
             ahead = pose[:2, 3] + reach * direction
         self.map.mark_blocked(i, float(ahead[0]), float(ahead[1]))
@@ -392,14 +392,10 @@ class GoalWalker:
             # The map restarted at a new height: the goal was found on the old slice. A walk
             # out of a stay chooses again, still out of the same stay.
             if self.stays[i, 2] > 0:
-                stay = self.stays[i].copy()
-                self.leave(i, stay[None, :2], stay[2])
-                self.stays[i, :2] = stay[:2]
+                self.leave(i, self.stays[i, None, :2].copy(), self.stays[i, 2])
             elif self.leaving[i]:
                 self._refresh(i)
-                self.slice_restarts[i] = self.map.slice_restarts[i]
-                self._wander(i)
-                self.leaving[i] = self.phases[i] == WALK
+                self._wander_away(i)
             else:
                 self._refresh(i)
                 self._go_to(i, 0)
@@ -502,6 +498,11 @@ class GoalWalker:
         )
         return nothing_in_reach and self.moves_without_candidate[i] > full_turn
 
+    def _stood_still(self, i: int) -> bool:
+        """Whether the move sent last left agent ``i`` where it was (the env refused it)."""
+        moved = np.hypot(*(self.map.poses[i][:2, 3] - self.last_positions[i]))
+        return bool(moved <= 0.25 * self.step_m)
+
     def _leave_move(self, i: int) -> int:
         """A step out of the stay along the path without turning first (forward, backward or
         sideways, whichever brings the agent nearest to the path's carrot), or -1: out of
@@ -510,9 +511,8 @@ class GoalWalker:
         that leads behind would take up to half a turn's steps on the spot.
         """
         pose = self.map.poses[i]
-        stood = np.hypot(*(pose[:2, 3] - self.last_positions[i])) < 0.25 * self.step_m
         left = np.hypot(*(pose[:2, 3] - self.stays[i, :2])) > self.stays[i, 2]
-        if left or (self.last_moves[i] in TRANSLATIONS and stood):
+        if left or (self.last_moves[i] in TRANSLATIONS and self._stood_still(i)):
             self.stays[i] = 0.0
             return -1
         grid, origin, cell_m = self.map.grids[i], self.map.origins[i], self.map.cell_m
@@ -573,9 +573,13 @@ class GoalWalker:
             return MOVE_FORWARD
         return int(move)
 
-    def _finish(self, i: int) -> None:
+    def _mark_done(self, i: int) -> None:
+        """The cluster agent ``i`` was sent to is done for the episode (none: nothing)."""
         a, b = self.target_clusters[i]
         if 0 <= a < self.done.shape[1] and 0 <= b < self.done.shape[2]:
             self.done[i, a, b] = True
+
+    def _finish(self, i: int) -> None:
+        self._mark_done(i)
         self._refresh(i)
         self._go_to(i, 0)
