@@ -24,6 +24,7 @@ from naruto_gym.rl.goal_planner import (
     TRANSLATIONS,
     TURN_LEFT,
     TURN_RIGHT,
+    WALK_ON_TURNS,
     WALKING,
     follow_path,
     move_is_safe,
@@ -62,6 +63,11 @@ OPPOSITE_TURN = {TURN_LEFT: TURN_RIGHT, TURN_RIGHT: TURN_LEFT}
 
 def _wrap(angle: float) -> float:
     return float((angle + np.pi) % (2.0 * np.pi) - np.pi)
+
+
+def _heading(pose: np.ndarray) -> float:
+    """The camera's optical axis' direction in the x-y plane (radians)."""
+    return float(np.arctan2(pose[1, 2], pose[0, 2]))
 
 
 class GoalWalker:
@@ -363,7 +369,7 @@ class GoalWalker:
         if self.last_moves[i] != MOVE_FORWARD or not self._stood_still(i):
             return False
         pose = self.map.poses[i]
-        heading = np.arctan2(pose[1, 2], pose[0, 2])
+        heading = _heading(pose)
         direction = np.array([np.cos(heading), np.sin(heading)])
         standing = self.map.cell_of(i, pose[:2, 3])
         reach = self.step_m
@@ -433,7 +439,7 @@ class GoalWalker:
             if self.phases[i] == FACE:
                 error = _wrap(
                     np.arctan2(self.targets[i, 1] - pose[1, 3], self.targets[i, 0] - pose[0, 3])
-                    - np.arctan2(pose[1, 2], pose[0, 2])
+                    - _heading(pose)
                 )
                 if abs(error) > 0.5 * self.turn_rad + 1e-6:
                     return TURN_LEFT if error > 0 else TURN_RIGHT
@@ -505,10 +511,12 @@ class GoalWalker:
 
     def _leave_move(self, i: int) -> int:
         """A step out of the stay along the path without turning first (forward, backward or
-        sideways, whichever brings the agent nearest to the path's carrot), or -1: out of
-        the stay, the env refused the last step, or no such step brings the carrot nearer
-        (the path is then followed as usual, turning to face it). Turning to face a path
-        that leads behind would take up to half a turn's steps on the spot.
+        sideways, whichever brings the agent nearest to the path's carrot); where no step
+        brings the carrot nearer, one turn towards it, while it lies more than the walk-on
+        angle off (after a turn or two a sideways or backward step usually does); or -1:
+        out of the stay, the env refused the last step, or facing the carrot (the path is
+        then followed as usual). Turning to face a path that leads behind would take up to
+        half a turn's steps on the spot.
         """
         pose = self.map.poses[i]
         left = np.hypot(*(pose[:2, 3] - self.stays[i, :2])) > self.stays[i, 2]
@@ -527,6 +535,9 @@ class GoalWalker:
             grid, origin, cell_m, pose, x, y, self.step_m, self.inflate, TRANSLATIONS
         )
         if move < 0:
+            error = _wrap(np.arctan2(y - pose[1, 3], x - pose[0, 3]) - _heading(pose))
+            if abs(error) > WALK_ON_TURNS * self.turn_rad + 1e-6:
+                return TURN_LEFT if error > 0 else TURN_RIGHT
             self.stays[i] = 0.0
         return int(move)
 

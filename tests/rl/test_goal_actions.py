@@ -536,6 +536,33 @@ def _walker_between_two_blocks() -> tuple[EgocentricMapBuilder, GoalWalker, np.n
     return builder, walker, pose
 
 
+def _walk_out(
+    builder: EgocentricMapBuilder, walker: GoalWalker, pose: np.ndarray, radius_m: float, most: int
+) -> list[int]:
+    """The walker's moves, each carried out on ``pose`` as the env would (steps of 0.1 m,
+    turns of 20 degrees) and observed, until it stands ``radius_m`` from where it started
+    or ``most`` moves were made."""
+    start = pose[:2, 3].copy()
+    panorama = np.zeros((32, 64), np.float32)
+    directions = {MOVE_FORWARD: 0.0, MOVE_LEFT: 0.5 * np.pi, MOVE_BACKWARD: np.pi,
+                  MOVE_RIGHT: -0.5 * np.pi}  # fmt: skip
+    moves: list[int] = []
+    while np.hypot(*(pose[:2, 3] - start)) <= radius_m and len(moves) < most:
+        move = int(walker.next_moves()[0])
+        moves.append(move)
+        heading = np.arctan2(pose[1, 2], pose[0, 2])
+        if move in (TURN_LEFT, TURN_RIGHT):
+            angle = np.deg2rad(20) * (1 if move == TURN_LEFT else -1)
+            turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
+                             [0, 0, 1]])  # fmt: skip
+            pose[:3, :3] = turn @ pose[:3, :3]
+        elif move in directions:
+            way = heading + directions[move]
+            pose[:2, 3] += 0.1 * np.array([np.cos(way), np.sin(way)])
+        _observe(builder, pose, panorama)
+    return moves
+
+
 def test_out_of_a_stay_the_walker_goes_past_it_without_turning_on_the_spot_first():
     """A stall watchdog's recovery (:meth:`GoalWalker.leave`): the nearest candidate's
     viewpoint lies within the stay, so the walker takes the next one, 3 m behind it, and
@@ -547,16 +574,22 @@ def test_out_of_a_stay_the_walker_goes_past_it_without_turning_on_the_spot_first
     assert np.hypot(*(walker.viewpoints[0, 0] - start)) < 0.6  # viewed from within the stay
     assert walker.leave(0, start[None], 0.6) == "walk to the nearest candidate past the stay"
     assert walker.phases[0] == WALK and walker.targets[0][0] < 3.0  # the one behind
-    moves = []
-    panorama = np.zeros((32, 64), np.float32)
-    while np.hypot(*(pose[:2, 3] - start)) <= 0.6 and len(moves) < 12:
-        move = int(walker.next_moves()[0])
-        moves.append(move)
-        step = {MOVE_FORWARD: (0.1, 0), MOVE_BACKWARD: (-0.1, 0), MOVE_LEFT: (0, 0.1),
-                MOVE_RIGHT: (0, -0.1)}.get(move, (0, 0))  # fmt: skip
-        pose[:2, 3] += step
-        _observe(builder, pose, panorama)
-    assert moves == [MOVE_BACKWARD] * 7
+    assert _walk_out(builder, walker, pose, 0.6, 12) == [MOVE_BACKWARD] * 7
+
+
+def test_out_of_a_stay_with_no_step_towards_the_path_the_walker_turns_only_until_one_is():
+    """An obstacle right behind the walker: its path out of the stay leads round it, and
+    soon no step (forward, backward or sideways) brings the path's carrot nearer. The
+    walker turns until one does, a turn or two, instead of turning round to face the path
+    (eight turns on the spot) before it steps out."""
+    builder, walker, pose = _walker_between_two_blocks()
+    i, j = np.floor((np.array([4.75, 5.05]) - builder.origins[0]) / builder.cell_m).astype(int)
+    builder.grids[0, OCCUPIED, i - 1 : i + 2, j - 1 : j + 2] = 255
+    builder.grids[0, FREE, i - 1 : i + 2, j - 1 : j + 2] = 0
+    walker.leave(0, pose[None, :2, 3].copy(), 0.6)
+    moves = _walk_out(builder, walker, pose, 0.6, 20)
+    turns = sum(move in (TURN_LEFT, TURN_RIGHT) for move in moves)
+    assert 1 <= turns <= 2 and len(moves) <= 12
 
 
 def test_a_walk_out_of_a_stay_stays_one_when_the_map_restarts_at_a_new_height():
