@@ -188,7 +188,7 @@ def table(episodes: list[dict[str, Any]]) -> str:
             f"{100 * e['coverage']:.1f} | {e['path_m']:.1f} | {triggers or 'none'} |"
         )
     lines.append("")
-    for row in summary(episodes)["naruto_vs_frontier"]:
+    for row in naruto_against_frontier(episodes):
         verdict = "holds" if row["holds"] else "does not hold"
         seeds = len(row["seeds"])
         lines.append(

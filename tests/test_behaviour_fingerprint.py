@@ -4,7 +4,6 @@ other entry exactly."""
 from __future__ import annotations
 
 import copy
-import importlib.util
 import sys
 from pathlib import Path
 
@@ -13,20 +12,17 @@ import numpy as np
 import pytest
 
 import naruto_gym  # noqa: F401
+from tests.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "behaviour_fingerprint.py"
 
 
 @pytest.fixture(scope="module")
 def fingerprint():
-    spec = importlib.util.spec_from_file_location("behaviour_fingerprint", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # its dataclasses look their module up there
     try:
-        spec.loader.exec_module(module)
-        yield module
+        yield load_script(SCRIPT, "behaviour_fingerprint")
     finally:
-        sys.modules.pop(spec.name, None)
+        sys.modules.pop("behaviour_fingerprint", None)
 
 
 def frame(offset: float = 0.0) -> np.ndarray:

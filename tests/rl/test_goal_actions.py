@@ -450,6 +450,14 @@ def _observe(builder: EgocentricMapBuilder, pose: np.ndarray, panorama: np.ndarr
     })  # fmt: skip
 
 
+def _turn(pose: np.ndarray, move: int) -> None:
+    """Turn ``pose`` in place as the env turns the agent: 20 degrees about +z."""
+    angle = np.deg2rad(20) * (1 if move == TURN_LEFT else -1)
+    turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
+                     [0, 0, 1]])  # fmt: skip
+    pose[:3, :3] = turn @ pose[:3, :3]
+
+
 def test_an_idle_walker_over_furniture_steps_down_after_a_full_turn():
     """Nothing in reach and the floor (a table top, say) 1.1 m below: above the doorways'
     lintels every room looks closed. After a full turn in place the walker steps down, and
@@ -462,11 +470,8 @@ def test_an_idle_walker_over_furniture_steps_down_after_a_full_turn():
         _observe(builder, pose, panorama)
         move = int(walker.next_moves()[0])
         moves.append(move)
-        if move in (TURN_LEFT, TURN_RIGHT):  # the env's turn of 20 degrees about +z
-            angle = np.deg2rad(20) * (1 if move == TURN_LEFT else -1)
-            turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
-                             [0, 0, 1]])  # fmt: skip
-            pose[:3, :3] = turn @ pose[:3, :3]
+        if move in (TURN_LEFT, TURN_RIGHT):
+            _turn(pose, move)
         elif move == MOVE_DOWN:
             pose[2, 3] -= 0.1
     first_down = moves.index(MOVE_DOWN)
@@ -520,16 +525,20 @@ def _set_coarse(builder: EgocentricMapBuilder) -> None:
     builder.coarse[0] = _coarse(builder.grids[0], builder.far_factor)
 
 
+def _unseen_block(builder: EgocentricMapBuilder, x: float, y: float) -> None:
+    """An obstacle of 3 x 3 cells around world (x, y) on agent 0's map, not yet seen."""
+    i, j = builder.cell_of(0, (x, y))
+    builder.grids[0, OCCUPIED, i - 1 : i + 2, j - 1 : j + 2] = 255
+    builder.grids[0, FREE, i - 1 : i + 2, j - 1 : j + 2] = 0
+
+
 def _walker_between_two_blocks() -> tuple[EgocentricMapBuilder, GoalWalker, np.ndarray]:
     """A walker at (5.05, 5.05) m facing +x on open floor, an unseen block 0.7 m to its left
     (viewed from where it stands) and one 3 m behind it; candidates found."""
     builder, walker, pose = _level_walker([5.05, 5.05, 1.3])
-    origin = builder.origins[0]
     builder.grids[0, FREE] = 255
-    for x, y in ((5.05, 5.75), (2.05, 5.05)):
-        i, j = np.floor((np.array([x, y]) - origin) / builder.cell_m).astype(int)
-        builder.grids[0, OCCUPIED, i - 1 : i + 2, j - 1 : j + 2] = 255
-        builder.grids[0, FREE, i - 1 : i + 2, j - 1 : j + 2] = 0
+    _unseen_block(builder, 5.05, 5.75)
+    _unseen_block(builder, 2.05, 5.05)
     _observe(builder, pose, np.zeros((32, 64), np.float32))
     _set_coarse(builder)
     walker.refresh_candidates()
@@ -552,10 +561,7 @@ def _walk_out(
         moves.append(move)
         heading = np.arctan2(pose[1, 2], pose[0, 2])
         if move in (TURN_LEFT, TURN_RIGHT):
-            angle = np.deg2rad(20) * (1 if move == TURN_LEFT else -1)
-            turn = np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
-                             [0, 0, 1]])  # fmt: skip
-            pose[:3, :3] = turn @ pose[:3, :3]
+            _turn(pose, move)
         elif move in directions:
             way = heading + directions[move]
             pose[:2, 3] += 0.1 * np.array([np.cos(way), np.sin(way)])
@@ -583,9 +589,7 @@ def test_out_of_a_stay_with_no_step_towards_the_path_the_walker_turns_only_until
     walker turns until one does, a turn or two, instead of turning round to face the path
     (eight turns on the spot) before it steps out."""
     builder, walker, pose = _walker_between_two_blocks()
-    i, j = np.floor((np.array([4.75, 5.05]) - builder.origins[0]) / builder.cell_m).astype(int)
-    builder.grids[0, OCCUPIED, i - 1 : i + 2, j - 1 : j + 2] = 255
-    builder.grids[0, FREE, i - 1 : i + 2, j - 1 : j + 2] = 0
+    _unseen_block(builder, 4.75, 5.05)  # 0.3 m behind
     walker.leave(0, pose[None, :2, 3].copy(), 0.6)
     moves = _walk_out(builder, walker, pose, 0.6, 20)
     turns = sum(move in (TURN_LEFT, TURN_RIGHT) for move in moves)

@@ -3,7 +3,6 @@ flag turns them off) through ``make_vector_env``, with the panorama band when as
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from pathlib import Path
 
@@ -14,18 +13,15 @@ pytest.importorskip("stable_baselines3")
 from naruto_agent.cli_args import parse_dataclass_args  # noqa: E402
 from naruto_gym.rl.explorer_env import TRAIN_MIX  # noqa: E402
 from naruto_gym.vector import NarutoReconVectorEnv, SharedSceneStreams  # noqa: E402
+from tests.scripts import load_script  # noqa: E402
 
 SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "train_explorer.py"
 
 
 @pytest.fixture(scope="module")
 def train_explorer():
-    spec = importlib.util.spec_from_file_location("train_explorer_under_test", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    yield module
-    del sys.modules[spec.name]
+    yield load_script(SCRIPT, "train_explorer_under_test")
+    del sys.modules["train_explorer_under_test"]
 
 
 def test_shared_scenes_by_default_and_a_flag_for_a_scene_per_agent(train_explorer):

@@ -8,7 +8,6 @@ used.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import subprocess
@@ -24,6 +23,7 @@ from naruto_agent.benchmark import build_specs, run_episode
 from naruto_agent.cli_args import field_docs
 from naruto_gym.scenes.catalogue import resolve_scene
 from naruto_gym.scenes.mesh_scene import dataset_up_axis
+from tests.scripts import load_script
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "scripts" / "prepare_replica.py"
@@ -32,11 +32,7 @@ ROOM = np.array([4.0, 5.0, 3.0])  # the box room's extents (m), from the origin
 
 
 def _load_script():
-    spec = importlib.util.spec_from_file_location("prepare_replica", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["prepare_replica"] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    return load_script(SCRIPT, "prepare_replica")
 
 
 prepare_replica = _load_script()
@@ -211,11 +207,7 @@ def test_the_prepared_scene_runs_in_the_harness(tmp_path):
 def test_replica_passive_replays_a_prepared_scene(tmp_path, capsys):
     source = write_release(tmp_path, scenes=("office0", "room0"), poses=4)
     assert run_prepare(source, tmp_path / "out") == 0
-    spec = importlib.util.spec_from_file_location(
-        "replica_passive", ROOT / "benchmarks" / "replica_passive.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["replica_passive"] = module
-    spec.loader.exec_module(module)
+    module = load_script(ROOT / "benchmarks" / "replica_passive.py", "replica_passive")
     report = module.main(["--scene-dir", str(tmp_path / "out" / "replica_room0"),
                           "--num-samples", "2000", "--output-file", str(tmp_path / "room0.json")])
     assert report["scene"] == "replica_room0" and report["frames"] == 4

@@ -2,23 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import pytest
 
 from naruto_agent.benchmark import write_json_atomic
+from tests.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[3] / "benchmarks" / "published_budgets.py"
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("published_budgets", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    return load_script(SCRIPT, "published_budgets")
 
 
 def _record(policy: str, seed: int, ratio: float, status: str = "ok") -> dict:

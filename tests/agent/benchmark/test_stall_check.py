@@ -2,19 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
+
+from tests.scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[3] / "benchmarks" / "stall_check.py"
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("stall_check", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    return load_script(SCRIPT, "stall_check")
 
 
 def _episode(policy: str, seed: int, path_m: float, coverage: float, stay: int = 10) -> dict:
