@@ -2,9 +2,27 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+
+
+def _share_the_cores_between_workers() -> None:
+    """pytest-xdist runs one worker per core, and every worker's compiled loops and torch
+    default to every core: N workers would start N pools of N threads each. A worker (and the
+    interpreters its tests start) gets its share instead, unless the caller set a count. Set
+    here, before any test module imports torch, which reads ``OMP_NUM_THREADS`` once."""
+    workers = os.environ.get("PYTEST_XDIST_WORKER_COUNT", "").strip()
+    if not workers.isdigit() or int(workers) < 2:
+        return
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    share = str(max(1, (cpus or 1) // int(workers)))
+    os.environ.setdefault("NARUTO_GYM_THREADS", share)
+    os.environ.setdefault("OMP_NUM_THREADS", share)
+
+
+_share_the_cores_between_workers()
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_SCENES = REPO_ROOT.parent / "shared" / "scenes"

@@ -26,6 +26,7 @@ from tqdm.auto import tqdm
 from naruto_agent.benchmark.records import STATUS_OK, is_done, write_json_atomic
 from naruto_agent.benchmark.runner import failed_record, run_episode_safe
 from naruto_agent.benchmark.spec import EpisodeSpec
+from naruto_gym.utils.threads import available_cpus
 
 MAX_POOL_RESTARTS_PER_EPISODE = 1
 
@@ -67,6 +68,20 @@ def stop_with_parent(parent_pid: int, interval_s: float = 1.0) -> None:
     threading.Thread(target=watch, name="naruto-stop-with-parent", daemon=True).start()
 
 
+def start_worker(parent_pid: int, threads: int) -> None:
+    """Initializer of a local worker process: it stops with its parent
+    (:func:`stop_with_parent`) and takes its share of the CPUs.
+
+    The libraries an episode loads after this (torch, Open3D's OpenMP loops, the env's compiled
+    loops in a worker process) size their thread pools from ``OMP_NUM_THREADS``. Unset, each
+    of N workers starts a pool of every CPU, and pools that contend for the same cores wait on
+    one another: some operations (a QR factorisation of a policy's weights, for one) then take
+    a hundred times longer. A value the user set is kept (the workers inherit it).
+    """
+    os.environ.setdefault("OMP_NUM_THREADS", str(threads))
+    stop_with_parent(parent_pid)
+
+
 def run_local(
     specs: list[EpisodeSpec],
     output_dir: str | Path,
@@ -79,7 +94,8 @@ def run_local(
     Args:
         specs: the episodes to run (see :func:`pending_specs` to skip finished ones).
         output_dir: output folder; records go to ``output_dir/records/...``.
-        workers: worker processes (spawn start method: Open3D/Embree are not fork-safe).
+        workers: worker processes (spawn start method: Open3D/Embree are not fork-safe), each
+            with an equal share of the CPUs for its thread pools (:func:`start_worker`).
         progress: show a progress bar.
         episode_fn: picklable function from a spec dict to a record (for tests).
 
@@ -96,9 +112,14 @@ def run_local(
         attempts = dict.fromkeys(range(len(specs)), 0)
         remaining = list(range(len(specs)))
         context = multiprocessing.get_context("spawn")
+        share = max(1, available_cpus() // workers)
         while remaining:
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=context,
-                                       initializer=stop_with_parent, initargs=(os.getpid(),))
+            pool = ProcessPoolExecutor(
+                max_workers=workers,
+                mp_context=context,
+                initializer=start_worker,
+                initargs=(os.getpid(), share),
+            )
             try:
                 futures: dict[Future, int] = {
                     pool.submit(episode_fn, specs[index].as_dict()): index for index in remaining

@@ -30,7 +30,6 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-import open3d as o3d
 import torch
 import trimesh
 
@@ -42,7 +41,7 @@ from naruto_agent.mapping.observed_space import (
     add_unknown_space_uncertainty,
 )
 from naruto_agent.mapping.sdf_volume import SdfVolume
-from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper
+from naruto_gym.evaluation.tsdf_mapper import TsdfFusionMapper, open3d_module
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.checks import check_bool, check_integer, check_number
 
@@ -138,7 +137,7 @@ class TsdfUncertaintyMapper:
             truncation_m=self.config.truncation_m,
             max_depth_m=self.config.max_depth_m,
             device="cuda"
-            if self._device.type == "cuda" and o3d.core.cuda.is_available()
+            if self._device.type == "cuda" and open3d_module().core.cuda.is_available()
             else "cpu",
         )
         template = SdfVolume.from_function(

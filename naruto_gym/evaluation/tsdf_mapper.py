@@ -14,15 +14,26 @@ voxel size, so ``truncation_m / voxel_size_m`` need not be an integer.
 from __future__ import annotations
 
 import os
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
-import open3d as o3d
-import open3d.core as o3c
 import trimesh
+
+if TYPE_CHECKING:
+    import open3d as o3d
+    import open3d.core as o3c
 
 from naruto_gym.evaluation.tsdf_kernels import behind_surface_bounds
 from naruto_gym.sensors.pinhole import PinholeCamera
+
+
+def open3d_module():
+    """Open3D, imported at first use: its import takes a second or more (most of it its plotly
+    viewer's dependencies), and an env that never fuses a reconstruction should not pay it."""
+    import open3d
+    import open3d.core  # noqa: F401 (the ``open3d.core`` attribute below)
+
+    return open3d
 
 
 class PreparedFrame(NamedTuple):
@@ -38,6 +49,7 @@ class PreparedFrame(NamedTuple):
 def resolve_open3d_device(device: str = "auto") -> o3c.Device:
     """Open3D device for a setting: ``"auto"`` (CUDA:0 when Open3D has CUDA and a GPU is
     present, else CPU:0), ``"cpu"``, ``"cuda"`` or an explicit ``"CUDA:1"``/``"CPU:0"``."""
+    o3c = open3d_module().core
     name = device.strip().lower()
     if name == "auto":
         return o3c.Device("CUDA:0") if o3c.cuda.is_available() else o3c.Device("CPU:0")
@@ -121,6 +133,8 @@ class TsdfFusionMapper:
 
     def reset(self) -> None:
         """Forget everything fused so far."""
+        o3d = open3d_module()
+        o3c = o3d.core
         self._grid = o3d.t.geometry.VoxelBlockGrid(
             attr_names=("tsdf", "weight", "color"),
             attr_dtypes=(o3c.float32, o3c.float32, o3c.float32),
@@ -191,6 +205,8 @@ class TsdfFusionMapper:
         """Fuse a frame :meth:`prepare_frame` made (``None``: nothing to fuse)."""
         if frame is None:
             return
+        o3d = open3d_module()
+        o3c = o3d.core
         extrinsic = o3c.Tensor(np.linalg.inv(frame.camera_to_world), o3c.float64)
         intrinsic = o3c.Tensor(frame.intrinsic, o3c.float64)
         depth_image = o3d.t.geometry.Image(o3c.Tensor(frame.depth)).to(self.device)
@@ -289,7 +305,7 @@ class TsdfFusionMapper:
         The blocks touched before are forgotten (:meth:`pop_touched_blocks` starts empty),
         since a user's coarse view of the old grid is no guide to the new one.
         """
-        self._grid = o3d.t.geometry.VoxelBlockGrid.load(os.fspath(path)).to(self.device)
+        self._grid = open3d_module().t.geometry.VoxelBlockGrid.load(os.fspath(path)).to(self.device)
         self._sdf_index = None
         self._touched_blocks = []
 

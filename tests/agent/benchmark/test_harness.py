@@ -25,6 +25,7 @@ from naruto_agent.benchmark import (
 from naruto_agent.benchmark.cli import parse_args, write_reports
 from naruto_agent.benchmark.plots import plot_curves
 from naruto_agent.episode_loop import eval_point_steps
+from naruto_gym.utils.threads import available_cpus
 
 # Tiny episodes: a small camera, few coverage samples, few evaluation samples.
 TINY = {
@@ -226,3 +227,25 @@ def test_sample_density_is_a_setting_of_the_record():
     with pytest.raises(ValueError, match="eval_samples_per_m2"):
         EpisodeSpec(scene="replica_like_room", policy="random", seed=0, steps=5,
                     eval_samples_per_m2=-1.0)
+
+
+def _report_worker_threads(spec: dict) -> dict:
+    """An episode function for :func:`run_local` that records its worker's thread setting."""
+    return {"status": "ok", "omp_num_threads": os.environ.get("OMP_NUM_THREADS")}
+
+
+@pytest.mark.parametrize("preset", [None, "3"])
+def test_local_workers_share_the_cpus_unless_the_user_set_threads(tmp_path, monkeypatch, preset):
+    """N workers each starting a thread pool of every CPU contend for the cores (some torch
+    operations then run a hundred times slower); each gets its share, or what the user set."""
+    if preset is None:
+        monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    else:
+        monkeypatch.setenv("OMP_NUM_THREADS", preset)
+    specs = [EpisodeSpec(scene="replica_like_room", policy="random", seed=seed, steps=1)
+             for seed in range(2)]
+    assert run_local(specs, tmp_path, workers=2, progress=False,
+                     episode_fn=_report_worker_threads) == 0
+    seen = {json.loads(spec.record_path(tmp_path).read_text())["omp_num_threads"]
+            for spec in specs}
+    assert seen == {preset or str(max(1, available_cpus() // 2))}
