@@ -71,11 +71,19 @@ def _channels_first(space: spaces.Box) -> tuple[int, int, int]:
     )
 
 
+def _channels_last(images: torch.Tensor) -> torch.Tensor:
+    return images.contiguous(memory_format=torch.channels_last)
+
+
 class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
     """Features of the explorer's observation: a CNN over the ``map`` channels, a CNN over the
     ``panorama``, an MLP over the relative ``pose`` and one over the ``candidates`` feature
     table (all its rows at once, so that it can compare them); concatenated and projected to
     ``features_dim``. uint8 images arrive in [0, 1] (SB3's preprocessing), channel-first.
+
+    The CNNs take their inputs channels-last in memory (NHWC; the shapes are unchanged): on
+    CPU, oneDNN's convolutions then run in that layout, forward and backward, about twice as
+    fast, with the same arithmetic up to the order of their sums.
 
     Args:
         observation_space: ``Dict`` with ``map``, ``panorama``, ``pose`` and ``candidates``.
@@ -132,8 +140,8 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
         return self.head(
             torch.cat(
                 [
-                    self.map(observations["map"]),
-                    self.panorama(observations["panorama"]),
+                    self.map(_channels_last(observations["map"])),
+                    self.panorama(_channels_last(observations["panorama"])),
                     self.pose(observations["pose"].flatten(1)),
                     self.candidates(observations["candidates"].flatten(1)),
                 ],

@@ -219,3 +219,40 @@ def test_the_explorer_recovers_from_a_stall_and_leaves_the_spot():
         action = policy.act(observation, info)
     assert farthest > 0.5, policy.stall_events
     env.close()
+
+
+def test_the_features_extractor_runs_channels_last_with_channel_first_results() -> None:
+    """Its CNNs take channels-last inputs (about twice as fast on CPU); the features are those
+    of the same layers run on channel-first inputs."""
+    import torch
+
+    model = PPO.load(PACKAGED_MODEL, device="cpu")
+    extractor = model.policy.features_extractor
+    assert isinstance(extractor, ExplorerFeaturesExtractor)
+    generator = torch.Generator().manual_seed(0)
+    observations = {
+        key: torch.rand((5, *space.shape), generator=generator)
+        for key, space in model.observation_space.spaces.items()
+    }
+    seen = []
+    hook = extractor.map[0].register_forward_pre_hook(lambda _, inputs: seen.append(inputs[0]))
+    with torch.no_grad():
+        features = extractor(observations)
+        expected = extractor.head(torch.cat([
+            _channel_first(extractor.map, observations["map"]),
+            _channel_first(extractor.panorama, observations["panorama"]),
+            extractor.pose(observations["pose"].flatten(1)),
+            extractor.candidates(observations["candidates"].flatten(1)),
+        ], 1))
+    hook.remove()
+    assert seen[0].is_contiguous(memory_format=torch.channels_last)
+    assert torch.allclose(features, expected, atol=1e-5)
+
+
+def _channel_first(layers, images):
+    """``layers`` run on channel-first (default contiguous) inputs and activations."""
+    import torch
+
+    for layer in layers:
+        images = layer(images.contiguous(memory_format=torch.contiguous_format))
+    return images
