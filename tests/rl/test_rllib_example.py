@@ -6,12 +6,12 @@ RLlib pins (see ``scripts/rllib_env.sh``)."""
 
 from __future__ import annotations
 
-import importlib.util
 import os
-import sys
 from pathlib import Path
 
 import pytest
+
+from tests.scripts import load_script
 
 pytest.importorskip("ray.rllib.algorithms.ppo", reason="needs naruto-gym[ray] (Ray + RLlib)")
 
@@ -20,11 +20,7 @@ EXAMPLE = ROOT / "examples" / "rllib_ppo.py"
 
 
 def _example():
-    spec = importlib.util.spec_from_file_location("rllib_ppo", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["rllib_ppo"] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    return load_script(EXAMPLE, "rllib_ppo")
 
 
 def _runner_env_type(runner) -> str:

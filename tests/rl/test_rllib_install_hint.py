@@ -4,7 +4,6 @@ tests run in the second environment of ``scripts/rllib_env.sh``)."""
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
@@ -12,17 +11,15 @@ from pathlib import Path
 
 import pytest
 
+from tests.scripts import load_script
+
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "rllib_ppo.py"
 HINT = "pip install 'naruto-gym[ray]'"
 
 
 def _example():
-    spec = importlib.util.spec_from_file_location("rllib_ppo_hint", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["rllib_ppo_hint"] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    return load_script(EXAMPLE, "rllib_ppo_hint")
 
 
 @pytest.mark.parametrize("blocked", ["ray", "ray.rllib.algorithms.ppo", "ray.tune.registry"])
