@@ -27,6 +27,8 @@ import os
 import platform
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -251,22 +253,42 @@ def _read(path: Path) -> list[dict[str, Any]]:
     return json.loads(path.read_text())["episodes"] if path.is_file() else []
 
 
+@contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    """An exclusive lock on ``path``'s lock file while the block runs, so that runs side by
+    side (a process per seed, say) do not drop each other's episodes between a read and a
+    write. Where ``fcntl`` is missing (Windows) the block runs unlocked."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path.with_name(path.name + ".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
 def _write(path: Path, args: Args, new: list[dict[str, Any]]) -> dict[str, Any]:
     """Add ``new`` to the episodes in the file as it is now (a second run of the script, say
-    for another policy, may have added some meanwhile) and write it; returns the summary."""
-    episodes = {_key(e): e for e in _read(path)}
-    episodes.update({_key(e): e for e in new})
-    result = summary(list(episodes.values()))
-    write_json_atomic(
-        path,
-        {
-            "args": asdict(args),
-            "machine": machine(),
-            "episodes": list(episodes.values()),
-            "summary": result,
-        },
-    )
-    (path.parent / TABLE_FILE).write_text(table(list(episodes.values())))
+    for another seed, may have added some meanwhile) and write it; returns the summary."""
+    with _locked(path):
+        episodes = {_key(e): e for e in _read(path)}
+        episodes.update({_key(e): e for e in new})
+        result = summary(list(episodes.values()))
+        write_json_atomic(
+            path,
+            {
+                "args": asdict(args),
+                "machine": machine(),
+                "episodes": list(episodes.values()),
+                "summary": result,
+            },
+        )
+        (path.parent / TABLE_FILE).write_text(table(list(episodes.values())))
     return result
 
 

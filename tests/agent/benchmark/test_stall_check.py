@@ -57,3 +57,30 @@ def test_a_scene_behind_on_both_means_does_not_hold():
     assert not row["holds"] and row["seeds_holding"] == 1
     assert summary["stays_over_limit"] == ["random@two_rooms:no_ceiling+holes#1: 31"]
     assert "does not hold" in check.table(episodes)
+
+
+def _write_episodes(folder: str, first_seed: int, count: int) -> None:
+    """One of two runs side by side: writes its episodes one at a time, as the script does."""
+    check = _script()
+    path = Path(folder) / check.RESULT_FILE
+    for seed in range(first_seed, first_seed + count):
+        check._write(path, check.Args(), [_episode("naruto", seed, 10.0, 0.5)])
+
+
+def test_runs_side_by_side_keep_each_others_episodes(tmp_path):
+    """Each write reads the file, adds its episode and writes it back; two runs at once (a
+    process per seed) must not drop each other's episodes in between."""
+    import multiprocessing
+
+    context = multiprocessing.get_context("spawn")
+    runs = [
+        context.Process(target=_write_episodes, args=(str(tmp_path), first, 60))
+        for first in (0, 1000)
+    ]
+    for run in runs:
+        run.start()
+    for run in runs:
+        run.join(timeout=120)
+    assert [run.exitcode for run in runs] == [0, 0]
+    seeds = {episode["seed"] for episode in _script()._read(tmp_path / "stall_check.json")}
+    assert seeds == set(range(60)) | set(range(1000, 1060))
