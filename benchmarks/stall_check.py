@@ -15,7 +15,8 @@ the seeds run (``--seeds 0 1 2``).
 
 It is resumable: every finished episode is written at once into ``stall_check.json`` under
 ``--output-dir`` (with its table, ``stall_check.md``), and a rerun skips the episodes found
-there. Example::
+there. Runs side by side (a process per seed, ``--seeds 1``) add to the same file: each
+takes a lock on it while it reads and writes it. Example::
 
     nice -n 10 python benchmarks/stall_check.py
 """
