@@ -145,6 +145,10 @@ class EgocentricMapBuilder:
         #: nothing, as nothing is known of it).
         self.clearance_up = np.zeros(self.num_envs)
         self.clearance_down = np.zeros(self.num_envs)
+        #: Whether no ray of the panorama's top row hit anything at the last observation:
+        #: nothing above within range, as over an open scan (no ceiling), or a top row that
+        #: was not cast (``panorama_horizon_deg``).
+        self.open_above = np.zeros(self.num_envs, bool)
         #: Height the obstacle and free layers of each agent's grid were built at, and how
         #: many times they restarted this episode (see :meth:`update`).
         self.slice_heights = np.zeros(self.num_envs)
@@ -264,6 +268,7 @@ class EgocentricMapBuilder:
         self.steps[envs] += 1
         top, bottom = panorama[:, 0], panorama[:, -1]
         self.clearance_up[envs] = np.where((top > 0).all(axis=1), top.min(axis=1), 0.0)
+        self.open_above[envs] = (top <= 0).all(axis=1)
         self.clearance_down[envs] = np.where((bottom > 0).all(axis=1), bottom.min(axis=1), 0.0)
 
     def cell_of(self, env: int, xy: Any) -> tuple[int, int]:

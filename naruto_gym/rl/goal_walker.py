@@ -18,7 +18,10 @@ from naruto_gym.motion.actions import DISCRETE_ACTIONS
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
 from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES, find_candidates, wander_goal
 from naruto_gym.rl.goal_planner import (
+    MOVE_BACKWARD,
     MOVE_FORWARD,
+    MOVE_LEFT,
+    MOVE_RIGHT,
     REACHED,
     REPLAN,
     TRANSLATIONS,
@@ -59,6 +62,13 @@ IDLE_SEARCH_EVERY = 4
 IDLE_LOWEST_M = 0.6
 #: Each turn in place and the turn the other way.
 OPPOSITE_TURN = {TURN_LEFT: TURN_RIGHT, TURN_RIGHT: TURN_LEFT}
+#: Each step and the step that undoes it.
+OPPOSITE_STEP = {
+    MOVE_FORWARD: MOVE_BACKWARD,
+    MOVE_BACKWARD: MOVE_FORWARD,
+    MOVE_LEFT: MOVE_RIGHT,
+    MOVE_RIGHT: MOVE_LEFT,
+}
 
 
 def _wrap(angle: float) -> float:
@@ -146,6 +156,8 @@ class GoalWalker:
         self.idle_steps = np.zeros(n, np.int64)
         self.moves_without_candidate = np.zeros(n, np.int64)  # idle or wandering, since a goal
         self.floor_heights = np.full(n, np.inf)  # lowest surface seen straight down
+        self.climb_ceilings = np.full(n, np.inf)  # height of a refused climb, none above it
+        self.last_heights = np.zeros(n)  # camera height when the last move was sent
         self.glance_left = np.zeros(n, np.int64)  # look-down moves left of a glance
         self.glanced = np.zeros(n, bool)  # the goal's glance is done
         self.wandering = np.zeros(n, bool)  # walking to a place with no candidate in view
@@ -192,6 +204,7 @@ class GoalWalker:
         self.counts[envs] = 0
         self.moves_without_candidate[envs] = 0
         self.floor_heights[envs] = np.inf
+        self.climb_ceilings[envs] = np.inf
         self.glance_left[envs] = 0
         self.glanced[envs] = False
 
@@ -361,6 +374,7 @@ class GoalWalker:
         move = self._choose(i)
         self.last_moves[i] = move
         self.last_positions[i] = self.map.poses[i][:2, 3]
+        self.last_heights[i] = self.map.poses[i][2, 3]
         return move
 
     def _refused(self, i: int) -> bool:
@@ -474,19 +488,28 @@ class GoalWalker:
     def _height_move(self, i: int) -> int:
         """A vertical move towards the walking height above the floor, or -1 (at it, or
         nothing seen below yet). It never comes nearer than one step and the vertical margin
-        to the surface below, nor climbs while an idle walker steps down."""
+        to the surface below, nor climbs while an idle walker steps down, nor where the env
+        refused a climb this episode."""
         below, above = self.map.clearance_down[i], self.map.clearance_up[i]
         if below <= 0:
             return -1
         z = float(self.map.poses[i][2, 3])
+        if self.last_moves[i] == MOVE_UP and z < self.last_heights[i] + 0.25 * self.step_m:
+            self.climb_ceilings[i] = min(self.climb_ceilings[i], z)  # the env refused it
         self.floor_heights[i] = min(self.floor_heights[i], z - below)
         height = z - self.floor_heights[i]
         least = self.step_m + VERTICAL_MARGIN_M
         if height > WALK_HEIGHT_M + WALK_HEIGHT_TOLERANCE_M and below > least:
             return MOVE_DOWN
+        # Nothing measured above (an open scan's sky) is room to climb, up to where the env
+        # refused a climb: without it an agent that starts low on an open scan walks its
+        # whole episode there, below the furniture that fences its map's slice.
+        room_above = above > least or (
+            self.map.open_above[i] and z + self.step_m < self.climb_ceilings[i] - 1e-6
+        )
         if (
             (height < WALK_HEIGHT_M - WALK_HEIGHT_TOLERANCE_M or below < least)
-            and above > least
+            and room_above
             and not self._idle_descent(i)
         ):
             return MOVE_UP
@@ -511,7 +534,8 @@ class GoalWalker:
 
     def _leave_move(self, i: int) -> int:
         """A step out of the stay along the path without turning first (forward, backward or
-        sideways, whichever brings the agent nearest to the path's carrot); where no step
+        sideways, whichever brings the agent nearest to the path's carrot, but never the step
+        that undoes the last one); where no step
         brings the carrot nearer, one turn towards it, while it lies more than the walk-on
         angle off (after a turn or two a sideways or backward step usually does); or -1:
         out of the stay, the env refused the last step, or facing the carrot (the path is
@@ -531,9 +555,13 @@ class GoalWalker:
         if status != WALKING:
             return -1
         x, y = origin + (self.paths[i, carrot] + 0.5) * cell_m
+        # Never the step that undoes the last one: the carrot moves with the agent, and a
+        # carrot between two places a step apart had it step right and left between them.
+        undo = OPPOSITE_STEP.get(int(self.last_moves[i]), -1)
         move = step_towards(
-            grid, origin, cell_m, pose, x, y, self.step_m, self.inflate, TRANSLATIONS
-        )
+            grid, origin, cell_m, pose, x, y, self.step_m, self.inflate,
+            TRANSLATIONS[TRANSLATIONS != undo],
+        )  # fmt: skip
         if move < 0:
             error = _wrap(np.arctan2(y - pose[1, 3], x - pose[0, 3]) - _heading(pose))
             if abs(error) > WALK_ON_TURNS * self.turn_rad + 1e-6:

@@ -479,6 +479,27 @@ def test_an_idle_walker_over_furniture_steps_down_after_a_full_turn():
     assert MOVE_UP not in moves and pose[2, 3] < 2.1  # below the lintels, and not back up
 
 
+def test_a_low_walker_under_an_open_sky_climbs_until_the_env_refuses():
+    """An open scan: the panorama's top row hits nothing. A walker that starts 0.44 m above
+    the floor climbs towards the walking height (nothing measured above used to count as no
+    room, and it walked the whole episode that low, fenced in by furniture on its map's
+    slice); once the env refuses a climb, it climbs no more there."""
+    builder, walker, pose = _level_walker([1.0, 1.0, 0.44])
+    panorama = np.zeros((32, 64), np.float32)
+    moves = []
+    for _ in range(12):
+        panorama[-1] = pose[2, 3]  # the floor at z = 0 straight down; nothing above
+        _observe(builder, pose, panorama)
+        move = int(walker.next_moves()[0])
+        moves.append(move)
+        if move == MOVE_UP and pose[2, 3] < 0.8:  # the env refuses climbs from 0.84 m
+            pose[2, 3] += 0.1
+        elif move in (TURN_LEFT, TURN_RIGHT):
+            _turn(pose, move)
+    assert moves[:5] == [MOVE_UP] * 5  # 0.44 -> 0.84, then the refused one
+    assert MOVE_UP not in moves[5:] and walker.climb_ceilings[0] == pytest.approx(0.84)
+
+
 @pytest.mark.parametrize("glance_steps", [-1, 1.5])
 def test_a_glance_that_is_not_a_whole_count_is_refused(glance_steps):
     builder = EgocentricMapBuilder(1, CAMERA, (32, 64))
@@ -594,6 +615,19 @@ def test_out_of_a_stay_with_no_step_towards_the_path_the_walker_turns_only_until
     moves = _walk_out(builder, walker, pose, 0.6, 20)
     turns = sum(move in (TURN_LEFT, TURN_RIGHT) for move in moves)
     assert 1 <= turns <= 2 and len(moves) <= 12
+
+
+def test_out_of_a_stay_the_walker_never_undoes_its_last_step():
+    """The path's carrot moves with the agent: one lying between two places a step apart had
+    the walker step right and left between them for 18 steps
+    (``procedural:flat:1000001:no_ceiling+holes``, seed 1). The step back out of the stay
+    is not taken right after a step forward; the walker turns towards the carrot instead."""
+    builder, walker, pose = _walker_between_two_blocks()
+    walker.leave(0, pose[None, :2, 3].copy(), 0.6)
+    assert int(walker.next_moves()[0]) == MOVE_BACKWARD  # the way out, as above
+    walker.last_moves[0] = MOVE_FORWARD  # as if it had just stepped forward (not refused)
+    walker.last_positions[0] = pose[:2, 3] - [0.1, 0.0]
+    assert int(walker.next_moves()[0]) in (TURN_LEFT, TURN_RIGHT)
 
 
 def test_a_walk_out_of_a_stay_stays_one_when_the_map_restarts_at_a_new_height():
