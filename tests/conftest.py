@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from naruto_gym.utils.threads import available_cpus  # imports no torch
+
 
 def _share_the_cores_between_workers() -> None:
     """pytest-xdist runs one worker per core, and every worker's compiled loops and torch
@@ -16,8 +18,7 @@ def _share_the_cores_between_workers() -> None:
     workers = os.environ.get("PYTEST_XDIST_WORKER_COUNT", "").strip()
     if not workers.isdigit() or int(workers) < 2:
         return
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    share = str(max(1, (cpus or 1) // int(workers)))
+    share = str(max(1, available_cpus() // int(workers)))
     os.environ.setdefault("NARUTO_GYM_THREADS", share)
     os.environ.setdefault("OMP_NUM_THREADS", share)
 

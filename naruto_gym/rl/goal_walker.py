@@ -157,14 +157,13 @@ class GoalWalker:
         self.moves_without_candidate = np.zeros(n, np.int64)  # idle or wandering, since a goal
         self.floor_heights = np.full(n, np.inf)  # lowest surface seen straight down
         self.climb_ceilings = np.full(n, np.inf)  # height of a refused climb, none above it
-        self.last_heights = np.zeros(n)  # camera height when the last move was sent
         self.glance_left = np.zeros(n, np.int64)  # look-down moves left of a glance
         self.glanced = np.zeros(n, bool)  # the goal's glance is done
         self.wandering = np.zeros(n, bool)  # walking to a place with no candidate in view
         self.leaving = np.zeros(n, bool)  # wandering out of a stay: candidates do not end it
         self.stays = np.zeros((n, 3))  # a stay left without turning: centre (x, y), radius
         self.last_moves = np.full(n, -1, np.int64)  # the walking move sent last, and from where
-        self.last_positions = np.zeros((n, 2))
+        self.last_positions = np.zeros((n, 3))
         self.slice_restarts = np.zeros(n, np.int64)  # the map's count when the goal was set
         self.targets = np.zeros((n, 2))  # world (x, y) of the cluster to face
         self.target_clusters = np.full((n, 2), -1, np.int64)
@@ -373,8 +372,7 @@ class GoalWalker:
     def _move(self, i: int) -> int:
         move = self._choose(i)
         self.last_moves[i] = move
-        self.last_positions[i] = self.map.poses[i][:2, 3]
-        self.last_heights[i] = self.map.poses[i][2, 3]
+        self.last_positions[i] = self.map.poses[i][:3, 3]
         return move
 
     def _refused(self, i: int) -> bool:
@@ -494,7 +492,7 @@ class GoalWalker:
         if below <= 0:
             return -1
         z = float(self.map.poses[i][2, 3])
-        if self.last_moves[i] == MOVE_UP and z < self.last_heights[i] + 0.25 * self.step_m:
+        if self.last_moves[i] == MOVE_UP and self._stood_still(i):
             self.climb_ceilings[i] = min(self.climb_ceilings[i], z)  # the env refused it
         self.floor_heights[i] = min(self.floor_heights[i], z - below)
         height = z - self.floor_heights[i]
@@ -528,8 +526,9 @@ class GoalWalker:
         return nothing_in_reach and self.moves_without_candidate[i] > full_turn
 
     def _stood_still(self, i: int) -> bool:
-        """Whether the move sent last left agent ``i`` where it was (the env refused it)."""
-        moved = np.hypot(*(self.map.poses[i][:2, 3] - self.last_positions[i]))
+        """Whether the move sent last (a step or a climb) left agent ``i`` where it was (the
+        env refused it)."""
+        moved = np.linalg.norm(self.map.poses[i][:3, 3] - self.last_positions[i])
         return bool(moved <= 0.25 * self.step_m)
 
     def _leave_move(self, i: int) -> int:

@@ -626,7 +626,7 @@ def test_out_of_a_stay_the_walker_never_undoes_its_last_step():
     walker.leave(0, pose[None, :2, 3].copy(), 0.6)
     assert int(walker.next_moves()[0]) == MOVE_BACKWARD  # the way out, as above
     walker.last_moves[0] = MOVE_FORWARD  # as if it had just stepped forward (not refused)
-    walker.last_positions[0] = pose[:2, 3] - [0.1, 0.0]
+    walker.last_positions[0] = pose[:3, 3] - [0.1, 0.0, 0.0]
     assert int(walker.next_moves()[0]) in (TURN_LEFT, TURN_RIGHT)
 
 
@@ -652,7 +652,7 @@ def test_a_refused_step_never_blocks_the_cell_the_walker_stands_in():
     pose[0, 3] = 5.099  # ... from near the cell's far side ends in the same cell
     _observe(builder, pose, np.zeros((32, 64), np.float32))
     own = tuple(np.floor((pose[:2, 3] - builder.origins[0]) / builder.cell_m).astype(int))
-    walker.last_moves[0], walker.last_positions[0] = MOVE_FORWARD, pose[:2, 3]
+    walker.last_moves[0], walker.last_positions[0] = MOVE_FORWARD, pose[:3, 3]
     walker.phases[0] = WALK
     walker.next_moves()  # sees the forward move refused (it did not move)
     assert builder.grids[0, OCCUPIED][own] == 0
