@@ -555,7 +555,7 @@ class GoalWalker:
             return -1
         x, y = origin + (self.paths[i, carrot] + 0.5) * cell_m
         # Never the step that undoes the last one: the carrot moves with the agent, and a
-        # carrot between two places a step apart had it step right and left between them.
+        # carrot between two places a step apart would send it right and left between them.
         undo = OPPOSITE_STEP.get(int(self.last_moves[i]), -1)
         move = step_towards(
             grid, origin, cell_m, pose, x, y, self.step_m, self.inflate,

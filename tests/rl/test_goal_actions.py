@@ -481,9 +481,9 @@ def test_an_idle_walker_over_furniture_steps_down_after_a_full_turn():
 
 def test_a_low_walker_under_an_open_sky_climbs_until_the_env_refuses():
     """An open scan: the panorama's top row hits nothing. A walker that starts 0.44 m above
-    the floor climbs towards the walking height (nothing measured above used to count as no
-    room, and it walked the whole episode that low, fenced in by furniture on its map's
-    slice); once the env refuses a climb, it climbs no more there."""
+    the floor climbs towards the walking height (nothing measured above is not a lack of
+    room: walking a whole episode that low, furniture fences in its map's slice); once the
+    env refuses a climb, it climbs no more there."""
     builder, walker, pose = _level_walker([1.0, 1.0, 0.44])
     panorama = np.zeros((32, 64), np.float32)
     moves = []
@@ -618,10 +618,10 @@ def test_out_of_a_stay_with_no_step_towards_the_path_the_walker_turns_only_until
 
 
 def test_out_of_a_stay_the_walker_never_undoes_its_last_step():
-    """The path's carrot moves with the agent: one lying between two places a step apart had
-    the walker step right and left between them for 18 steps
-    (``procedural:flat:1000001:no_ceiling+holes``, seed 1). The step back out of the stay
-    is not taken right after a step forward; the walker turns towards the carrot instead."""
+    """The path's carrot moves with the agent: one lying between two places a step apart
+    would send the walker right and left between them (the open-scans page has the episode).
+    The step back out of the stay is not taken right after a step forward; the walker turns
+    towards the carrot instead."""
     builder, walker, pose = _walker_between_two_blocks()
     walker.leave(0, pose[None, :2, 3].copy(), 0.6)
     assert int(walker.next_moves()[0]) == MOVE_BACKWARD  # the way out, as above
