@@ -94,12 +94,16 @@ class GoalPlanner:
         spots = np.asarray(spots, np.float64).reshape(-1, 3).copy()
         self._leave = (spots, float(radius_m))
 
-    def plan(self, position: np.ndarray, frame: int = 0) -> Plan | None:
+    def plan(self, position: np.ndarray, frame: int = 0,
+             rotation: np.ndarray | None = None) -> Plan | None:
         """The next plan from ``position`` on the newest planner view.
 
         Args:
             position: the agent's position.
             frame: the frame's index in the episode (for the diagnostics).
+            rotation: (3, 3) the camera's rotation (camera to world, OpenCV axes: z looks
+                ahead), which a climb out of the scan's margin keeps; None: it looks around
+                at the top.
 
         Returns:
             The plan, or None when no goal could be reached (the agent stays).
@@ -117,8 +121,12 @@ class GoalPlanner:
             # Checked on the panorama already; the edge test held every way from here.
             record.update(outcome="climb out of the scan's margin", path_nodes=int(len(climb)))
             self.recoveries.append((frame, "climb"))
-            return Plan(climb, look_around_views(climb[-1], self.config), climb[-1].copy(),
-                        {"recovery": "climb", "trusted": True})
+            # It keeps facing the way it faces: a look-around up there would repeat what it
+            # saw from just below, and the next plan comes right after the climb.
+            views = (look_around_views(climb[-1], self.config) if rotation is None
+                     else climb[-1][None] + np.asarray(rotation, np.float64)[:, 2][None])
+            return Plan(climb, views, climb[-1].copy(),
+                        {"recovery": "climb", "trusted": True, "move_at_once": True})
         if self.monitor.needs_recovery():
             self._leave = None  # a recovery moves away too
             return self._recover(position, record, frame)
@@ -237,7 +245,8 @@ class GoalPlanner:
     def goal_mask(self, start: np.ndarray) -> np.ndarray | None:
         """The candidate goals on the planner view's grid: free space connected to
         ``start``, measured free (``goals_in_observed_space``), inside the scan
-        (``stay_in_scanned_space``), away from goals that failed recently; None: all."""
+        (``stay_in_scanned_space``), away from goals that failed recently (at any height
+        from those that failed past an open scan's edge); None: all."""
         sdf = self.agent_map.sdf
         components = self.agent_map.components
         labels = components.labels_near(start)
@@ -256,6 +265,8 @@ class GoalPlanner:
             near = np.zeros(len(points), dtype=bool)
             for goal in failed:
                 near |= np.linalg.norm(points - goal, axis=1) <= radius
+            for goal in self.monitor.recent_failed_goals(columns=True):
+                near |= np.linalg.norm(points[:, :2] - goal[:2], axis=1) <= radius
             near = near.reshape(sdf.shape)
             mask = ~near if mask is None else mask & ~near
         return mask

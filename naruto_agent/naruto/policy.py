@@ -145,6 +145,7 @@ class NarutoPolicy(Policy):
         self._new_map = False
         self._commanded: np.ndarray | None = None
         self._stalled = False
+        self._cut_short = False  # the last plan was cut short by a held or refused move
         self.use_stall_watchdog(STALL_WATCHDOG, enabled=self.config.stall_watchdog)
 
     # -- the episode's state, read-only ------------------------------------------------------
@@ -218,7 +219,7 @@ class NarutoPolicy(Policy):
         self.agent_map = AgentMap(mapper, self.config, self.timings)
         self.guard.reset()
         self.scan_checks = NarutoScanChecks(self.config, self.guard, self.agent_map,
-                                            self._fail_current_goal)
+                                            self._fail_current_goal_past_edge)
         self.move_checker = MoveChecker(self.config, self.agent_map, self.scan_checks)
         self.goal_planner = GoalPlanner(self.config, self.agent_map, self.scan_checks,
                                         self.move_checker, self.monitor, self._rng,
@@ -227,6 +228,7 @@ class NarutoPolicy(Policy):
         self._new_map = False
         self._commanded = None
         self._stalled = False
+        self._cut_short = False
         self._integrate(observation)
 
     def recover_from_stall(self, event: StallEvent) -> str:
@@ -258,6 +260,8 @@ class NarutoPolicy(Policy):
         before = sum(self.timings[name] for name in inner)
         new_map, self._new_map = self._new_map, False
         new_map, self._stalled = new_map or self._stalled, False
+        new_map, self._cut_short = new_map or self._cut_short, False
+        cut_before = self.machine.collisions
         pose = self.machine.step(
             np.asarray(observation["pose"], dtype=np.float64),
             new_map=new_map,
@@ -265,6 +269,9 @@ class NarutoPolicy(Policy):
             plan=self._plan,
             move_is_free=self._move_check,
         )
+        # A move held by the agent's checks or refused by the env taught the map where not to
+        # go: the next frame plans again instead of waiting for the next mapping step.
+        self._cut_short = self.machine.collisions > cut_before
         # Control is the state machine's own work; the phases it called are timed apart.
         called = sum(self.timings[name] for name in inner) - before
         self.timings["control"] += time.perf_counter() - clock - called
@@ -322,15 +329,17 @@ class NarutoPolicy(Policy):
         """
         if self.agent_map is None:
             raise RuntimeError("call reset() with the first observation before act()")
+        past_edge = False
         if reason == "escape":
             self.guard.note_escape()
             if self.scan_checks.refused_climb(position, target):
                 self.agent_map.lower_ceiling(position[2])
             else:
                 self.agent_map.block_past_edge(position, target)
+                past_edge = True
         else:
             self.agent_map.block(target)
-        self._fail_current_goal()
+        self._fail_current_goal(column=past_edge)
 
     def wrap_move_check(self, wrapper: Callable[[MoveCheck], MoveCheck]) -> None:
         """Wrap the move check the state machine calls, e.g. to time it.
@@ -367,12 +376,17 @@ class NarutoPolicy(Policy):
             return
         self.learn_refusal(position, self._commanded, info.get("collision_reason"))
 
-    def _fail_current_goal(self) -> None:
-        """The current plan's goal failed (a recovery's plan has no goal to fail)."""
+    def _fail_current_goal(self, column: bool = False) -> None:
+        """The current plan's goal failed (a recovery's plan has no goal to fail);
+        ``column``: on the way past an open scan's edge, at any height."""
         plan = self.machine.plan
         if plan is not None and not plan.info.get("recovery"):
-            self.monitor.goal_failed(plan.goal)
+            self.monitor.goal_failed(plan.goal, column=column)
+
+    def _fail_current_goal_past_edge(self) -> None:
+        """The scan checks held a move over the scan's edge: the goal fails at any height."""
+        self._fail_current_goal(column=True)
 
     def _plan(self, position: np.ndarray, rotation: np.ndarray) -> Plan | None:
-        """The state machine's planning step (the rotation is not needed)."""
-        return self.goal_planner.plan(position, self._frame_index)
+        """The state machine's planning step."""
+        return self.goal_planner.plan(position, self._frame_index, rotation)

@@ -103,7 +103,7 @@ class ProgressMonitor:
         self._observed: deque[float] = deque(maxlen=self.config.window)
         self.trajectory: list[np.ndarray] = []
         self.failed_plans = 0
-        self.failed_goals: list[tuple[np.ndarray, int]] = []
+        self.failed_goals: list[tuple[np.ndarray, int, bool]] = []  # goal, frame, column
         self.frame = 0
         self.escalation = 0
         self.last_recovery_frame = -(10**9)
@@ -168,16 +168,18 @@ class ProgressMonitor:
         ) >= self.config.min_motion_m:
             self.escalation = 0
 
-    def goal_failed(self, goal: np.ndarray) -> None:
-        self.failed_goals.append((np.asarray(goal, np.float64).copy(), self.frame))
+    def goal_failed(self, goal: np.ndarray, column: bool = False) -> None:
+        """``goal`` failed; ``column``: for where it lies, not for how high (past an open
+        scan's edge, which no height crosses), so every goal above or below it fails too."""
+        self.failed_goals.append((np.asarray(goal, np.float64).copy(), self.frame, column))
 
-    def recent_failed_goals(self) -> np.ndarray:
-        """(F, 3) goals that failed within the memory."""
+    def recent_failed_goals(self, columns: bool = False) -> np.ndarray:
+        """(F, 3) goals that failed within the memory (``columns``: only those that failed
+        for where they lie)."""
         horizon = self.frame - self.config.failed_goal_memory_frames
-        self.failed_goals = [(g, f) for g, f in self.failed_goals if f >= horizon]
-        if not self.failed_goals:
-            return np.zeros((0, 3))
-        return np.stack([g for g, _ in self.failed_goals])
+        self.failed_goals = [entry for entry in self.failed_goals if entry[1] >= horizon]
+        goals = [goal for goal, _, column in self.failed_goals if column or not columns]
+        return np.stack(goals) if goals else np.zeros((0, 3))
 
     def retreat_path(self, position: np.ndarray, step_m: float = 0.1) -> np.ndarray:
         """(K, 3) nodes from ``position`` back along the trajectory for ``retreat_m``,

@@ -185,8 +185,43 @@ def test_public_seams_wrap_the_move_check_refresh_the_view_and_learn_refusals(ep
     assert not policy.move_is_free(position, target)
     policy.machine.plan.info["trusted"] = True  # a retreat or a climb: checked already
     assert policy.move_is_free(position, target)
+    # A goal refused at a surface fails where it is; one refused past an open scan's edge
+    # (sideways, not a climb at the open top) fails at every height.
+    policy.machine.plan = Plan(np.array([position, target]), target[None], target, {})
+    policy.learn_refusal(position, target, "surface")
+    assert len(policy.monitor.recent_failed_goals(columns=True)) == 0
+    policy.learn_refusal(position, target, "escape")
+    assert np.allclose(policy.monitor.recent_failed_goals(columns=True), [target])
     with pytest.raises(RuntimeError, match="reset"):
         NarutoPolicy().move_is_free(position, target)
+
+
+def test_a_held_move_is_planned_around_at_the_next_frame():
+    """A move the agent's own checks hold cuts the plan short and blocks the space in the
+    map; the agent plans again at the next frame instead of standing until the next mapping
+    step (each hold cost a stay of up to a mapping period, five frames)."""
+    held: list[int] = []  # the frames of the held moves
+    plans_held: set[int] = set()
+
+    def hold_first_move_of_each_plan(check):
+        def wrapped(start, end):
+            plan = policy.machine.plan
+            if (len(held) < 4 and np.linalg.norm(end - start) > 1e-6 and plan is not None
+                    and id(plan) not in plans_held and len(policy.plans) >= 2):
+                plans_held.add(id(plan))
+                held.append(len(policy.machine.history))
+                return False
+            return check(start, end)
+        return wrapped
+
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
+    policy.wrap_move_check(hold_first_move_of_each_plan)
+    run = run_episode(80, policy=policy)
+    assert len(held) >= 2, held
+    history = run.policy.machine.history
+    assert all(history[frame] == State.STAYING for frame in held)  # the held moves' frames
+    assert all(history[frame + 1] != State.STAYING for frame in held), (
+        [history[frame + 1] for frame in held])
 
 
 @pytest.mark.parametrize("looks", [4.0, 0.0])

@@ -91,10 +91,19 @@ def test_the_first_plan_looks_around_and_a_pending_climb_comes_next() -> None:
     for _ in range(parts.config.guard.max_held_moves + 1):
         assert not parts.checks.panorama_keeps_to_scan(agent, agent + [0.25, 0.0, 0.0])
     plan = parts.planner.plan(agent, frame=9)
-    assert plan.info == {"recovery": "climb", "trusted": True}
-    np.testing.assert_allclose(plan.path[-1], agent + [0.0, 0.0, parts.config.margin_climb_m])
+    assert plan.info == {"recovery": "climb", "trusted": True, "move_at_once": True}
+    top = agent + [0.0, 0.0, parts.config.margin_climb_m]
+    np.testing.assert_allclose(plan.path[-1], top)
+    assert len(plan.views) == parts.config.recovery.look_around_views  # no heading given
     assert parts.planner.recoveries == [(9, "climb")]
     assert parts.checks.pending_climb is None  # used once
+    # Given the camera's rotation, the climb keeps facing the way the camera faces (no
+    # look-around at the top: the next plan comes at once).
+    for _ in range(parts.config.guard.max_held_moves + 1):
+        assert not parts.checks.panorama_keeps_to_scan(agent, agent + [0.25, 0.0, 0.0])
+    facing_y = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # z -> +y
+    plan = parts.planner.plan(agent, frame=12, rotation=facing_y)
+    np.testing.assert_allclose(plan.views, [top + [0.0, 1.0, 0.0]])
 
 
 def test_escape_from_inside_a_blocked_ball_takes_a_line_the_move_check_accepts() -> None:
@@ -126,6 +135,13 @@ def test_goal_mask_keeps_goals_away_from_failed_ones() -> None:
     parts.monitor.goal_failed(np.array([2.0, 2.0, 2.0]))
     masked = parts.planner.goal_mask(start)
     assert mask[20, 20, 20] and not masked[20, 20, 20] and masked[15, 15, 15]
+    assert masked[20, 20, 10]  # a goal that failed on its own: lower ones stay candidates
+    # A goal that failed past an open scan's edge fails at every height.
+    parts.monitor.goal_failed(np.array([1.0, 1.0, 2.0]), column=True)
+    masked = parts.planner.goal_mask(start)
+    assert not masked[10, 10, 20] and not masked[10, 10, 5] and masked[15, 15, 5]
+    assert len(parts.monitor.recent_failed_goals()) == 2
+    assert len(parts.monitor.recent_failed_goals(columns=True)) == 1
 
 
 def test_shortened_paths_keep_nodes_a_step_apart() -> None:
