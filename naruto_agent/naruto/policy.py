@@ -146,6 +146,7 @@ class NarutoPolicy(Policy):
         self._commanded: np.ndarray | None = None
         self._stalled = False
         self._cut_short = False  # the last plan was cut short by a held or refused move
+        self._replanning = False  # this frame plans again because of it
         self.use_stall_watchdog(STALL_WATCHDOG, enabled=self.config.stall_watchdog)
 
     # -- the episode's state, read-only ------------------------------------------------------
@@ -229,6 +230,7 @@ class NarutoPolicy(Policy):
         self._commanded = None
         self._stalled = False
         self._cut_short = False
+        self._replanning = False
         self._integrate(observation)
 
     def recover_from_stall(self, event: StallEvent) -> str:
@@ -260,7 +262,8 @@ class NarutoPolicy(Policy):
         before = sum(self.timings[name] for name in inner)
         new_map, self._new_map = self._new_map, False
         new_map, self._stalled = new_map or self._stalled, False
-        new_map, self._cut_short = new_map or self._cut_short, False
+        self._replanning, self._cut_short = self._cut_short, False
+        new_map = new_map or self._replanning
         cut_before = self.machine.collisions
         pose = self.machine.step(
             np.asarray(observation["pose"], dtype=np.float64),
@@ -388,5 +391,10 @@ class NarutoPolicy(Policy):
         self._fail_current_goal(column=True)
 
     def _plan(self, position: np.ndarray, rotation: np.ndarray) -> Plan | None:
-        """The state machine's planning step."""
-        return self.goal_planner.plan(position, self._frame_index, rotation)
+        """The state machine's planning step; a plan made at once after a held or refused
+        move sets off without turning first (it turns on the way): each new path would
+        otherwise cost a turn in place towards it."""
+        plan = self.goal_planner.plan(position, self._frame_index, rotation)
+        if plan is not None and self._replanning:
+            plan.info["move_at_once"] = True
+        return plan

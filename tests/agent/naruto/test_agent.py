@@ -206,10 +206,12 @@ def test_a_held_move_is_planned_around_at_the_next_frame():
     def hold_first_move_of_each_plan(check):
         def wrapped(start, end):
             plan = policy.machine.plan
+            frame = len(policy.machine.history)
             if (len(held) < 4 and np.linalg.norm(end - start) > 1e-6 and plan is not None
-                    and id(plan) not in plans_held and len(policy.plans) >= 2):
+                    and id(plan) not in plans_held and len(policy.plans) >= 2
+                    and (not held or frame > held[-1] + 3)):
                 plans_held.add(id(plan))
-                held.append(len(policy.machine.history))
+                held.append(frame)
                 return False
             return check(start, end)
         return wrapped
@@ -221,6 +223,9 @@ def test_a_held_move_is_planned_around_at_the_next_frame():
     history = run.policy.machine.history
     assert all(history[frame] == State.STAYING for frame in held)  # the held moves' frames
     assert all(history[frame + 1] != State.STAYING for frame in held), (
+        [history[frame + 1] for frame in held])
+    # ... and sets off without turning first (each new path would cost a turn in place).
+    assert all(history[frame + 1] != State.ROTATING_AT_START for frame in held), (
         [history[frame + 1] for frame in held])
 
 
