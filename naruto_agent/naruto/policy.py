@@ -145,8 +145,8 @@ class NarutoPolicy(Policy):
         self._new_map = False
         self._commanded: np.ndarray | None = None
         self._stalled = False
-        self._cut_short = False  # the last plan was cut short by a held or refused move
-        self._replanning = False  # this frame plans again because of it
+        # The last frame's plan was cut short by a held or refused move: this frame plans again.
+        self._replanning = False
         self.use_stall_watchdog(STALL_WATCHDOG, enabled=self.config.stall_watchdog)
 
     # -- the episode's state, read-only ------------------------------------------------------
@@ -229,7 +229,6 @@ class NarutoPolicy(Policy):
         self._new_map = False
         self._commanded = None
         self._stalled = False
-        self._cut_short = False
         self._replanning = False
         self._integrate(observation)
 
@@ -262,7 +261,6 @@ class NarutoPolicy(Policy):
         before = sum(self.timings[name] for name in inner)
         new_map, self._new_map = self._new_map, False
         new_map, self._stalled = new_map or self._stalled, False
-        self._replanning, self._cut_short = self._cut_short, False
         new_map = new_map or self._replanning
         cut_before = self.machine.collisions
         pose = self.machine.step(
@@ -274,7 +272,7 @@ class NarutoPolicy(Policy):
         )
         # A move held by the agent's checks or refused by the env taught the map where not to
         # go: the next frame plans again instead of waiting for the next mapping step.
-        self._cut_short = self.machine.collisions > cut_before
+        self._replanning = self.machine.collisions > cut_before
         # Control is the state machine's own work; the phases it called are timed apart.
         called = sum(self.timings[name] for name in inner) - before
         self.timings["control"] += time.perf_counter() - clock - called

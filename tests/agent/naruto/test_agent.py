@@ -199,7 +199,7 @@ def test_public_seams_wrap_the_move_check_refresh_the_view_and_learn_refusals(ep
 def test_a_held_move_is_planned_around_at_the_next_frame():
     """A move the agent's own checks hold cuts the plan short and blocks the space in the
     map; the agent plans again at the next frame instead of standing until the next mapping
-    step (each hold cost a stay of up to a mapping period, five frames)."""
+    step (a wait of up to a mapping period, five frames, for each hold)."""
     held: list[int] = []  # the frames of the held moves
     plans_held: set[int] = set()
 
