@@ -53,9 +53,9 @@ class RecoveryConfig:
             rather than 5 cm of it per refusal (0.5 m: half a 1 m window; 0: as a surface).
         look_around_views: headings of the turn in place.
         look_around_pitch_deg: the look-around alternates looking this much up and down (20:
-            three 20-degree steps from one view to the next, 25 steps for 8 views, so that
-            the look-around fits in the stall watchdog's ``max_stay_steps``; 25 degrees
-            needs four steps a view).
+            three 20-degree steps from one view to the next, 25 steps for 8 views, of which
+            the stall watchdog lets the first 20 run, ``max_stay_steps``; 25 degrees needs
+            four steps a view).
         wander_max_m: the farthest a move to reachable space goes (straight-line distance).
         retreat_m: how far back along its own trajectory the agent retreats.
     """

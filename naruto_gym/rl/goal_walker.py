@@ -403,7 +403,9 @@ class GoalWalker:
         if abs(pitch) > 0.5 * self.turn_rad + 1e-6:
             # Walk with the camera level: a pitched one sees floor or ceiling only.
             return LOOK_DOWN if pitch > 0 else LOOK_UP
-        height = self._height_move(i)
+        # A walk out of a stay leaves first: a vertical move restarts the map's slice, which
+        # empties the map the way out was planned on, and the agent turns on the spot again.
+        height = -1 if self._inside_stay_left(i) else self._height_move(i)
         if height >= 0:
             return height
         if self.slice_restarts[i] != self.map.slice_restarts[i]:
@@ -424,8 +426,13 @@ class GoalWalker:
                 self.idle_steps[i] += 1
                 if self.idle_steps[i] % IDLE_SEARCH_EVERY:
                     return self._idle_move(i)
-                self._refresh(i)
-                self._go_to(i, 0)
+                if self.stays[i, 2] > 0:
+                    # A walk out of a stay that found nothing reachable (the map had just
+                    # restarted) tries again out of the same stay, not to the nearest goal.
+                    self.leave(i, self.stays[i, None, :2].copy(), self.stays[i, 2])
+                else:
+                    self._refresh(i)
+                    self._go_to(i, 0)
                 if self.phases[i] == IDLE:
                     return self._idle_move(i)
             if self.phases[i] == GIVEN_UP:
@@ -531,6 +538,12 @@ class GoalWalker:
         moved = np.linalg.norm(self.map.poses[i][:3, 3] - self.last_positions[i])
         return bool(moved <= 0.25 * self.step_m)
 
+    def _inside_stay_left(self, i: int) -> bool:
+        """Whether agent ``i`` is walking out of a stay (:meth:`leave`) and still inside it."""
+        if self.phases[i] != WALK or self.stays[i, 2] <= 0:
+            return False
+        return bool(np.hypot(*(self.map.poses[i][:2, 3] - self.stays[i, :2])) <= self.stays[i, 2])
+
     def _leave_move(self, i: int) -> int:
         """A step out of the stay along the path without turning first (forward, backward or
         sideways, whichever brings the agent nearest to the path's carrot, but never the step
@@ -542,8 +555,8 @@ class GoalWalker:
         half a turn's steps on the spot.
         """
         pose = self.map.poses[i]
-        left = np.hypot(*(pose[:2, 3] - self.stays[i, :2])) > self.stays[i, 2]
-        if left or (self.last_moves[i] in TRANSLATIONS and self._stood_still(i)):
+        refused = self.last_moves[i] in TRANSLATIONS and self._stood_still(i)
+        if not self._inside_stay_left(i) or refused:
             self.stays[i] = 0.0
             return -1
         grid, origin, cell_m = self.map.grids[i], self.map.origins[i], self.map.cell_m

@@ -36,6 +36,8 @@ from naruto_gym.rl.goal_planner import (
 )
 from naruto_gym.rl.goal_walker import (
     FACE,
+    IDLE,
+    IDLE_SEARCH_EVERY,
     LOOK_DOWN,
     LOOK_UP,
     MOVE_DOWN,
@@ -567,17 +569,23 @@ def _walker_between_two_blocks() -> tuple[EgocentricMapBuilder, GoalWalker, np.n
 
 
 def _walk_out(
-    builder: EgocentricMapBuilder, walker: GoalWalker, pose: np.ndarray, radius_m: float, most: int
+    builder: EgocentricMapBuilder,
+    walker: GoalWalker,
+    pose: np.ndarray,
+    radius_m: float,
+    most: int,
+    floor_below_m: float = 0.0,
 ) -> list[int]:
     """The walker's moves, each carried out on ``pose`` as the env would (steps of 0.1 m,
-    turns of 20 degrees) and observed, until it stands ``radius_m`` from where it started
-    or ``most`` moves were made."""
-    start = pose[:2, 3].copy()
+    turns of 20 degrees, climbs of 0.1 m) and observed, until it stands ``radius_m`` from
+    where it started or ``most`` moves were made; ``floor_below_m``: the panorama sees the
+    floor that far below the agent's start height (0: nothing)."""
+    start = pose[:3, 3].copy()
     panorama = np.zeros((32, 64), np.float32)
     directions = {MOVE_FORWARD: 0.0, MOVE_LEFT: 0.5 * np.pi, MOVE_BACKWARD: np.pi,
                   MOVE_RIGHT: -0.5 * np.pi}  # fmt: skip
     moves: list[int] = []
-    while np.hypot(*(pose[:2, 3] - start)) <= radius_m and len(moves) < most:
+    while np.hypot(*(pose[:2, 3] - start[:2])) <= radius_m and len(moves) < most:
         move = int(walker.next_moves()[0])
         moves.append(move)
         heading = np.arctan2(pose[1, 2], pose[0, 2])
@@ -586,6 +594,10 @@ def _walk_out(
         elif move in directions:
             way = heading + directions[move]
             pose[:2, 3] += 0.1 * np.array([np.cos(way), np.sin(way)])
+        elif move in (MOVE_UP, MOVE_DOWN):
+            pose[2, 3] += 0.1 if move == MOVE_UP else -0.1
+        if floor_below_m > 0:
+            panorama[-1] = floor_below_m - (start[2] - pose[2, 3])
         _observe(builder, pose, panorama)
     return moves
 
@@ -640,6 +652,34 @@ def test_a_walk_out_of_a_stay_stays_one_when_the_map_restarts_at_a_new_height():
     builder.slice_restarts[0] += 1
     assert int(walker.next_moves()[0]) == MOVE_BACKWARD
     assert walker.phases[0] == WALK and walker.targets[0][0] < 3.0  # still the one behind
+    np.testing.assert_allclose(walker.stays[0], [*start, 0.6])
+
+
+def test_a_walk_out_of_a_stay_leaves_before_it_changes_height():
+    """Out of a stay 1.9 m above the floor (above the walking height): a step down first would
+    restart the map's slice and empty the map the way out was planned on (an episode then
+    turned on the spot for ten steps). The walker steps out of the stay first."""
+    builder, walker, pose = _walker_between_two_blocks()
+    panorama = np.zeros((32, 64), np.float32)
+    panorama[-1] = 1.9  # the floor straight down
+    _observe(builder, pose, panorama)
+    walker.leave(0, pose[None, :2, 3].copy(), 0.6)
+    moves = _walk_out(builder, walker, pose, 0.6, 12, floor_below_m=1.9)
+    assert moves == [MOVE_BACKWARD] * 7
+    assert int(walker.next_moves()[0]) == MOVE_DOWN  # past the stay, the height comes next
+
+
+def test_a_walk_out_of_a_stay_that_found_nothing_tries_again_out_of_the_same_stay():
+    """A walk out of a stay that found nothing reachable (the map had just restarted at a new
+    height) turns in place; at its next search it chooses again among the candidates past
+    the same stay, not the nearest one (which would lead back into it)."""
+    builder, walker, pose = _walker_between_two_blocks()
+    start = pose[:2, 3].copy()
+    walker.leave(0, start[None], 0.6)
+    walker.phases[0] = IDLE  # as if nothing had been reachable after the restart
+    walker.idle_steps[0] = IDLE_SEARCH_EVERY - 1  # the next move searches again
+    assert int(walker.next_moves()[0]) == MOVE_BACKWARD
+    assert walker.phases[0] == WALK and walker.targets[0][0] < 3.0  # the one behind
     np.testing.assert_allclose(walker.stays[0], [*start, 0.6])
 
 

@@ -16,7 +16,7 @@ from naruto_agent.policies import (
     make_policy,
     pose_action,
 )
-from naruto_agent.policies.watchdog import longest_stay
+from naruto_agent.policies.watchdog import StallEvent, longest_stay
 
 
 def _feed(watchdog: StallWatchdog, positions, refused=False, progress=None):
@@ -211,19 +211,29 @@ def test_every_shipped_policy_recovers_from_a_stall_and_moves_again(name):
     env.close()
 
 
-@pytest.mark.parametrize("name", ["passive", "random", "frontier", "naruto"])
-def test_the_watchdog_is_on_in_every_shipped_policy(name):
-    """On by default, with the default settings (no stay over 30 steps); the setting
+@pytest.mark.parametrize(
+    ("name", "settings"),
+    [
+        ("passive", StallWatchdogConfig()),
+        ("random", StallWatchdogConfig()),
+        ("frontier", StallWatchdogConfig()),
+        ("naruto", StallWatchdogConfig(max_stay_steps=20)),
+    ],
+)
+def test_the_watchdog_is_on_in_every_shipped_policy(name, settings):
+    """On by default, with the default settings (NARUTO, whose 3-D way out of a stay takes
+    longer, cuts a stay that learns at 20 steps: no stay over 30 steps); the setting
     ``stall_watchdog=False`` turns it off."""
     watchdog = make_policy(name).stall_watchdog
-    assert watchdog is not None and watchdog.config == StallWatchdogConfig()
+    assert watchdog is not None and watchdog.config == settings
     assert make_policy(name, stall_watchdog=False).stall_watchdog is None
 
 
 def test_naruto_cuts_a_long_look_around_short_for_a_goal_away_from_it():
     """NARUTO's first look-around (8 views, alternately up and down) learns all along but
-    lasts over 30 steps: the watchdog cuts it at ``max_stay_steps`` as lingering, and the
-    next plan goes, without a turn first, to a goal past the stay radius."""
+    lasts over 30 steps: the watchdog cuts it at NARUTO's ``max_stay_steps`` (20) as
+    lingering, and the next plan goes, without a turn first, to a goal past the stay radius,
+    0.5 m away within 30 steps of the start."""
     policy = make_policy("naruto", mapper_kind="tsdf")
     env = gym.make(
         "NarutoRecon-v0",
@@ -237,12 +247,43 @@ def test_naruto_cuts_a_long_look_around_short_for_a_goal_away_from_it():
     policy.reset(observation, info, seed=3)
     start = observation["pose"][:3, 3].copy()
     positions = []
-    for _ in range(StallWatchdogConfig().max_stay_steps + 8):
+    for _ in range(30):
         observation, _, _, _, info = env.step(policy.act(observation, info))
         positions.append(observation["pose"][:3, 3].copy())
     event = policy.stall_events[0]
-    assert (event.kind, event.step) == ("lingering", StallWatchdogConfig().max_stay_steps)
+    assert (event.kind, event.step) == ("lingering", policy.stall_watchdog.config.max_stay_steps)
     assert "away from the stay" in event.recovery
     assert any(plan.get("leaving") and plan.get("move_at_once") for plan in policy.plans)
     assert np.linalg.norm(positions[-1] - start) > 0.5
+    env.close()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_leaves_a_stall_in_a_corner_along_the_heading_clear_the_farthest(seed):
+    """0.45 m from two walls of a room, most headings are blocked within a few steps: a new
+    run that is clear for one step ends in the next redraw, and the walk bounces in the
+    corner. The random walk's recovery runs along the heading the panorama shows clear for
+    the whole probe (1.6 m), whichever heading its sweep starts from."""
+    policy = make_policy("random", seed=seed)
+    env = gym.make(
+        "NarutoRecon-v0",
+        scene="replica_like_room",
+        image_scale=0.05,
+        coverage_samples=500,
+        panorama_shape=(32, 64),
+        action_mode=policy.preferred_action_mode,
+    )
+    context = EnvContext.from_env(env, max_episode_steps=200)
+    policy.bind(context)
+    pose = np.eye(4)
+    pose[:3, :3] = [[0, 0, 1], [-1, 0, 0], [0, -1, 0]]
+    pose[:3, 3] = [context.bounds[0, 0] + 0.45, context.bounds[0, 1] + 0.45, 1.3]
+    observation, info = env.reset(seed=seed, options={"pose": pose})
+    policy.reset(observation, info, seed=seed)
+    policy.act(observation, info)  # the panorama the recovery reads
+    panorama = policy.guard.panorama(observation)
+    policy.recover_from_stall(StallEvent(step=20, position=pose[:3, 3], kind="oscillation"))
+    heading = np.array([*policy.direction[:2], 0.0]) / np.linalg.norm(policy.direction[:2])
+    for metres in (0.1, 0.4, 1.6):
+        assert not policy.guard.way_blocked(panorama, heading * metres), metres
     env.close()
