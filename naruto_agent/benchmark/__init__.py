@@ -10,11 +10,14 @@
   metres to a level; :mod:`~naruto_agent.benchmark.statistics`: bootstrap intervals and paired
   comparisons; :mod:`~naruto_agent.benchmark.suite_report` and
   :mod:`~naruto_agent.benchmark.suite_plots`: per-class tables and plots;
-  :mod:`~naruto_agent.benchmark.leaderboard`: the docs' leaderboard page.
+  :mod:`~naruto_agent.benchmark.leaderboard`: the docs' leaderboard page, made from a run
+  folder or from :mod:`~naruto_agent.benchmark.episode_archive` (compact copies of a suite
+  run's episodes kept in git, for a run spread over sessions).
 * :mod:`~naruto_agent.benchmark.cli`: the ``naruto-benchmark`` command.
 """
 
 from naruto_agent.benchmark.efficiency import episode_efficiency
+from naruto_agent.benchmark.episode_archive import archive_run, load_episodes
 from naruto_agent.benchmark.executors import pending_specs, run_local, run_ray
 from naruto_agent.benchmark.records import load_records, write_json_atomic
 from naruto_agent.benchmark.runner import run_episode, run_episode_safe
@@ -26,9 +29,11 @@ from naruto_agent.benchmark.tables import markdown_table, summarise
 
 __all__ = [
     "EpisodeSpec",
+    "archive_run",
     "bootstrap_ci",
     "build_specs",
     "episode_efficiency",
+    "load_episodes",
     "load_records",
     "markdown_table",
     "paired_comparison",

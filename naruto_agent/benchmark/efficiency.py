@@ -83,6 +83,18 @@ def cumulative_path(trajectory: Sequence[Sequence[float]] | np.ndarray) -> np.nd
     return np.concatenate([[0.0], np.cumsum(steps)])
 
 
+def checkpoint_paths(record: dict[str, Any], steps: np.ndarray) -> np.ndarray:
+    """The path walked (metres) after each of ``steps`` (the checkpoints of
+    :func:`completion_points`): from the record's trajectory, or, for an archived copy
+    (:mod:`~naruto_agent.benchmark.episode_archive`), from its ``checkpoint_path_m``."""
+    steps = np.asarray(steps).astype(int)
+    if record.get("trajectory") is None and record.get("checkpoint_path_m") is not None:
+        walked = {int(step): float(metres) for step, metres in record["checkpoint_path_m"]}
+        return np.asarray([walked[step] for step in steps.tolist()], np.float64)
+    path = cumulative_path(record.get("trajectory") or [[0.0, 0.0, 0.0]])
+    return path[np.minimum(steps, len(path) - 1)]
+
+
 def area_under_curve(x: np.ndarray, ratio_pct: np.ndarray, horizon: float) -> float:
     """``(1 / horizon) * integral_0^horizon c(x) dx / 100`` of a piecewise-linear curve.
 
@@ -154,6 +166,8 @@ def episode_efficiency(
         ``steps_to_<p>`` and ``metres_to_<p>`` for each level ``p`` (None when not reached),
         and ``path_m`` (the whole path, metres).
     """
+    if record.get("trajectory") is None and record.get("efficiency") is not None:
+        return _archived_efficiency(record, thresholds_pct)
     steps, ratios = completion_points(record)
     config = record.get("config") or {}
     budget = int(config.get("steps") or record.get("steps_run") or 1)
@@ -166,7 +180,7 @@ def episode_efficiency(
             out[f"metres_to_{level:g}"] = None
         return out
     out["auc_steps"] = area_under_curve(steps, ratios, float(budget))
-    at_points = path[np.minimum(steps.astype(int), len(path) - 1)]
+    at_points = checkpoint_paths(record, steps)
     # The path is monotone but may stand still: keep the best ratio at each distance.
     metres, best = _monotone(at_points, ratios)
     out["auc_path"] = area_under_curve(metres, best, path_horizon_m(record))
@@ -178,6 +192,25 @@ def episode_efficiency(
             None if step is None else float(path[min(step, len(path) - 1)])
         )
     return out
+
+
+def _archived_efficiency(
+    record: dict[str, Any], thresholds_pct: Sequence[float]
+) -> dict[str, Any]:
+    """The efficiency an archived copy keeps (computed from the trajectory it left out), for
+    the levels it was computed at."""
+    stored = record["efficiency"]
+    keys = ["path_m", "auc_steps", "auc_path"]
+    for level in thresholds_pct:
+        keys += [f"steps_to_{level:g}", f"metres_to_{level:g}"]
+    missing = [key for key in keys if key not in stored]
+    if missing:
+        raise ValueError(
+            f"the archived episode {record.get('episode_id')} keeps no {', '.join(missing)} "
+            f"(it was archived with the levels {THRESHOLDS_PCT}); compute other levels from "
+            "its full record"
+        )
+    return {key: stored[key] for key in keys}
 
 
 def _monotone(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

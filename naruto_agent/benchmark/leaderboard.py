@@ -2,15 +2,17 @@
 
 Usage::
 
-    python -m naruto_agent.benchmark.leaderboard benchmarks/results/suite_test \\
+    python -m naruto_agent.benchmark.leaderboard benchmarks/results/leaderboard \\
         --img-dir docs/benchmarks/img > docs/benchmarks/leaderboard.md
 
 It reads the records and ``suite.json`` of the folder (written by ``naruto-benchmark --suite``),
-and prints a Markdown page: one table per size class (mean [95 % bootstrap interval over
-scenes and seeds], ranked by the area under the completion-ratio curve), the paired
-differences between policies, the curves (PNG files written to ``--img-dir``), and the exact
-commands and machines of the runs. A policy run into the same folder with the same command
-(``--policies package.module:ClassName``) appears in it at the next generation.
+or of an archive of compact copies (:mod:`~naruto_agent.benchmark.episode_archive`: a run
+spread over sessions), and prints a Markdown page: one table per size class (mean [95 %
+bootstrap interval over scenes and seeds], ranked by the area under the completion-ratio
+curve), the paired differences between policies, the curves (PNG files written to
+``--img-dir``), and the exact commands and machines of the runs. A policy run into the same
+folder with the same command (``--policies package.module:ClassName``) appears in it at the
+next generation.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-from naruto_agent.benchmark.records import STATUS_OK, load_records
+from naruto_agent.benchmark.episode_archive import load_episodes
+from naruto_agent.benchmark.records import STATUS_OK
 from naruto_agent.benchmark.suite import entry_group, ordered_groups, read_manifest, suite_module
 from naruto_agent.benchmark.suite_report import (
     EFFICIENCY_KEYS,
@@ -161,7 +164,7 @@ def leaderboard_markdown(
     """The page's Markdown; writes its two PNG files into ``img_dir``.
 
     Args:
-        results_dir: a ``naruto-benchmark --suite`` output folder.
+        results_dir: a ``naruto-benchmark --suite`` output folder, or an archive of one.
         img_dir: where the curve pictures go.
         img_link: how the page links ``img_dir`` (relative to the page).
 
@@ -176,9 +179,9 @@ def leaderboard_markdown(
             f"{results_dir} holds no suite.json; run naruto-benchmark --suite test "
             f"--output-dir {results_dir} first"
         )
-    records = load_records(results_dir)
+    records = load_episodes(results_dir)
     if not records:
-        raise ValueError(f"{results_dir} holds no episode records")
+        raise ValueError(f"{results_dir} holds no episode records or archived episodes")
     summary = class_summary(records, manifest)
     paired = paired_summary(records, manifest)
     img_dir = Path(img_dir)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import subprocess
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -73,6 +74,23 @@ def is_done(path: str | Path, config_hash: str) -> bool:
         and record.get("status") == STATUS_OK
         and record.get("config_hash") == config_hash
     )
+
+
+def source_commit() -> str | None:
+    """The commit of the source tree that makes the records, when it is a git checkout (None
+    otherwise): the provenance a record or a run keeps."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        result = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return result.stdout.strip() or None if result.returncode == 0 else None
 
 
 def load_records(output_dir: str | Path) -> list[dict[str, Any]]:

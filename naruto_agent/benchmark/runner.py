@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from naruto_agent.benchmark.records import STATUS_FAILED, STATUS_OK
+from naruto_agent.benchmark.records import STATUS_FAILED, STATUS_OK, source_commit
 from naruto_agent.benchmark.spec import EpisodeSpec
 from naruto_agent.episode_loop import (
     EpisodeHook,
@@ -147,6 +147,7 @@ def run_episode(
                 phase: 1000.0 * total / per_step for phase, total in times.items()
             },
             "host": platform.node(),
+            "commit": source_commit(),
         }
     finally:
         policy.close()

@@ -14,12 +14,11 @@ import json
 import os
 import platform
 import shlex
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
-from naruto_agent.benchmark.records import read_record, write_json_atomic
+from naruto_agent.benchmark.records import read_record, source_commit, write_json_atomic
 from naruto_agent.benchmark.spec import EpisodeSpec, build_specs, parse_scene
 
 MANIFEST_FILE = "suite.json"
@@ -148,25 +147,9 @@ def machine() -> dict[str, Any]:
         "gpu": gpu,
         "python": platform.python_version(),
         "naruto_gym": package,
-        "commit": _git_commit(),
+        "commit": source_commit(),
         "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
     }
-
-
-def _git_commit() -> str | None:
-    """The source tree's commit when it is a git checkout (None otherwise)."""
-    root = Path(__file__).resolve().parents[2]
-    try:
-        result = subprocess.run(
-            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=False,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return result.stdout.strip() or None if result.returncode == 0 else None
 
 
 def write_manifest(

@@ -13,7 +13,7 @@ matplotlib.use("Agg")  # files only; no display on servers and in workers
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from naruto_agent.benchmark.efficiency import completion_points, cumulative_path  # noqa: E402
+from naruto_agent.benchmark.efficiency import checkpoint_paths, completion_points  # noqa: E402
 from naruto_agent.benchmark.records import STATUS_OK  # noqa: E402
 from naruto_agent.benchmark.statistics import bootstrap_ci, excludes_zero  # noqa: E402
 from naruto_agent.benchmark.suite import group_of, ordered_groups  # noqa: E402
@@ -29,9 +29,7 @@ def episode_curves(record: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.n
     from ``(0, 0, 0)``."""
     steps, ratios = completion_points(record)
     budget = float((record.get("config") or {}).get("steps") or max(steps[-1], 1.0))
-    path = cumulative_path(record.get("trajectory") or [[0.0, 0.0, 0.0]])
-    metres = path[np.minimum(steps.astype(int), len(path) - 1)]
-    return steps / budget, metres, ratios
+    return steps / budget, checkpoint_paths(record, steps), ratios
 
 
 def _band(
