@@ -239,7 +239,14 @@ class NarutoPolicy(Policy):
         learning (``"lingering"``, a long look-around) the next goal of a normal plan past
         the stay (the goal search weighs what the cut look-around left unseen); after any
         other stall a recovery that moves (a wander to reachable space away from where the
-        agent has been, or a retreat along its trajectory)."""
+        agent has been, or a retreat along its trajectory). A recovery that moves and is
+        under way is kept."""
+        plan = self.machine.plan
+        if (plan is not None and plan.info.get("recovery") in ("wander", "retreat")
+                and self.machine.state in (State.ROTATING_AT_START, State.MOVING)):
+            # A recovery that moves is under way (asked for by held moves, say): cutting it
+            # for the next one would only start another walk from the same spot.
+            return "a recovery that moves is under way: kept"
         self.machine.interrupt()
         self._stalled = True
         if event.kind == "lingering":
@@ -264,7 +271,7 @@ class NarutoPolicy(Policy):
         new_map, self._new_map = self._new_map, False
         new_map, self._stalled = new_map or self._stalled, False
         new_map = new_map or self._replanning
-        cut_before = self.machine.collisions
+        cut_before, plan_before = self.machine.collisions, self.machine.plan
         pose = self.machine.step(
             np.asarray(observation["pose"], dtype=np.float64),
             new_map=new_map,
@@ -273,8 +280,16 @@ class NarutoPolicy(Policy):
             move_is_free=self._move_check,
         )
         # A move held by the agent's checks or refused by the env taught the map where not to
-        # go: the next frame plans again instead of waiting for the next mapping step.
+        # go: the next frame plans again instead of waiting for the next mapping step. The
+        # monitor counts the holds per goal: a spot whose plans keep being held fails.
         self._replanning = self.machine.collisions > cut_before
+        # (A hold that ended the step standing held the plan in hand; one followed by a new
+        # plan in the same step held the one before.)
+        held = self.machine.plan if self.machine.state == State.STAYING else plan_before
+        if self._replanning:
+            self.monitor.move_held(position)
+            if held is not None and not held.info.get("recovery"):
+                self.monitor.goal_held(held.goal)
         # Control is the state machine's own work; the phases it called are timed apart.
         called = sum(self.timings[name] for name in inner) - before
         self.timings["control"] += time.perf_counter() - clock - called

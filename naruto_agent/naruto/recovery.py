@@ -42,6 +42,17 @@ class RecoveryConfig:
         max_failed_plans: planning requests in a row without a plan that trigger a recovery.
         failed_goal_radius_m: candidate goals this close to a goal that failed are skipped.
         failed_goal_memory_frames: ... for this many frames.
+        max_goal_holds: plans to goals within ``held_goal_radius_m`` of each other (across,
+            at any height) whose moves the agent's checks held this many times within the
+            memory fail, at every height: the goal search would choose that spot again and
+            again (an open apartment: 17 plans to one corner in 60 frames, each held after
+            one to five moves, while the agent stayed within 0.5 m).
+        held_goal_radius_m: ... how near each other those goals lie.
+        max_holds_in_place: moves held this many times while the agent stays within
+            ``hold_radius_m`` of where the first was held ask for a recovery that moves (a
+            wander or a retreat): a plan whose first move is held at once, every frame,
+            leaves the agent standing (33 frames on an open room, no move refused by the env).
+        hold_radius_m: ... how far from there the agent may have got (the stay radius).
         blocked_radius_m: a refused move blocks the agent's map this far around its target
             (0.05 m, the agent's radius; see ``docs/agent-config.md`` for the larger radius
             and what it costs).
@@ -66,6 +77,10 @@ class RecoveryConfig:
     max_failed_plans: int = 3
     failed_goal_radius_m: float = 0.3
     failed_goal_memory_frames: int = 300
+    max_goal_holds: int = 3
+    held_goal_radius_m: float = 0.5
+    max_holds_in_place: int = 3
+    hold_radius_m: float = 0.5
     blocked_radius_m: float = 0.05
     escape_blocked_radius_m: float = 0.5
     look_around_views: int = 8
@@ -75,9 +90,11 @@ class RecoveryConfig:
 
     def __post_init__(self) -> None:
         check_integer("RecoveryConfig.window", self.window, low=2)
-        for name in ("max_failed_plans", "look_around_views"):
+        for name in ("max_failed_plans", "look_around_views", "max_goal_holds",
+                     "max_holds_in_place"):
             check_integer(f"RecoveryConfig.{name}", getattr(self, name), low=1)
-        for name in ("min_motion_m", "failed_goal_radius_m", "wander_max_m", "retreat_m"):
+        for name in ("min_motion_m", "failed_goal_radius_m", "held_goal_radius_m",
+                     "hold_radius_m", "wander_max_m", "retreat_m"):
             check_number(f"RecoveryConfig.{name}", getattr(self, name), low=0.0)
         for name in ("min_observed_gain", "blocked_radius_m", "escape_blocked_radius_m"):
             check_number(f"RecoveryConfig.{name}", getattr(self, name), low=0.0, low_open=False)
@@ -104,6 +121,9 @@ class ProgressMonitor:
         self.trajectory: list[np.ndarray] = []
         self.failed_plans = 0
         self.failed_goals: list[tuple[np.ndarray, int, bool]] = []  # goal, frame, column
+        self.held_goals: list[tuple[np.ndarray, int]] = []  # goal, frame
+        self._hold_spot: np.ndarray | None = None  # where the holds in place began
+        self._holds_in_place = 0
         self.frame = 0
         self.escalation = 0
         self.last_recovery_frame = -(10**9)
@@ -172,6 +192,42 @@ class ProgressMonitor:
         """``goal`` failed; ``column``: for where it lies, not for how high (past an open
         scan's edge, which no height crosses), so every goal above or below it fails too."""
         self.failed_goals.append((np.asarray(goal, np.float64).copy(), self.frame, column))
+
+    def move_held(self, position: np.ndarray) -> bool:
+        """A move was held (by the agent's checks or the env) with the agent at
+        ``position``. At the ``max_holds_in_place``-th hold within ``hold_radius_m`` of where
+        the first of them was, the next plan is a recovery that moves
+        (:meth:`request_recovery`); returns whether it is."""
+        position = np.asarray(position, np.float64)
+        if (self._hold_spot is None
+                or np.linalg.norm(position - self._hold_spot) > self.config.hold_radius_m):
+            self._hold_spot, self._holds_in_place = position.copy(), 0
+        self._holds_in_place += 1
+        if self._holds_in_place < self.config.max_holds_in_place:
+            return False
+        self._holds_in_place = 0
+        self.request_recovery()
+        return True
+
+    def goal_held(self, goal: np.ndarray) -> bool:
+        """A move of the plan to ``goal`` was held (by the agent's checks or the env). At the
+        ``max_goal_holds``-th such plan within the memory to goals within
+        ``held_goal_radius_m`` of it (across), they all fail at every height; returns
+        whether they did."""
+        goal = np.asarray(goal, np.float64).copy()
+        horizon = self.frame - self.config.failed_goal_memory_frames
+        self.held_goals = [entry for entry in self.held_goals if entry[1] >= horizon]
+        self.held_goals.append((goal, self.frame))
+        radius = self.config.held_goal_radius_m
+        near = [np.linalg.norm(held[:2] - goal[:2]) <= radius for held, _ in self.held_goals]
+        if sum(near) < self.config.max_goal_holds:
+            return False
+        for (held, _), close in zip(self.held_goals, near, strict=True):
+            if close:
+                self.goal_failed(held, column=True)
+        self.held_goals = [entry for entry, close in zip(self.held_goals, near, strict=True)
+                           if not close]
+        return True
 
     def recent_failed_goals(self, columns: bool = False) -> np.ndarray:
         """(F, 3) goals that failed within the memory (``columns``: only those that failed

@@ -12,6 +12,7 @@ import pytest
 import naruto_gym  # noqa: F401  (registers the env)
 from naruto_agent.naruto import TRANSITIONS, NarutoPolicy, Plan, State, build_config
 from naruto_agent.policies import EnvContext, make_policy, pose_action
+from naruto_agent.policies.watchdog import StallEvent
 from naruto_gym.geometry.transforms import rotation_angle_between
 
 SCENE = "replica_like_room"
@@ -227,6 +228,45 @@ def test_a_held_move_is_planned_around_at_the_next_frame():
     # ... and sets off without turning first (each new path would cost a turn in place).
     assert all(history[frame + 1] != State.ROTATING_AT_START for frame in held), (
         [history[frame + 1] for frame in held])
+
+
+def test_moves_held_in_one_place_lead_to_a_recovery_the_watchdog_lets_run():
+    """From frame 30 on, the agent's checks hold every move of a normal plan (as next to a
+    wall top on an open scan): after three holds in one place the next plan is a recovery
+    that moves, and a watchdog trigger while it is under way keeps it instead of starting
+    another walk from the same spot."""
+    holding = False
+
+    def hold_normal_plans(check):
+        def wrapped(start, end):
+            plan = policy.machine.plan
+            if holding and plan is not None and not plan.info.get("recovery"):
+                return False
+            return check(start, end)
+        return wrapped
+
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
+    policy.wrap_move_check(hold_normal_plans)
+    env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=SCALE, panorama_shape=None,
+                   max_episode_steps=200)
+    policy.bind(EnvContext.from_env(env))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info, seed=0)
+    under_way = None
+    for frame in range(1, 80):
+        holding = frame > 30
+        action = policy.act(observation, info)
+        plan = policy.machine.plan
+        if (holding and plan is not None and plan.info.get("recovery") in ("wander", "retreat")
+                and policy.state in (State.ROTATING_AT_START, State.MOVING)):
+            under_way = frame
+            break
+        observation, _, _, _, info = env.step(action)
+    assert under_way is not None and under_way <= 30 + 12, under_way
+    event = StallEvent(step=under_way, position=observation["pose"][:3, 3], kind="oscillation")
+    assert "kept" in policy.recover_from_stall(event)
+    assert policy.machine.plan is plan
+    env.close()
 
 
 @pytest.mark.parametrize("looks", [4.0, 0.0])

@@ -81,6 +81,35 @@ def test_failed_goals_are_forgotten_after_the_memory() -> None:
     assert len(monitor.recent_failed_goals()) == 0
 
 
+def test_moves_held_again_and_again_in_one_place_ask_for_a_recovery_that_moves() -> None:
+    """A plan whose first move is held at once, frame after frame, leaves the agent standing:
+    the third hold within the stay radius of where the first was asks for a recovery that
+    moves (not a look-around); holds spread over the room do not."""
+    monitor = ProgressMonitor(RecoveryConfig())
+    here = np.array([1.0, 1.0, 1.5])
+    assert not monitor.move_held(here)
+    assert not monitor.move_held(here + [0.2, 0.0, 0.0])
+    assert monitor.move_held(here + [0.0, 0.3, -0.1])
+    assert monitor.needs_recovery() and monitor.next_recovery() == RecoveryKind.WANDER
+    spread = ProgressMonitor(RecoveryConfig())
+    assert not any(spread.move_held(here + [0.6 * k, 0.0, 0.0]) for k in range(6))
+    assert not spread.needs_recovery()
+
+
+def test_a_spot_whose_plans_keep_being_held_fails_at_every_height() -> None:
+    """Plans to goals within 0.5 m of each other across, at any height, held three times:
+    the goal search would choose that spot again and again, so every one of them fails for
+    where it lies (the goal search skips it at every height); two holds do not."""
+    monitor = ProgressMonitor(RecoveryConfig())
+    goals = np.array([[10.53, 6.93, 1.65], [10.33, 6.93, 2.15], [10.53, 7.33, 1.15]])
+    assert not monitor.goal_held(goals[0])
+    assert not monitor.goal_held(np.array([5.0, 5.0, 1.5]))  # elsewhere
+    assert len(monitor.recent_failed_goals()) == 0
+    assert not monitor.goal_held(goals[1])
+    assert monitor.goal_held(goals[2])
+    np.testing.assert_allclose(monitor.recent_failed_goals(columns=True), goals)
+
+
 def test_retreat_goes_back_along_the_trajectory_in_small_steps() -> None:
     monitor = ProgressMonitor(RecoveryConfig(retreat_m=0.5))
     for x in np.linspace(0.0, 2.0, 21):
