@@ -258,14 +258,13 @@ class GoalPlanner:
         if self.config.stay_in_scanned_space:
             inside = self.scan_checks.inside_scan(sdf.grid_points(), start).reshape(sdf.shape)
             mask = inside if mask is None else mask & inside
-        failed = self.monitor.recent_failed_goals()
+        failed, radii = self.monitor.recent_failed()
         if len(failed):
-            radius = self.config.recovery.failed_goal_radius_m
             points = sdf.grid_points()
             near = np.zeros(len(points), dtype=bool)
-            for goal in failed:
+            for goal, radius in zip(failed, radii, strict=True):
                 near |= np.linalg.norm(points - goal, axis=1) <= radius
-            for goal in self.monitor.recent_failed_goals(columns=True):
+            for goal, radius in zip(*self.monitor.recent_failed(columns=True), strict=True):
                 near |= np.linalg.norm(points[:, :2] - goal[:2], axis=1) <= radius
             near = near.reshape(sdf.shape)
             mask = ~near if mask is None else mask & ~near

@@ -281,15 +281,19 @@ class NarutoPolicy(Policy):
         )
         # A move held by the agent's checks or refused by the env taught the map where not to
         # go: the next frame plans again instead of waiting for the next mapping step. The
-        # monitor counts the holds per goal: a spot whose plans keep being held fails.
+        # monitor counts the holds per place and per goal (a spot whose plans keep being held
+        # fails); a held recovery is followed by the next one.
         self._replanning = self.machine.collisions > cut_before
         # (A hold that ended the step standing held the plan in hand; one followed by a new
         # plan in the same step held the one before.)
         held = self.machine.plan if self.machine.state == State.STAYING else plan_before
         if self._replanning:
-            self.monitor.move_held(position)
-            if held is not None and not held.info.get("recovery"):
-                self.monitor.goal_held(held.goal)
+            if held is not None and held.info.get("recovery"):
+                self.monitor.request_recovery()  # the next step of the escalation, at once
+            else:
+                self.monitor.move_held(position)
+                if held is not None:
+                    self.monitor.goal_held(held.goal)
         # Control is the state machine's own work; the phases it called are timed apart.
         called = sum(self.timings[name] for name in inner) - before
         self.timings["control"] += time.perf_counter() - clock - called

@@ -44,10 +44,12 @@ class RecoveryConfig:
         failed_goal_memory_frames: ... for this many frames.
         max_goal_holds: plans to goals within ``held_goal_radius_m`` of each other (across,
             at any height) whose moves the agent's checks held this many times within the
-            memory fail, at every height: the goal search would choose that spot again and
-            again (an open apartment: 17 plans to one corner in 60 frames, each held after
-            one to five moves, while the agent stayed within 0.5 m).
-        held_goal_radius_m: ... how near each other those goals lie.
+            memory fail, at every height and that far around: the goal search would choose
+            that spot again and again (an open apartment: 17 plans to one corner in 60
+            frames, each held after one to five moves, while the agent stayed within 0.5 m;
+            an open flat: goals 0.4-0.6 m apart behind a wall, a retreat after each hold).
+        held_goal_radius_m: ... how near each other those goals lie, and how far around
+            each of them the goal search then skips.
         max_holds_in_place: moves held this many times while the agent stays within
             ``hold_radius_m`` of where the first was held ask for a recovery that moves (a
             wander or a retreat): a plan whose first move is held at once, every frame,
@@ -77,8 +79,8 @@ class RecoveryConfig:
     max_failed_plans: int = 3
     failed_goal_radius_m: float = 0.3
     failed_goal_memory_frames: int = 300
-    max_goal_holds: int = 3
-    held_goal_radius_m: float = 0.5
+    max_goal_holds: int = 2
+    held_goal_radius_m: float = 1.0
     max_holds_in_place: int = 3
     hold_radius_m: float = 0.5
     blocked_radius_m: float = 0.05
@@ -120,7 +122,8 @@ class ProgressMonitor:
         self._observed: deque[float] = deque(maxlen=self.config.window)
         self.trajectory: list[np.ndarray] = []
         self.failed_plans = 0
-        self.failed_goals: list[tuple[np.ndarray, int, bool]] = []  # goal, frame, column
+        # goal, frame, column, radius (None: failed_goal_radius_m)
+        self.failed_goals: list[tuple[np.ndarray, int, bool, float | None]] = []
         self.held_goals: list[tuple[np.ndarray, int]] = []  # goal, frame
         self._hold_spot: np.ndarray | None = None  # where the holds in place began
         self._holds_in_place = 0
@@ -188,10 +191,13 @@ class ProgressMonitor:
         ) >= self.config.min_motion_m:
             self.escalation = 0
 
-    def goal_failed(self, goal: np.ndarray, column: bool = False) -> None:
+    def goal_failed(self, goal: np.ndarray, column: bool = False,
+                    radius_m: float | None = None) -> None:
         """``goal`` failed; ``column``: for where it lies, not for how high (past an open
-        scan's edge, which no height crosses), so every goal above or below it fails too."""
-        self.failed_goals.append((np.asarray(goal, np.float64).copy(), self.frame, column))
+        scan's edge, which no height crosses), so every goal above or below it fails too;
+        ``radius_m``: how far around it goals are skipped (None: ``failed_goal_radius_m``)."""
+        self.failed_goals.append(
+            (np.asarray(goal, np.float64).copy(), self.frame, column, radius_m))
 
     def move_held(self, position: np.ndarray) -> bool:
         """A move was held (by the agent's checks or the env) with the agent at
@@ -224,7 +230,7 @@ class ProgressMonitor:
             return False
         for (held, _), close in zip(self.held_goals, near, strict=True):
             if close:
-                self.goal_failed(held, column=True)
+                self.goal_failed(held, column=True, radius_m=radius)
         self.held_goals = [entry for entry, close in zip(self.held_goals, near, strict=True)
                            if not close]
         return True
@@ -232,10 +238,18 @@ class ProgressMonitor:
     def recent_failed_goals(self, columns: bool = False) -> np.ndarray:
         """(F, 3) goals that failed within the memory (``columns``: only those that failed
         for where they lie)."""
+        return self.recent_failed(columns)[0]
+
+    def recent_failed(self, columns: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """The goals that failed within the memory, (F, 3), and how far around each goals
+        are skipped, (F,) metres (``columns``: only those that failed for where they lie)."""
         horizon = self.frame - self.config.failed_goal_memory_frames
         self.failed_goals = [entry for entry in self.failed_goals if entry[1] >= horizon]
-        goals = [goal for goal, _, column in self.failed_goals if column or not columns]
-        return np.stack(goals) if goals else np.zeros((0, 3))
+        kept = [(goal, self.config.failed_goal_radius_m if radius is None else radius)
+                for goal, _, column, radius in self.failed_goals if column or not columns]
+        if not kept:
+            return np.zeros((0, 3)), np.zeros(0)
+        return np.stack([goal for goal, _ in kept]), np.array([radius for _, radius in kept])
 
     def retreat_path(self, position: np.ndarray, step_m: float = 0.1) -> np.ndarray:
         """(K, 3) nodes from ``position`` back along the trajectory for ``retreat_m``,
