@@ -172,10 +172,11 @@ def test_blocked_space_forgets_only_guesses_near_a_point() -> None:
 
 def _first_move(reason: str, offset: np.ndarray | None = None):
     """An agent on two_rooms, its first move (or, with ``offset``, a move by that much from
-    where it stands), and the agent after the env refused it."""
+    where it stands), and the agent after the env refused it. The env is not stepped until
+    then, so the stall watchdog, which would read that as standing, is off."""
     env = gym.make("NarutoRecon-v0", scene="two_rooms", image_scale=0.1,
                    max_episode_steps=1000)
-    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu", stall_watchdog=False)
     policy.bind(EnvContext.from_env(env.unwrapped))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)
