@@ -17,7 +17,6 @@
 """
 
 from naruto_agent.benchmark.efficiency import episode_efficiency
-from naruto_agent.benchmark.episode_archive import archive_run, load_episodes
 from naruto_agent.benchmark.executors import pending_specs, run_local, run_ray
 from naruto_agent.benchmark.records import load_records, write_json_atomic
 from naruto_agent.benchmark.runner import run_episode, run_episode_safe
@@ -29,11 +28,9 @@ from naruto_agent.benchmark.tables import markdown_table, summarise
 
 __all__ = [
     "EpisodeSpec",
-    "archive_run",
     "bootstrap_ci",
     "build_specs",
     "episode_efficiency",
-    "load_episodes",
     "load_records",
     "markdown_table",
     "paired_comparison",
