@@ -6,7 +6,7 @@ per-step coverage, tens of kB for an apartment, and stays out of git. Its compac
 what the leaderboard reads: the settings and their hash, the metrics, the completion curve,
 the refusals and stalls, the commit that ran it, and, in place of the trajectory, the path
 walked at each checkpoint of the curve and the efficiency metrics computed from it
-(:func:`~naruto_agent.benchmark.efficiency.episode_efficiency`). About 2 kB an episode.
+(:func:`~naruto_agent.benchmark.efficiency.episode_efficiency`). About 3 kB an episode.
 
 An archive is laid out as a run folder, with ``episodes/`` in place of ``records/``: its
 ``suite.json`` lists the scenes and every archived run's command and machine. The leaderboard

@@ -69,13 +69,11 @@ from naruto_agent.policies.layers import Layer
 from naruto_agent.policies.registry import register_policy
 from naruto_agent.policies.watchdog import StallEvent, StallWatchdogConfig
 
-#: The agent's stall watchdog. A look-around that still learns (8 views alternately 20 degrees
-#: up and down take 25 steps, a goal's up to 10 views longer) is cut short after 20 steps
-#: (``max_stay_steps``, 24 by default) for the next goal: the agent's way out of a stay is an
-#: E-RRT path that climbs and bends around what it meets, and takes up to 10 steps to get
-#: 0.5 m away, so that no stay lasts over 30 steps. A stay that learns nothing is a stall
-#: after one window.
-STALL_WATCHDOG = StallWatchdogConfig(max_stay_steps=20)
+#: The agent's stall watchdog: the default settings, so that no stay lasts over 30 steps. A
+#: look-around that still learns (8 views alternately 20 degrees up and down take 25 steps,
+#: a goal's up to 10 views longer) is cut short after ``max_stay_steps`` for the next goal;
+#: a stay that learns nothing is a stall after one window.
+STALL_WATCHDOG = StallWatchdogConfig()
 
 #: The phases whose seconds ``NarutoPolicy.timings`` holds.
 PHASES = ("mapping", "planner_view", "goal_search", "rrt", "control")

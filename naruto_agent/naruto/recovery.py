@@ -46,8 +46,8 @@ class RecoveryConfig:
             at any height) whose moves the agent's checks held this many times within the
             memory fail, at every height and that far around: the goal search would choose
             that spot again and again (an open apartment: 17 plans to one corner in 60
-            frames, each held after one to five moves, while the agent stayed within 0.5 m;
-            an open flat: goals 0.4-0.6 m apart behind a wall, a retreat after each hold).
+            frames, each held after one to five moves, while the agent stayed within 0.5 m).
+            Two holds and 1 m cut the coverage of a 2 x 2.4 m scan to half.
         held_goal_radius_m: ... how near each other those goals lie, and how far around
             each of them the goal search then skips.
         max_holds_in_place: moves held this many times while the agent stays within
@@ -67,7 +67,7 @@ class RecoveryConfig:
         look_around_views: headings of the turn in place.
         look_around_pitch_deg: the look-around alternates looking this much up and down (20:
             three 20-degree steps from one view to the next, 25 steps for 8 views, of which
-            the stall watchdog lets the first 20 run, ``max_stay_steps``; 25 degrees needs
+            the stall watchdog lets the first 24 run, ``max_stay_steps``; 25 degrees needs
             four steps a view).
         wander_max_m: the farthest a move to reachable space goes (straight-line distance).
         retreat_m: how far back along its own trajectory the agent retreats.
@@ -79,8 +79,8 @@ class RecoveryConfig:
     max_failed_plans: int = 3
     failed_goal_radius_m: float = 0.3
     failed_goal_memory_frames: int = 300
-    max_goal_holds: int = 2
-    held_goal_radius_m: float = 1.0
+    max_goal_holds: int = 3
+    held_goal_radius_m: float = 0.5
     max_holds_in_place: int = 3
     hold_radius_m: float = 0.5
     blocked_radius_m: float = 0.05

@@ -97,18 +97,20 @@ def test_moves_held_again_and_again_in_one_place_ask_for_a_recovery_that_moves()
 
 
 def test_a_spot_whose_plans_keep_being_held_fails_at_every_height() -> None:
-    """Plans to goals within 1 m of each other across, at any height, held twice: the goal
-    search would choose that spot again and again, so both fail for where they lie, and the
-    goal search skips 1 m around each at every height; a hold elsewhere does not count."""
+    """Plans to goals within 0.5 m of each other across, at any height, held three times:
+    the goal search would choose that spot again and again, so each fails for where it lies
+    (the goal search skips 0.5 m around each at every height); a hold elsewhere does not
+    count."""
     monitor = ProgressMonitor(RecoveryConfig())
-    goals = np.array([[5.48, 8.33, 2.15], [4.88, 8.13, 1.65]])
+    goals = np.array([[10.53, 6.93, 1.65], [10.33, 6.93, 2.15], [10.53, 7.33, 1.15]])
     assert not monitor.goal_held(goals[0])
-    assert not monitor.goal_held(np.array([2.0, 3.0, 1.5]))  # elsewhere
+    assert not monitor.goal_held(np.array([5.0, 5.0, 1.5]))  # elsewhere
+    assert not monitor.goal_held(goals[1])
     assert len(monitor.recent_failed_goals()) == 0
-    assert monitor.goal_held(goals[1])
+    assert monitor.goal_held(goals[2])
     failed, radii = monitor.recent_failed(columns=True)
     np.testing.assert_allclose(failed, goals)
-    np.testing.assert_allclose(radii, [1.0, 1.0])
+    np.testing.assert_allclose(radii, [0.5, 0.5, 0.5])
     monitor.goal_failed(np.zeros(3))  # an ordinary failure keeps the ordinary radius
     assert monitor.recent_failed()[1][-1] == RecoveryConfig().failed_goal_radius_m
 
