@@ -180,7 +180,7 @@ def episode_efficiency(
             out[f"metres_to_{level:g}"] = None
         return out
     out["auc_steps"] = area_under_curve(steps, ratios, float(budget))
-    at_points = checkpoint_paths(record, steps)
+    at_points = path[np.minimum(steps.astype(int), len(path) - 1)]
     # The path is monotone but may stand still: keep the best ratio at each distance.
     metres, best = _monotone(at_points, ratios)
     out["auc_path"] = area_under_curve(metres, best, path_horizon_m(record))

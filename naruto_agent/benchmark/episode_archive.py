@@ -8,9 +8,10 @@ the refusals and stalls, the commit that ran it, and, in place of the trajectory
 walked at each checkpoint of the curve and the efficiency metrics computed from it
 (:func:`~naruto_agent.benchmark.efficiency.episode_efficiency`). About 3 kB an episode.
 
-An archive is laid out as a run folder, with ``episodes/`` in place of ``records/``: its
-``suite.json`` lists the scenes and every archived run's command and machine. The leaderboard
-is generated from it as from a run folder (:func:`load_episodes` reads both kinds)::
+An archive is a folder of two files: ``suite.json``, as in a run folder (the scenes, and every
+archived run's command and machine), and ``episodes.json``, the compact copies by episode id.
+The leaderboard is generated from it as from a run folder (:func:`load_episodes` reads
+both kinds)::
 
     naruto-benchmark --suite test --size-class small --policies explorer --seeds 0 1 2 \\
         --eval-points 4 --output-dir runs/suite
@@ -40,8 +41,8 @@ from naruto_agent.benchmark.records import (
 )
 from naruto_agent.benchmark.suite import MANIFEST_FILE, read_manifest
 
-#: The folder of an archive that holds the compact copies.
-EPISODES_DIR = "episodes"
+#: The file of an archive that holds the compact copies, by episode id.
+EPISODES_FILE = "episodes.json"
 #: What a compact copy keeps of its record as it is.
 KEPT = (
     "episode_id",
@@ -112,14 +113,15 @@ def archive_run(run_dir: str | Path, archive_dir: str | Path) -> tuple[int, int]
                 f"{manifest.get(key)!r}: archive it into another folder"
             )
         archived[key] = manifest.get(key)
+    episodes = read_record(archive_dir / EPISODES_FILE) or {}
     count = new = 0
     for record in load_records(run_dir):
         if record.get("status") != STATUS_OK:
             continue
-        path = archive_dir / EPISODES_DIR / f"{record['episode_id']}.json"
-        new += not path.is_file()
-        write_json_atomic(path, compact_record(record))
+        new += record["episode_id"] not in episodes
+        episodes[record["episode_id"]] = compact_record(record)
         count += 1
+    write_json_atomic(archive_dir / EPISODES_FILE, dict(sorted(episodes.items())))
     archived["scenes"].update(manifest.get("scenes", {}))
     for run in manifest.get("runs", []):
         if run not in archived["runs"]:
@@ -131,11 +133,7 @@ def archive_run(run_dir: str | Path, archive_dir: str | Path) -> tuple[int, int]
 def load_episodes(folder: str | Path) -> list[dict[str, Any]]:
     """The episodes of a run folder (its records) or an archive (its compact copies), sorted
     by episode id; where a folder holds both for one episode, the record."""
-    episodes: dict[str, dict[str, Any]] = {}
-    for path in sorted((Path(folder) / EPISODES_DIR).glob("*/*/*.json")):
-        copy = read_record(path)
-        if copy is not None and "episode_id" in copy:
-            episodes[copy["episode_id"]] = copy
+    episodes: dict[str, dict[str, Any]] = dict(read_record(Path(folder) / EPISODES_FILE) or {})
     for record in load_records(folder):
         episodes[record["episode_id"]] = record
     return [episodes[key] for key in sorted(episodes)]

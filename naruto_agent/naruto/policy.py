@@ -242,8 +242,8 @@ class NarutoPolicy(Policy):
         plan = self.machine.plan
         if (plan is not None and plan.info.get("recovery") in ("wander", "retreat")
                 and self.machine.state in (State.ROTATING_AT_START, State.MOVING)):
-            # A recovery that moves is under way (asked for by held moves, say): cutting it
-            # for the next one would only start another walk from the same spot.
+            # A recovery that moves is under way: cutting it for the next one would only
+            # start another walk from the same spot.
             return "a recovery that moves is under way: kept"
         self.machine.interrupt()
         self._stalled = True
@@ -282,10 +282,10 @@ class NarutoPolicy(Policy):
         # monitor counts the holds per place and per goal (a spot whose plans keep being held
         # fails); a held recovery is followed by the next one.
         self._replanning = self.machine.collisions > cut_before
-        # (A hold that ended the step standing held the plan in hand; one followed by a new
-        # plan in the same step held the one before.)
-        held = self.machine.plan if self.machine.state == State.STAYING else plan_before
         if self._replanning:
+            # A hold that ended the step standing held the plan in hand; one followed by a
+            # new plan in the same step held the one before.
+            held = self.machine.plan if self.machine.state == State.STAYING else plan_before
             if held is not None and held.info.get("recovery"):
                 self.monitor.request_recovery()  # the next step of the escalation, at once
             else:

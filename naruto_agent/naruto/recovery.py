@@ -45,15 +45,13 @@ class RecoveryConfig:
         max_goal_holds: plans to goals within ``held_goal_radius_m`` of each other (across,
             at any height) whose moves the agent's checks held this many times within the
             memory fail, at every height and that far around: the goal search would choose
-            that spot again and again (an open apartment: 17 plans to one corner in 60
-            frames, each held after one to five moves, while the agent stayed within 0.5 m).
-            Two holds and 1 m cut the coverage of a 2 x 2.4 m scan to half.
+            that spot again and again while the agent stays put (docs/agent-config.md).
         held_goal_radius_m: ... how near each other those goals lie, and how far around
             each of them the goal search then skips.
         max_holds_in_place: moves held this many times while the agent stays within
             ``hold_radius_m`` of where the first was held ask for a recovery that moves (a
             wander or a retreat): a plan whose first move is held at once, every frame,
-            leaves the agent standing (33 frames on an open room, no move refused by the env).
+            leaves the agent standing while the env refuses nothing.
         hold_radius_m: ... how far from there the agent may have got (the stay radius).
         blocked_radius_m: a refused move blocks the agent's map this far around its target
             (0.05 m, the agent's radius; see ``docs/agent-config.md`` for the larger radius

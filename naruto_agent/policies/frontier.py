@@ -46,9 +46,9 @@ WANDER_RANGE_M = (1.0, 3.0)
 
 
 #: The frontier policy's stall watchdog: a stay that still learns (a look-around at a goal,
-#: 27 steps in full) is cut after 22 steps (24 by default). Its walk away from a stay climbs or
-#: sinks as it goes and took 7 steps to get 0.5 m away in a 2 x 2.4 m scan: 24 + 7 steps
-#: were one over the 30 a stay may last.
+#: 27 steps in full) is cut after 22 steps (24 by default): its walk away from a stay climbs or
+#: sinks as it goes and needs up to 8 steps to get 0.5 m away, within the 30 a stay may last
+#: (docs/policies.md).
 STALL_WATCHDOG = StallWatchdogConfig(max_stay_steps=22)
 
 

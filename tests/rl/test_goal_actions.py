@@ -657,8 +657,8 @@ def test_a_walk_out_of_a_stay_stays_one_when_the_map_restarts_at_a_new_height():
 
 def test_a_walk_out_of_a_stay_leaves_before_it_changes_height():
     """Out of a stay 1.9 m above the floor (above the walking height): a step down first would
-    restart the map's slice and empty the map the way out was planned on (an episode then
-    turned on the spot for ten steps). The walker steps out of the stay first."""
+    restart the map's slice and empty the map the way out was planned on. The walker steps
+    out of the stay first."""
     builder, walker, pose = _walker_between_two_blocks()
     panorama = np.zeros((32, 64), np.float32)
     panorama[-1] = 1.9  # the floor straight down

@@ -174,13 +174,9 @@ def test_a_watchdog_without_a_recovery_says_what_to_implement():
     env.close()
 
 
-@pytest.mark.parametrize("name", ["passive", "random", "frontier", "naruto"])
-def test_every_shipped_policy_recovers_from_a_stall_and_moves_again(name):
-    """The env is sent the agent's own pose, whatever the policy asks (as if each of its
-    moves were refused in place), until the watchdog fires (within 20 steps); the policy's
-    recovery then leaves the spot by more than 0.5 m within 15 steps."""
-    policy = make_policy(name, stall_watchdog=True)
-    env = gym.make(
+def _small_room(policy: Policy) -> gym.Env:
+    """The catalogue's room at small frames, with the panorama, in ``policy``'s action mode."""
+    return gym.make(
         "NarutoRecon-v0",
         scene="replica_like_room",
         image_scale=0.05,
@@ -188,6 +184,15 @@ def test_every_shipped_policy_recovers_from_a_stall_and_moves_again(name):
         panorama_shape=(32, 64),
         action_mode=policy.preferred_action_mode,
     )
+
+
+@pytest.mark.parametrize("name", ["passive", "random", "frontier", "naruto"])
+def test_every_shipped_policy_recovers_from_a_stall_and_moves_again(name):
+    """The env is sent the agent's own pose, whatever the policy asks (as if each of its
+    moves were refused in place), until the watchdog fires (within 20 steps); the policy's
+    recovery then leaves the spot by more than 0.5 m within 15 steps."""
+    policy = make_policy(name, stall_watchdog=True)
+    env = _small_room(policy)
     policy.bind(EnvContext.from_env(env, max_episode_steps=200))
     observation, info = env.reset(seed=3, options=policy.reset_options())
     policy.reset(observation, info, seed=3)
@@ -265,14 +270,7 @@ def test_random_leaves_a_stall_in_a_corner_along_the_heading_clear_the_farthest(
     corner. The random walk's recovery runs along the heading the panorama shows clear for
     the whole probe (1.6 m), whichever heading its sweep starts from."""
     policy = make_policy("random", seed=seed)
-    env = gym.make(
-        "NarutoRecon-v0",
-        scene="replica_like_room",
-        image_scale=0.05,
-        coverage_samples=500,
-        panorama_shape=(32, 64),
-        action_mode=policy.preferred_action_mode,
-    )
+    env = _small_room(policy)
     context = EnvContext.from_env(env, max_episode_steps=200)
     policy.bind(context)
     pose = np.eye(4)
