@@ -147,6 +147,8 @@ class NarutoPolicy(Policy):
         self._stalled = False
         # The last frame's plan was cut short by a held or refused move: this frame plans again.
         self._replanning = False
+        # The stay the watchdog last cut short (its spots and radius) while the agent is in it.
+        self._cut_stay: tuple[np.ndarray, float] | None = None
         self.use_stall_watchdog(STALL_WATCHDOG, enabled=self.config.stall_watchdog)
 
     # -- the episode's state, read-only ------------------------------------------------------
@@ -230,6 +232,7 @@ class NarutoPolicy(Policy):
         self._commanded = None
         self._stalled = False
         self._replanning = False
+        self._cut_stay = None
         self._integrate(observation)
 
     def recover_from_stall(self, event: StallEvent) -> str:
@@ -248,7 +251,8 @@ class NarutoPolicy(Policy):
         self.machine.interrupt()
         self._stalled = True
         if event.kind == "lingering":
-            self.goal_planner.leave(*self.stay_of(event))
+            self._cut_stay = self.stay_of(event)
+            self.goal_planner.leave(*self._cut_stay)
             return "look-around cut short: next goal away from the stay"
         self.monitor.request_recovery()
         return "plan cut short: recovery that moves"
@@ -280,7 +284,9 @@ class NarutoPolicy(Policy):
         # A move held by the agent's checks or refused by the env taught the map where not to
         # go: the next frame plans again instead of waiting for the next mapping step. The
         # monitor counts the holds per place and per goal (a spot whose plans keep being held
-        # fails); a held recovery is followed by the next one.
+        # fails); a held recovery, or a move held on the way out of a stay the watchdog cut
+        # short (the agent has stayed there long already), is followed by a recovery that
+        # moves at once.
         self._replanning = self.machine.collisions > cut_before
         if self._replanning:
             # A hold that ended the step standing held the plan in hand; one followed by a
@@ -289,7 +295,10 @@ class NarutoPolicy(Policy):
             if held is not None and held.info.get("recovery"):
                 self.monitor.request_recovery()  # the next step of the escalation, at once
             else:
-                self.monitor.move_held(position)
+                if self._in_cut_stay(position) and self._clear_to_wander(position):
+                    self.monitor.request_recovery()
+                else:
+                    self.monitor.move_held(position)
                 if held is not None:
                     self.monitor.goal_held(held.goal)
         # Control is the state machine's own work; the phases it called are timed apart.
@@ -386,6 +395,24 @@ class NarutoPolicy(Policy):
             self._new_map = True
             if not self.config.lazy_planner_view:
                 self.agent_map.refresh()
+
+    def _in_cut_stay(self, position: np.ndarray) -> bool:
+        """Whether the agent is still within the stay the watchdog last cut short (which is
+        forgotten once the agent has left it)."""
+        if self._cut_stay is None:
+            return False
+        spots, radius = self._cut_stay
+        if np.min(np.linalg.norm(spots - position, axis=1)) < radius:
+            return True
+        self._cut_stay = None
+        return False
+
+    def _clear_to_wander(self, position: np.ndarray) -> bool:
+        """Whether the agent keeps the planner's clearance on its map, where a wander (the
+        recovery that moves to space away from where the agent has been) can set off; a
+        recovery from within a clearance retreats along the way the agent came."""
+        self.agent_map.refresh()
+        return float(self.agent_map.sdf.sample(position[None])[0]) > self.agent_map.clearance_m
 
     def _learn_from_refusal(self, position: np.ndarray, info: Info) -> None:
         """The step info says the env refused the move the agent commanded last: learn it
