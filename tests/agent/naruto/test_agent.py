@@ -230,11 +230,13 @@ def test_a_held_move_is_planned_around_at_the_next_frame():
         [history[frame + 1] for frame in held])
 
 
-def test_moves_held_in_one_place_lead_to_a_recovery_the_watchdog_lets_run():
-    """From frame 30 on, the agent's checks hold every move of a normal plan (as next to a
-    wall top on an open scan): after three holds in one place the next plan is a recovery
-    that moves, and a watchdog trigger while it is under way keeps it instead of starting
-    another walk from the same spot."""
+def _hold_normal_plans_from(frame_held: int, stay: np.ndarray | str | None = None):
+    """An episode whose agent's checks hold every move of a normal plan from ``frame_held``
+    on (as next to a wall top on an open scan), until a recovery that moves is under way;
+    ``stay``: where a look-around the stall watchdog cut short at ``frame_held`` lay (the
+    agent's position when it is ``"here"``). Returns the policy, the env, the last
+    observation, the frame the recovery was under way (None: not within 80 frames) and the
+    moves held until then."""
     holding = False
 
     def hold_normal_plans(check):
@@ -252,20 +254,46 @@ def test_moves_held_in_one_place_lead_to_a_recovery_the_watchdog_lets_run():
     policy.bind(EnvContext.from_env(env))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info, seed=0)
-    under_way = None
+    held_before = 0
     for frame in range(1, 80):
-        holding = frame > 30
+        if frame == frame_held + 1:
+            held_before = policy.machine.collisions
+            if stay is not None:
+                here = observation["pose"][:3, 3]
+                spot = here if isinstance(stay, str) else stay
+                policy.recover_from_stall(StallEvent(step=frame_held, position=spot,
+                                                     kind="lingering"))
+        holding = frame > frame_held
         action = policy.act(observation, info)
         plan = policy.machine.plan
         if (holding and plan is not None and plan.info.get("recovery") in ("wander", "retreat")
                 and policy.state in (State.ROTATING_AT_START, State.MOVING)):
-            under_way = frame
-            break
+            return policy, env, observation, frame, policy.machine.collisions - held_before
         observation, _, _, _, info = env.step(action)
+    return policy, env, observation, None, policy.machine.collisions - held_before
+
+
+def test_moves_held_in_one_place_lead_to_a_recovery_the_watchdog_lets_run():
+    """From frame 30 on, the agent's checks hold every move of a normal plan: after three
+    holds in one place the next plan is a recovery that moves, and a watchdog trigger while
+    it is under way keeps it instead of starting another walk from the same spot."""
+    policy, env, observation, under_way, held = _hold_normal_plans_from(30)
     assert under_way is not None and under_way <= 30 + 12, under_way
+    assert held == 3
+    plan = policy.machine.plan
     event = StallEvent(step=under_way, position=observation["pose"][:3, 3], kind="oscillation")
     assert "kept" in policy.recover_from_stall(event)
     assert policy.machine.plan is plan
+    env.close()
+
+
+@pytest.mark.parametrize("stay, holds", [("here", 1), (np.array([50.0, 50.0, 1.0]), 3)])
+def test_a_move_held_on_the_way_out_of_a_cut_stay_leads_to_a_recovery_at_once(stay, holds):
+    """The watchdog cut a look-around short here: the agent has stayed long already, so the
+    first move held on its way out is followed by a recovery that moves; a stay cut short
+    elsewhere changes nothing (three holds in one place)."""
+    policy, env, _, under_way, held = _hold_normal_plans_from(30, stay)
+    assert under_way is not None and held == holds, (under_way, held)
     env.close()
 
 
