@@ -87,6 +87,11 @@ class AgentMap:
         """The planner's clearance from surfaces."""
         return self.config.planner.clearance_m
 
+    def keeps_clearance(self, position: np.ndarray) -> bool:
+        """Whether ``position`` keeps the planner's clearance on the planner view held (where
+        a path may set off without an escape first)."""
+        return float(self.sdf.sample(np.asarray(position, np.float64))[0]) > self.clearance_m
+
     # -- mapping -----------------------------------------------------------------------------
     def integrate(self, rgb: np.ndarray, depth: np.ndarray, pose: np.ndarray, frame_index: int,
                   panorama: np.ndarray | None = None) -> bool:

@@ -412,7 +412,7 @@ class NarutoPolicy(Policy):
         recovery that moves to space away from where the agent has been) can set off; a
         recovery from within a clearance retreats along the way the agent came."""
         self.agent_map.refresh()
-        return float(self.agent_map.sdf.sample(position[None])[0]) > self.agent_map.clearance_m
+        return self.agent_map.keeps_clearance(position)
 
     def _learn_from_refusal(self, position: np.ndarray, info: Info) -> None:
         """The step info says the env refused the move the agent commanded last: learn it

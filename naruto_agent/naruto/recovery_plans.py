@@ -99,9 +99,9 @@ class RecoveryPlanner:
         """A path to reachable space within ``recovery.wander_max_m``, as far as possible from
         where the agent has been; None when the agent is within a clearance or no such
         point can be reached."""
-        sdf = self.agent_map.sdf
-        if sdf.sample(position)[0] <= self.agent_map.clearance_m:
+        if not self.agent_map.keeps_clearance(position):
             return None
+        sdf = self.agent_map.sdf
         planner = replace(self.config.planner, seed=int(self.rng.integers(2**31 - 1)),
                           device=str(self.device))
         clock = time.perf_counter()
