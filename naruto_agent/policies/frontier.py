@@ -43,6 +43,10 @@ from naruto_gym.geometry.transforms import look_at_rotation, make_pose, rotation
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
 #: Path lengths (metres) of the places a stall recovery may walk to when no frontier is left.
 WANDER_RANGE_M = (1.0, 3.0)
+#: After a stall recovery's walk the env refused, a plan whose moves are all held (the panorama
+#: shows a surface in the way) leads to a walk elsewhere instead of a look-around on the
+#: refused spot (the stay the walk was to end), up to this many times per stall.
+WANDER_RETRIES = 1
 
 
 #: The frontier policy's stall watchdog: a stay that still learns (a look-around at a goal,
@@ -97,7 +101,14 @@ class FrontierPolicy(Policy):
         self._last_target: np.ndarray | None = None
         self._wandering = False  # on a stall recovery's walk: the env, not the probes, decides
         self._wander_failed: list[np.ndarray] = []  # where refused walks of this episode led
+        self._wander_retries = 0  # walks elsewhere after refused ones, since the last stall
+        self._walk_refused = False  # the last stall recovery's walk was refused, no move since
         self.use_stall_watchdog(STALL_WATCHDOG, enabled=self.config.stall_watchdog)
+
+    @property
+    def wandering(self) -> bool:
+        """On a stall recovery's walk to a reachable place away from the stall."""
+        return self._wandering
 
     @property
     def scan_open(self) -> bool:
@@ -139,6 +150,8 @@ class FrontierPolicy(Policy):
         self._last_target = None
         self._wandering = False
         self._wander_failed = []
+        self._wander_retries = 0
+        self._walk_refused = False
         self.guard.reset()
         self._closed_scan_held_done = False
         pose = np.asarray(observation["pose"], np.float64)
@@ -392,6 +405,8 @@ class FrontierPolicy(Policy):
         self._mark_visited(position)
         self._views.clear()
         self._stuck = 0
+        self._wander_retries = 0
+        self._walk_refused = False
         self._release_closed_scan()
         if self._wander(position):
             return "walk to a reachable place away from the stall"
@@ -433,6 +448,15 @@ class FrontierPolicy(Policy):
         self.state = "move"
         self._wandering = True
         return True
+
+    def _retry_walk(self, position: np.ndarray) -> bool:
+        """After a refused walk away from a stall and no plan that moves: walk elsewhere
+        (:data:`WANDER_RETRIES` times per stall); False when that is spent or no walk is
+        found."""
+        if not self._walk_refused or self._wander_retries >= WANDER_RETRIES:
+            return False
+        self._wander_retries += 1
+        return self._wander(position)
 
     def _walk_straight(self, position: np.ndarray) -> bool:
         """With no traversable voxel around (the height band the map allows is empty, e.g.
@@ -617,10 +641,12 @@ class FrontierPolicy(Policy):
                     )
                     self.grid.mark_occupied(bump[None])
             if self._wandering and collided:
-                # A stall recovery's walk refused: plan; the next recovery walks elsewhere.
+                # A stall recovery's walk refused: plan; a walk elsewhere (away from where
+                # refused ones led) if no plan moves, or at the next recovery.
                 self._wander_failed.append(np.asarray(self._path[-1], np.float64).copy())
                 if self._last_target is not None:
                     self._wander_failed.append(self._last_target.copy())
+                self._walk_refused = True
                 self.state = "plan"
             elif self._stuck >= 3 or (collided and self._stuck >= 1):
                 self._mark_visited(self.grid.cell_to_world(self._goal_cell[None])[0])
@@ -649,12 +675,17 @@ class FrontierPolicy(Policy):
             if self.state == "move":
                 action = self._move_action(pose, observation.get("panorama"))
                 if action is not None:
+                    self._walk_refused = False
                     return clip_pose_action(action, self.context.action_space)
                 if self.state == "plan":
                     continue  # the move would have left the scan
                 # Arrived: look around here, towards the cluster first.
                 self._mark_visited(position)
                 self._start_look_around(pose, self._goal_focus)
+        if not self._views and self._retry_walk(position):
+            action = self._move_action(pose, observation.get("panorama"))
+            if action is not None:
+                return clip_pose_action(action, self.context.action_space)
         # Nothing left to explore (or no decision this step): keep turning on the spot.
         if not self._views:
             self._start_look_around(pose, focus=None)

@@ -285,3 +285,25 @@ def test_random_leaves_a_stall_in_a_corner_along_the_heading_clear_the_farthest(
     for metres in (0.1, 0.4, 1.6):
         assert not policy.guard.way_blocked(panorama, heading * metres), metres
     env.close()
+
+
+@pytest.mark.slow
+def test_frontier_walks_elsewhere_when_its_walk_away_from_a_stay_is_refused_and_no_plan_moves():
+    """An open apartment-like scan where frontier's walk away from a stay was refused twice,
+    each time followed by a plan whose every move the panorama held and a look-around on the
+    refused spot (a 44-step stay): after a refused walk and no plan that moves it walks
+    elsewhere."""
+    policy = make_policy("frontier")
+    env = gym.make("NarutoRecon-v0", scene="procedural:small:1000005:no_ceiling+holes",
+                   image_scale=0.125, action_mode=policy.preferred_action_mode,
+                   max_episode_steps=200)
+    policy.bind(EnvContext.from_env(env, max_episode_steps=200))
+    observation, info = env.reset(seed=0, options=policy.reset_options())
+    policy.reset(observation, info, seed=0)
+    positions, coverage = [], []
+    for _ in range(200):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+        positions.append(observation["pose"][:3, 3].copy())
+        coverage.append(info["coverage"])
+    env.close()
+    assert longest_stay(np.array(positions), np.array(coverage)) <= 30
