@@ -147,7 +147,7 @@ class NarutoPolicy(Policy):
         self._stalled = False
         # The last frame's plan was cut short by a held or refused move: this frame plans again.
         self._replanning = False
-        # The stay the watchdog last cut short (its spots and radius) while the agent is in it.
+        # The stay the watchdog last cut short (its spots and radius), until a hold outside it.
         self._cut_stay: tuple[np.ndarray, float] | None = None
         self.use_stall_watchdog(STALL_WATCHDOG, enabled=self.config.stall_watchdog)
 
@@ -397,8 +397,8 @@ class NarutoPolicy(Policy):
                 self.agent_map.refresh()
 
     def _in_cut_stay(self, position: np.ndarray) -> bool:
-        """Whether the agent is still within the stay the watchdog last cut short (which is
-        forgotten once the agent has left it)."""
+        """Whether the agent is within the stay the watchdog last cut short; asked at a hold,
+        and a hold outside the stay forgets it (the next cut replaces it too)."""
         if self._cut_stay is None:
             return False
         spots, radius = self._cut_stay

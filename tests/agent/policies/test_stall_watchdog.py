@@ -289,10 +289,10 @@ def test_random_leaves_a_stall_in_a_corner_along_the_heading_clear_the_farthest(
 
 @pytest.mark.slow
 def test_frontier_walks_elsewhere_when_its_walk_away_from_a_stay_is_refused_and_no_plan_moves():
-    """An open apartment-like scan where frontier's walk away from a stay was refused twice,
-    each time followed by a plan whose every move the panorama held and a look-around on the
-    refused spot (a 44-step stay): after a refused walk and no plan that moves it walks
-    elsewhere."""
+    """On this open small-class scan frontier's walk away from a stay is refused at its first
+    step, and every first move of the plan made on the refused spot is held by the panorama:
+    it walks elsewhere instead of turning all around on that spot, and no stay lasts over 30
+    steps."""
     policy = make_policy("frontier")
     env = gym.make("NarutoRecon-v0", scene="procedural:small:1000005:no_ceiling+holes",
                    image_scale=0.125, action_mode=policy.preferred_action_mode,
