@@ -141,6 +141,21 @@ def _partial_note(manifest: dict[str, Any]) -> str | None:
             + "): run the whole split for the leaderboard.")
 
 
+def _missing_note(manifest: dict[str, Any]) -> str | None:
+    """The test split's size classes the run holds no scene of, or None."""
+    if manifest.get("split") != "test":
+        return None
+    suite = suite_module()
+    present = {entry["size_class"] for entry in manifest.get("scenes", {}).values()}
+    missing = [f"{size_class} ({len(suite.test_seeds(size_class))} test scenes of "
+               f"{suite.budget(size_class)} steps)"
+               for size_class in suite.SIZE_CLASSES if size_class not in present]
+    if not missing:
+        return None
+    return ("**Not in this run**: " + ", ".join(missing) + "; run them with "
+            "`--size-class` into the same folder to rank the policies there too.")
+
+
 def _scenes_section(manifest: dict[str, Any], records: list[dict[str, Any]]) -> list[str]:
     episodes = Counter(record["scene"] for record in records if record.get("status") == STATUS_OK)
     lines = ["## Scenes", "", "| Class | Scenes | Budget (steps) | Variant | Episodes |",
@@ -207,6 +222,7 @@ def leaderboard_markdown(
         "what each policy does.",
         "",
         *([note, ""] if (note := _partial_note(manifest)) else []),
+        *([missing, ""] if (missing := _missing_note(manifest)) else []),
         *_add_your_policy(),
     ]
     for size_class in ordered_groups(summary):

@@ -112,6 +112,7 @@ def test_a_tiny_suite_run_resumes_after_a_kill_and_makes_the_leaderboard(tmp_pat
     assert statistics["classes"]["small"]["random"]["episodes"] == 2
     page = leaderboard_markdown(out_dir, tmp_path / "img")
     assert "## small" in page and "--suite test" in page
+    assert "**Not in this run**: apartment (8 test scenes of 800 steps), house" in page
     assert (tmp_path / "img" / "leaderboard_curves.png").is_file()
 
 
