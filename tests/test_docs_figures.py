@@ -207,23 +207,47 @@ FIGURES: tuple[Figure, ...] = (
         _MEAN_STD,
     ),
     Figure(
-        _README, r"small: NARUTO ([\d.]+ \[[\d.]+, [\d.]+\])", _BOARD, _board("small", "naruto")
+        _README,
+        r"small: explorer \(learned\) ([\d.]+ \[[\d.]+, [\d.]+\])",
+        _BOARD,
+        _board("small", "explorer"),
     ),
     Figure(
         _README,
-        r"apartments: NARUTO ([\d.]+ \[[\d.]+, [\d.]+\])",
+        r"small: [^;]*?NARUTO ([\d.]+ \[[\d.]+, [\d.]+\])",
+        _BOARD,
+        _board("small", "naruto"),
+    ),
+    Figure(_README, r"small: [^;]*?frontier ([\d.]+)", _BOARD, _board("small", "frontier", False)),
+    Figure(
+        _README,
+        r"apartments: explorer ([\d.]+ \[[\d.]+, [\d.]+\])",
+        _BOARD,
+        _board("apartment", "explorer"),
+    ),
+    Figure(
+        _README,
+        r"apartments: [^;]*?NARUTO ([\d.]+ \[[\d.]+, [\d.]+\])",
         _BOARD,
         _board("apartment", "naruto"),
     ),
     Figure(
-        _README, r"houses: NARUTO ([\d.]+ \[[\d.]+, [\d.]+\])", _BOARD, _board("house", "naruto")
+        _README,
+        r"apartments: [^;]*?frontier ([\d.]+)",
+        _BOARD,
+        _board("apartment", "frontier", False),
     ),
-    Figure(_README, r"PPO ([\d.]+), random", _BOARD, _board("small", "PPOExplorer", False)),
     Figure(
-        _README, r"first in small \(([\d.]+)\)", _BOARD, _board("small (open)", "naruto", False)
+        _README,
+        r"first in small \(([\d.]+)\)",
+        _BOARD,
+        _board("small (open)", "explorer", False),
     ),
     Figure(
-        _README, r"and apartments \(([\d.]+)\)", _BOARD, _board("apartment (open)", "naruto", False)
+        _README,
+        r"and apartments \(([\d.]+)\)",
+        _BOARD,
+        _board("apartment (open)", "explorer", False),
     ),
     Figure(
         _README,
