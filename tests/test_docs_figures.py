@@ -239,6 +239,18 @@ FIGURES: tuple[Figure, ...] = (
     ),
     Figure(
         _README,
+        r"houses: [^;]*?NARUTO ([\d.]+ \[[\d.]+, [\d.]+\])",
+        _BOARD,
+        _board("house", "naruto"),
+    ),
+    Figure(
+        _README,
+        r"houses: [^;]*?explorer ([\d.]+ \[[\d.]+, [\d.]+\])",
+        _BOARD,
+        _board("house", "explorer"),
+    ),
+    Figure(
+        _README,
         r"first in small \(([\d.]+)\)",
         _BOARD,
         _board("small (open)", "explorer", False),
