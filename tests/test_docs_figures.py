@@ -69,6 +69,13 @@ def _board(section: str, policy: str, interval: bool = True) -> str:
     return rf"(?s)\n## {re.escape(section)}\n.*?\n\| {policy} \| \d+ \| \d+ \| [^|]+ \| {cell}"
 
 
+def _readme_board(lead: str, section: str, policy: str, interval: bool = True) -> Figure:
+    """The README's AUC-steps figure of ``policy`` printed after ``lead`` (a regular
+    expression), against its cell in ``section`` of the leaderboard page."""
+    cell = r"([\d.]+ \[[\d.]+, [\d.]+\])" if interval else r"([\d.]+)"
+    return Figure(_README, f"{lead} {cell}", _BOARD, _board(section, policy, interval))
+
+
 def _explorer_figures(label: str, result: str) -> tuple[Figure, ...]:
     """The explorer page's table row ``label`` (final coverage / area for each policy, the
     paired differences with their intervals) against ``evaluation_{result}.json``."""
@@ -206,49 +213,14 @@ FIGURES: tuple[Figure, ...] = (
         "rows[policy=naruto].metrics.completion_ratio_pct",
         _MEAN_STD,
     ),
-    Figure(
-        _README,
-        r"small: explorer \(learned\) ([\d.]+ \[[\d.]+, [\d.]+\])",
-        _BOARD,
-        _board("small", "explorer"),
-    ),
-    Figure(
-        _README,
-        r"small: [^;]*?NARUTO ([\d.]+ \[[\d.]+, [\d.]+\])",
-        _BOARD,
-        _board("small", "naruto"),
-    ),
-    Figure(_README, r"small: [^;]*?frontier ([\d.]+)", _BOARD, _board("small", "frontier", False)),
-    Figure(
-        _README,
-        r"apartments: explorer ([\d.]+ \[[\d.]+, [\d.]+\])",
-        _BOARD,
-        _board("apartment", "explorer"),
-    ),
-    Figure(
-        _README,
-        r"apartments: [^;]*?NARUTO ([\d.]+ \[[\d.]+, [\d.]+\])",
-        _BOARD,
-        _board("apartment", "naruto"),
-    ),
-    Figure(
-        _README,
-        r"apartments: [^;]*?frontier ([\d.]+)",
-        _BOARD,
-        _board("apartment", "frontier", False),
-    ),
-    Figure(
-        _README,
-        r"houses: [^;]*?NARUTO ([\d.]+ \[[\d.]+, [\d.]+\])",
-        _BOARD,
-        _board("house", "naruto"),
-    ),
-    Figure(
-        _README,
-        r"houses: [^;]*?explorer ([\d.]+ \[[\d.]+, [\d.]+\])",
-        _BOARD,
-        _board("house", "explorer"),
-    ),
+    _readme_board(r"small: explorer \(learned\)", "small", "explorer"),
+    _readme_board(r"small: [^;]*?NARUTO", "small", "naruto"),
+    _readme_board(r"small: [^;]*?frontier", "small", "frontier", interval=False),
+    _readme_board(r"apartments: explorer", "apartment", "explorer"),
+    _readme_board(r"apartments: [^;]*?NARUTO", "apartment", "naruto"),
+    _readme_board(r"apartments: [^;]*?frontier", "apartment", "frontier", interval=False),
+    _readme_board(r"houses: [^;]*?NARUTO", "house", "naruto"),
+    _readme_board(r"houses: [^;]*?explorer", "house", "explorer"),
     Figure(
         _README,
         r"first in small \(([\d.]+)\)",
