@@ -19,8 +19,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from naruto_gym.rl.egocentric_map import EgocentricMapObservation
-from naruto_gym.rl.goal_actions import GoalActions
+from naruto_gym.rl.egocentric_map import EgocentricMapObservation, VectorEgocentricMapObservation
+from naruto_gym.rl.goal_actions import GoalActions, VectorGoalActions
 from naruto_gym.scenes.suite import scene_name
 from naruto_gym.vector.shared_scenes import SharedSceneStreams
 
@@ -31,6 +31,7 @@ __all__ = [
     "make_rllib_explorer_env",
     "shared_train_mix",
     "train_mix",
+    "wrap_explorer",
 ]
 
 #: The suite's train split the explorer learns on: closed and open variants of the small
@@ -79,6 +80,24 @@ def shared_train_mix(
         ValueError: a count that is not a positive integer.
     """
     return SharedSceneStreams(scenes, agents_per_scene, episodes_per_scene)
+
+
+def wrap_explorer(
+    env: gym.vector.VectorEnv,
+    steps_per_goal: int = 20,
+    num_candidates: int = 8,
+    primitive_actions: bool = True,
+) -> gym.vector.VectorEnv:
+    """The explorer's chain over a batched env: the egocentric map observation, then goal
+    actions walked every ``steps_per_goal`` env steps (the ``wrap`` of
+    :class:`~naruto_gym.vector.sharded_wrapped.ShardedWrappedEnv`, through
+    ``functools.partial`` for other settings)."""
+    return VectorGoalActions(
+        VectorEgocentricMapObservation(env),
+        steps_per_goal,
+        num_candidates=num_candidates,
+        primitive_actions=primitive_actions,
+    )
 
 
 def make_rllib_explorer_env(config: Mapping[str, Any]) -> gym.Env:

@@ -176,7 +176,9 @@ class GoalWalker:
         self.counts = np.zeros(n, np.int64)
         side = -(-map_builder.coarse.shape[-1] // self.cluster_cells)
         self.done = np.zeros((n, side, side), bool)
-        self._scratch = np.zeros((2 * self.radius + 1, 2 * self.radius + 1))
+        # Per agent: the path lengths of its last candidate search, which its wander reads
+        # (an agent's wander may come after the other agents' searches).
+        self.path_lengths = np.zeros((n, 2 * self.radius + 1, 2 * self.radius + 1))
 
     @property
     def action_space(self) -> spaces.Discrete:
@@ -230,7 +232,7 @@ class GoalWalker:
             self.view_m,
             self.frontier_m,
             self.done[i],
-            self._scratch,
+            self.path_lengths[i],
             self.tables[i],
             self.viewpoints[i],
             self.centres[i],
@@ -323,8 +325,8 @@ class GoalWalker:
         pose = self.map.poses[i]
         si, sj = self.map.cell_of(i, pose[:2, 3])
         wi, wj = wander_goal(
-            self.map.grids[i], self.map.coarse[i], self.map.far_factor, self._scratch, si, sj,
-            self.radius, 3,
+            self.map.grids[i], self.map.coarse[i], self.map.far_factor, self.path_lengths[i],
+            si, sj, self.radius, 3,
         )  # fmt: skip
         self.target_clusters[i] = -1
         if wi < 0:

@@ -14,6 +14,12 @@ from naruto_gym.rl.egocentric_map import (
     VectorEgocentricMapObservation,
 )
 from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL
+from naruto_gym.rl.explorer_env import (
+    EXPLORER_ENV,
+    EXPLORER_PANORAMA_HORIZON_DEG,
+    shared_train_mix,
+    wrap_explorer,
+)
 from naruto_gym.rl.goal_actions import GoalActions, VectorGoalActions
 from naruto_gym.rl.goal_candidates import (
     CANDIDATE_FEATURES,
@@ -47,7 +53,7 @@ from naruto_gym.rl.goal_walker import (
     GoalWalker,
 )
 from naruto_gym.sensors.pinhole import PinholeCamera
-from naruto_gym.vector import NarutoReconVectorEnv
+from naruto_gym.vector import NarutoReconVectorEnv, make_vector_env
 
 CAMERA = PinholeCamera(16, 16, 8, 8, 7.5, 7.5)
 ENV = {
@@ -699,3 +705,39 @@ def test_a_refused_step_never_blocks_the_cell_the_walker_stands_in():
     assert builder.grids[0, OCCUPIED, own[0] - 1, own[1]] == 255  # the cell it led into
     builder.mark_blocked(0, *pose[:2, 3])
     assert builder.grids[0, OCCUPIED][own] == 0
+
+
+def test_an_agents_walk_does_not_depend_on_the_other_agents_of_its_batch():
+    """Each agent's candidates, wander and moves are its own: the first four agents of a
+    batch of eight walk as a batch of those four does (an agent's wander once read the path
+    lengths of the agent searched last), on the training mix's scenes."""
+    settings = {
+        **EXPLORER_ENV,
+        "max_episode_steps": 40,
+        "autoreset_mode": "SameStep",
+        "panorama_horizon_deg": EXPLORER_PANORAMA_HORIZON_DEG,
+    }
+
+    def moves_of(num_envs: int) -> list[np.ndarray]:
+        envs = wrap_explorer(
+            make_vector_env(num_envs, workers=1, scene=shared_train_mix(2, 2), **settings)
+        )
+        taken = []
+        next_moves = envs.walker.next_moves
+
+        def recorded() -> np.ndarray:
+            moves = next_moves()
+            taken.append(np.concatenate([moves[:4], envs.unwrapped.poses[:4, :3, 3].ravel()]))
+            return moves
+
+        envs.walker.next_moves = recorded
+        try:
+            envs.reset(seed=3)
+            rng = np.random.default_rng(0)
+            for _ in range(3):
+                envs.step(rng.integers(0, envs.single_action_space.n, 8)[:num_envs])
+        finally:
+            envs.close()
+        return taken
+
+    np.testing.assert_array_equal(np.array(moves_of(8)), np.array(moves_of(4)))
