@@ -41,6 +41,7 @@ import os
 import re
 import time
 from dataclasses import asdict, dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -53,13 +54,12 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
-from naruto_gym.rl.egocentric_map import VectorEgocentricMapObservation
-from naruto_gym.rl.explorer_env import EXPLORER_ENV, shared_train_mix, train_mix
+from naruto_gym.rl.explorer_env import EXPLORER_ENV, shared_train_mix, train_mix, wrap_explorer
 from naruto_gym.rl.explorer_sb3 import ExplorerFeaturesExtractor
-from naruto_gym.rl.goal_actions import VectorGoalActions
 from naruto_gym.rl.sb3 import Sb3VecEnv
 from naruto_gym.utils.threads import default_thread_count
 from naruto_gym.vector import make_vector_env
+from naruto_gym.vector.sharded_wrapped import ShardedWrappedEnv
 
 
 @dataclass
@@ -90,13 +90,22 @@ class Args:
     """entropy bonus"""
     features_dim: int = 128
     """size of the features extractor's output"""
+    update_dtype: str = "float32"
+    """precision of the PPO update's forward and backward passes: "bfloat16" runs them under
+    autocast (about twice as fast on CPUs with bfloat16 units); the parameters, the
+    optimiser and the rollouts' forward passes stay float32"""
     seed: int = 0
     """seed of the envs and of PPO"""
     torch_threads: int | None = None
     """torch threads (None: every CPU this process may use; the learner and the env take
     turns, so each gets them all)"""
     env_threads: int | None = None
-    """threads of the env's compiled loops (None: every CPU this process may use)"""
+    """threads of the env's compiled loops (None: every CPU this process may use; with
+    env_workers above 1, the CPUs split between the worker processes)"""
+    env_workers: int | None = None
+    """processes that step the env with the map and goal wrappers, each a share of the
+    agents (whole groups of agents_per_scene); 1: in this process, the env's time and the
+    wrappers' timed apart; None: the most, up to one per CPU, that share the groups evenly"""
     shared_scenes: bool = True
     """agents in groups on shared scenes, each kept for episodes_per_scene episodes (a scene
     built once for many episodes, a group's rays cast in one call); --no-shared-scenes: every
@@ -153,18 +162,43 @@ def make_batched_env(args: Args) -> gym.vector.VectorEnv:
     )
 
 
-def make_env(args: Args) -> tuple[Sb3VecEnv, Timed, Timed]:
-    """The training env, with timers around the bare env and around the whole chain."""
-    bare = Timed(make_batched_env(args))
-    chain = Timed(
-        VectorGoalActions(
-            VectorEgocentricMapObservation(bare),
-            args.steps_per_goal,
-            num_candidates=args.num_candidates,
-            primitive_actions=args.primitive_actions,
-        )
+def make_env(args: Args) -> tuple[Sb3VecEnv, Timed | None, Timed]:
+    """The training env, with timers around the bare env (None when the chain steps in
+    worker processes) and around the whole chain."""
+    wrap = partial(
+        wrap_explorer,
+        steps_per_goal=args.steps_per_goal,
+        num_candidates=args.num_candidates,
+        primitive_actions=args.primitive_actions,
     )
+    workers = env_workers(args)
+    if workers > 1:
+        chain = Timed(
+            ShardedWrappedEnv(
+                wrap,
+                args.num_envs,
+                workers,
+                training_scenes(args),
+                max_episode_steps=args.max_episode_steps,
+                autoreset_mode=AutoresetMode.SAME_STEP,
+                **env_settings(args),
+            )
+        )
+        return Sb3VecEnv(chain), None, chain
+    bare = Timed(make_batched_env(args))
+    chain = Timed(wrap(bare))
     return Sb3VecEnv(chain), bare, chain
+
+
+def env_workers(args: Args) -> int:
+    """The processes that step the chain: ``env_workers``, or one per group of agents on a
+    shared scene (one per agent without shared scenes), at most one per CPU."""
+    if args.env_workers is not None:
+        return args.env_workers
+    groups = args.num_envs // args.agents_per_scene if args.shared_scenes else args.num_envs
+    cpus = args.env_threads or default_thread_count()
+    # Whole groups per worker: the most workers that divide the groups evenly.
+    return max(k for k in range(1, max(1, min(groups, cpus)) + 1) if groups % k == 0)
 
 
 def training_scenes(args: Args) -> Any:
@@ -194,7 +228,7 @@ class LearningCurve(BaseCallback):
     refusals per 100 env steps, env steps per second; appended to a CSV, plotted at the end;
     and the time split of ``profile.json``."""
 
-    def __init__(self, args: Args, bare: Timed, chain: Timed, first_row: int) -> None:
+    def __init__(self, args: Args, bare: Timed | None, chain: Timed, first_row: int) -> None:
         super().__init__()
         self.args = args
         self.path = Path(args.output_dir) / "learning_curve.csv"
@@ -224,7 +258,7 @@ class LearningCurve(BaseCallback):
         self.steps_at_start = self.num_timesteps
         self.started = self.mark = time.perf_counter()
         self.cpu_started = time.process_time()
-        self.env_seconds_at_start = self.bare.seconds
+        self.env_seconds_at_start = self.env_seconds()
         self.chain_seconds_at_start = self.chain.seconds
 
     def _on_training_end(self) -> None:
@@ -252,6 +286,11 @@ class LearningCurve(BaseCallback):
 
     def env_steps(self) -> int:
         return self.num_timesteps * self.args.steps_per_goal
+
+    def env_seconds(self) -> float:
+        """Seconds in the bare env so far; with the chain in worker processes, in the whole
+        chain (its env and wrappers cannot be timed apart from here)."""
+        return (self.bare or self.chain).seconds
 
     def _on_rollout_end(self) -> None:
         now = time.perf_counter()
@@ -294,12 +333,17 @@ class LearningCurve(BaseCallback):
         forward passes and the PPO update, and env steps per second end to end."""
         total = (self.ended or time.perf_counter()) - self.started
         cpu = (self.cpu_ended or time.process_time()) - self.cpu_started
-        env = self.bare.seconds - self.env_seconds_at_start
+        env = self.env_seconds() - self.env_seconds_at_start
         wrappers = self.chain.seconds - self.chain_seconds_at_start - env
         forward = self.forward_seconds
+        # With the chain in worker processes its env and wrappers are one part.
+        chain_parts = (
+            {"env": env, "map_and_goal_wrappers": wrappers}
+            if self.bare is not None
+            else {"env_and_wrappers_in_workers": env}
+        )
         parts = {
-            "env": env,
-            "map_and_goal_wrappers": wrappers,
+            **chain_parts,
             "policy_forward_and_sb3": forward,
             "ppo_update": self.update_seconds,
         }
@@ -312,7 +356,11 @@ class LearningCurve(BaseCallback):
             "env_steps_per_s": round(steps / max(total, 1e-9), 1),
             "cpu_seconds": round(cpu, 1),
             "env_steps_per_cpu_s": round(steps / max(cpu, 1e-9), 1),
-            "wrapper_cost_per_env_step_over_env": round(wrappers / max(env, 1e-9), 3),
+            **(
+                {"wrapper_cost_per_env_step_over_env": round(wrappers / max(env, 1e-9), 3)}
+                if self.bare is not None
+                else {}
+            ),
             "load_end": os.getloadavg(),
         }
 
@@ -402,6 +450,21 @@ def plot(path: Path) -> None:
     figure.savefig(path.with_suffix(".png"), dpi=120)
 
 
+UPDATE_DTYPES = {"float32": None, "bfloat16": torch.bfloat16}
+
+
+class AutocastPPO(PPO):
+    """PPO whose update (``train``) runs under autocast to ``update_dtype`` (a key of
+    :data:`UPDATE_DTYPES`; "float32": as PPO)."""
+
+    update_dtype = "float32"
+
+    def train(self) -> None:
+        dtype = UPDATE_DTYPES[self.update_dtype]
+        with torch.autocast(self.device.type, dtype=dtype or torch.bfloat16, enabled=bool(dtype)):
+            super().train()
+
+
 def main(args: Args) -> dict[str, Any]:
     output_dir = Path(args.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
@@ -409,6 +472,10 @@ def main(args: Args) -> dict[str, Any]:
         raise SystemExit(
             f"--max-episode-steps ({args.max_episode_steps}) must be a multiple "
             f"of --steps-per-goal ({args.steps_per_goal})"
+        )
+    if args.update_dtype not in UPDATE_DTYPES:
+        raise SystemExit(
+            f"--update-dtype must be one of {sorted(UPDATE_DTYPES)}, got {args.update_dtype!r}"
         )
     torch.set_num_threads(args.torch_threads or default_thread_count())
     venv, bare, chain = make_env(args)
@@ -419,10 +486,10 @@ def main(args: Args) -> dict[str, Any]:
             f"--resume: no checkpoint in {output_dir / 'checkpoints'}; train without --resume first"
         )
     if checkpoint is not None:
-        model = PPO.load(checkpoint, env=venv, device="cpu")
+        model = AutocastPPO.load(checkpoint, env=venv, device="cpu")
         print(f"resuming from {checkpoint} ({model.num_timesteps * args.steps_per_goal} steps)")
     else:
-        model = PPO(
+        model = AutocastPPO(
             "MultiInputPolicy",
             venv,
             n_steps=args.n_steps,
@@ -438,6 +505,7 @@ def main(args: Args) -> dict[str, Any]:
                 "features_extractor_kwargs": {"features_dim": args.features_dim},
             },
         )
+    model.update_dtype = args.update_dtype
     rows = 0
     if (output_dir / "learning_curve.csv").exists():
         rows = sum(1 for _ in (output_dir / "learning_curve.csv").open()) - 1
