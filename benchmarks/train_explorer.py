@@ -466,16 +466,16 @@ class AutocastPPO(PPO):
 
 
 def main(args: Args) -> dict[str, Any]:
+    if args.update_dtype not in UPDATE_DTYPES:
+        raise SystemExit(
+            f"--update-dtype must be one of {sorted(UPDATE_DTYPES)}, got {args.update_dtype!r}"
+        )
     output_dir = Path(args.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     if args.max_episode_steps % args.steps_per_goal:
         raise SystemExit(
             f"--max-episode-steps ({args.max_episode_steps}) must be a multiple "
             f"of --steps-per-goal ({args.steps_per_goal})"
-        )
-    if args.update_dtype not in UPDATE_DTYPES:
-        raise SystemExit(
-            f"--update-dtype must be one of {sorted(UPDATE_DTYPES)}, got {args.update_dtype!r}"
         )
     torch.set_num_threads(args.torch_threads or default_thread_count())
     venv, bare, chain = make_env(args)

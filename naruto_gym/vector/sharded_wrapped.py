@@ -111,6 +111,11 @@ class ShardedWrappedEnv(gym.vector.VectorEnv):
         """The worker processes."""
         return self._agents.workers
 
+    @property
+    def worker_pids(self) -> list[int]:
+        """The process ids of the worker processes."""
+        return self._agents.pids
+
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:

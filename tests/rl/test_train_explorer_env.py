@@ -51,3 +51,41 @@ def test_shared_scenes_by_default_and_a_flag_for_a_scene_per_agent(train_explore
     assert env.settings.panorama_horizon_deg == 30
     assert train_explorer.explorer_settings(alone)["panorama_horizon_deg"] == 30
     env.close()
+
+
+def test_the_chain_steps_in_as_many_workers_as_share_the_scene_groups(train_explorer):
+    def workers(*flags: str) -> int:
+        return train_explorer.env_workers(parse_dataclass_args(train_explorer.Args, list(flags)))
+
+    # 64 agents in 4 groups of 16: one worker per CPU, as many as share the groups evenly.
+    big = ["--num-envs", "64", "--agents-per-scene", "16"]
+    assert workers(*big, "--env-threads", "2") == 2
+    assert workers(*big, "--env-threads", "3") == 2
+    assert workers(*big, "--env-threads", "16") == 4
+    assert workers(*big, "--env-threads", "1") == 1
+    assert workers("--num-envs", "8", "--no-shared-scenes", "--env-threads", "16") == 8
+    assert workers(*big, "--env-workers", "1") == 1
+
+
+def test_training_with_the_chain_in_workers_and_a_bfloat16_update(train_explorer, tmp_path):
+    args = parse_dataclass_args(
+        train_explorer.Args,
+        [
+            "--total-timesteps", "320", "--num-envs", "4", "--agents-per-scene", "2",
+            "--env-workers", "2", "--n-steps", "2", "--batch-size", "8", "--n-epochs", "1",
+            "--max-episode-steps", "40", "--update-dtype", "bfloat16",
+            "--output-dir", str(tmp_path),
+        ],
+    )  # fmt: skip
+    profile = train_explorer.main(args)["profile"]
+    assert set(profile["seconds"]) == {
+        "env_and_wrappers_in_workers",
+        "policy_forward_and_sb3",
+        "ppo_update",
+    }
+    assert profile["env_steps"] == 320 and profile["seconds"]["ppo_update"] > 0
+    assert (tmp_path / "explorer.zip").is_file()
+    with pytest.raises(SystemExit, match="update-dtype"):
+        train_explorer.main(
+            parse_dataclass_args(train_explorer.Args, ["--update-dtype", "float16"])
+        )
