@@ -1,5 +1,6 @@
-"""The explorer's training throughput, before and after shared scenes and the panorama band,
-in one run. Results: docs/benchmarks/explorer.md
+"""The explorer's training throughput, before and after shared scenes, the panorama band,
+the chain in worker processes and the bfloat16 update, in one run. Results:
+docs/benchmarks/explorer.md
 
 Builds the batched env as ``benchmarks/train_explorer.py`` does (:func:`make_batched_env`) in
 three configurations:
@@ -17,10 +18,14 @@ so the configurations are timed interleaved, each seeing the same load:
 * the bare batched env (random forward / turn moves, no wrapper, no learner): one env per
   configuration, stepped in turn ``chunk_steps`` steps at a time, ``max_episode_steps + 20``
   steps per agent after a warm-up, so that each crosses one episode end with its new scenes;
-* training end to end, for "before" and "after": Stable-Baselines3 PPO through the map and
-  goal wrappers (``train_explorer.main``) for one rollout that crosses an episode end and its
-  update, in the order before, after, after, before; its profile splits the time (the env's
-  share of it is how far training falls below its own env, measured under one load).
+* training end to end: Stable-Baselines3 PPO through the map and goal wrappers
+  (``train_explorer.main``) for one rollout that crosses an episode end and its update, in
+  four configurations (:func:`training_configurations`): "before" in one process, "after"
+  in one process, then with the env and its wrappers stepped in worker processes
+  (``--env-workers``, the script's default), then with the update in bfloat16 as well
+  (``--update-dtype bfloat16``); run in that order and then in reverse. Its profile splits
+  the time (the env's share of it is how far training falls below its own env, measured
+  under one load).
 
 It writes env steps per second, their ratios to "before", and the profiles.
 
@@ -126,15 +131,31 @@ def bare_rates(args: Args, scratch: str) -> dict[str, float]:
     return {name: args.num_envs * steps / seconds[name] for name in envs}
 
 
-def training_profiles(args: Args, scratch: str) -> dict[str, list[dict[str, Any]]]:
-    """The profiles of one-rollout training runs of "before" and "after", in the order
-    before, after, after, before."""
+def training_configurations(args: Args) -> dict[str, dict[str, Any]]:
+    """The training script's arguments of each training configuration timed: "before", the
+    env changes in one process, then the chain in worker processes, then the bfloat16
+    update."""
     names = list(configurations(args))
-    ends = [names[0], names[-1]]
-    profiles: dict[str, list[dict[str, Any]]] = {name: [] for name in ends}
-    for name in [*ends, *reversed(ends)]:
-        options = configurations(args)[name]
-        profile = train_explorer.main(training_args(args, options, scratch))["profile"]
+    after = configurations(args)[names[-1]]
+    return {
+        names[0]: {**configurations(args)[names[0]], "env_workers": 1, "update_dtype": "float32"},
+        f"{names[-1]}, one process": {**after, "env_workers": 1, "update_dtype": "float32"},
+        "and the chain in worker processes": {
+            **after,
+            "env_workers": None,
+            "update_dtype": "float32",
+        },
+        "and the update in bfloat16": {**after, "env_workers": None, "update_dtype": "bfloat16"},
+    }
+
+
+def training_profiles(args: Args, scratch: str) -> dict[str, list[dict[str, Any]]]:
+    """The profiles of one-rollout training runs of every training configuration, in their
+    order and then in reverse (each pair of runs sees the same load on average)."""
+    runs = training_configurations(args)
+    profiles: dict[str, list[dict[str, Any]]] = {name: [] for name in runs}
+    for name in [*runs, *reversed(runs)]:
+        profile = train_explorer.main(training_args(args, runs[name], scratch))["profile"]
         profiles[name].append(profile)
         print(f"{name}: training {profile['env_steps_per_s']} env steps/s", flush=True)
     return profiles
@@ -165,10 +186,14 @@ def main(args: Args) -> dict:
         }
         summary["training_env_steps_per_s"] = {k: round(v, 1) for k, v in rates.items()}
         summary["training_ratio_to_before"] = ratios(rates, rates[names[0]])
-        summary["training_env_share"] = {
-            name: round(
-                sum(p["seconds"]["env"] for p in runs) / sum(p["wall_seconds"] for p in runs), 3
-            )
+        summary["training_shares"] = {
+            name: {
+                part: round(
+                    sum(p["seconds"][part] for p in runs) / sum(p["wall_seconds"] for p in runs),
+                    3,
+                )
+                for part in runs[0]["seconds"]
+            }
             for name, runs in trained.items()
         }
         summary["training_profiles"] = trained

@@ -7,7 +7,10 @@ episodes, then the next of their stream (:func:`naruto_gym.rl.explorer_env.share
 ``--no-shared-scenes``: every agent draws and builds a scene of its own every episode, the
 dearer way). ``--panorama-horizon-deg 30`` casts only the panorama rows the map reads (a
 third of the rays); it is saved with the model's settings, and the policy must then be shown
-the same band at evaluation (``EquirectangularCamera.keep_cast_rows``).
+the same band at evaluation (``EquirectangularCamera.keep_cast_rows``). The env and its
+map and goal wrappers step in worker processes, each a share of the scene groups
+(``--env-workers``, :class:`naruto_gym.vector.sharded_wrapped.ShardedWrappedEnv`), while
+the learner waits; ``--update-dtype bfloat16`` runs the PPO update under autocast.
 
 The agent sees the egocentric map (occupied,
 free, seen surface, frontier and trail, near and far, :mod:`naruto_gym.rl.egocentric_map`),
@@ -54,7 +57,13 @@ from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 
 from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
-from naruto_gym.rl.explorer_env import EXPLORER_ENV, shared_train_mix, train_mix, wrap_explorer
+from naruto_gym.rl.explorer_env import (
+    EXPLORER_ENV,
+    TRAIN_MIX,
+    shared_train_mix,
+    train_mix,
+    wrap_explorer,
+)
 from naruto_gym.rl.explorer_sb3 import ExplorerFeaturesExtractor
 from naruto_gym.rl.sb3 import Sb3VecEnv
 from naruto_gym.utils.threads import default_thread_count
@@ -110,8 +119,9 @@ class Args:
     """agents in groups on shared scenes, each kept for episodes_per_scene episodes (a scene
     built once for many episodes, a group's rays cast in one call); --no-shared-scenes: every
     agent draws and builds its own scene every episode"""
-    agents_per_scene: int = 4
-    """agents sharing a scene (num_envs = 4 * agents_per_scene gives each train stream a group)"""
+    agents_per_scene: int | None = None
+    """agents sharing a scene (None: num_envs / 4, so that each of the four train streams
+    gets one group)"""
     episodes_per_scene: int = 4
     """episodes each agent plays in a shared scene before its group draws the next"""
     panorama_horizon_deg: float | None = None
@@ -195,7 +205,7 @@ def env_workers(args: Args) -> int:
     shared scene (one per agent without shared scenes), at most one per CPU."""
     if args.env_workers is not None:
         return args.env_workers
-    groups = args.num_envs // args.agents_per_scene if args.shared_scenes else args.num_envs
+    groups = args.num_envs // group_size(args) if args.shared_scenes else args.num_envs
     cpus = args.env_threads or default_thread_count()
     # Whole groups per worker: the most workers that divide the groups evenly.
     return max(k for k in range(1, max(1, min(groups, cpus)) + 1) if groups % k == 0)
@@ -204,8 +214,16 @@ def env_workers(args: Args) -> int:
 def training_scenes(args: Args) -> Any:
     """The batched env's ``scene``: the train mix on shared scenes, or one stream per agent."""
     if args.shared_scenes:
-        return shared_train_mix(args.agents_per_scene, args.episodes_per_scene)
+        return shared_train_mix(group_size(args), args.episodes_per_scene)
     return train_mix(args.num_envs)
+
+
+def group_size(args: Args) -> int:
+    """Agents per shared scene: ``agents_per_scene``, or a quarter of the agents (one group
+    per train stream; at least one agent)."""
+    if args.agents_per_scene is not None:
+        return args.agents_per_scene
+    return max(1, args.num_envs // len(TRAIN_MIX))
 
 
 def agent_streams(args: Args) -> list[str]:
@@ -479,6 +497,10 @@ def main(args: Args) -> dict[str, Any]:
         )
     torch.set_num_threads(args.torch_threads or default_thread_count())
     venv, bare, chain = make_env(args)
+    missing = sorted(set(TRAIN_MIX) - set(agent_streams(args)))
+    if missing:
+        print(f"note: {args.num_envs} agents do not reach every train stream; not trained on: "
+              f"{', '.join(missing)} (give each stream a group: --num-envs 4 * agents-per-scene)")
     venv.seed(args.seed)
     checkpoint = latest_checkpoint(output_dir) if args.resume else None
     if args.resume and checkpoint is None:

@@ -65,6 +65,12 @@ def test_the_chain_steps_in_as_many_workers_as_share_the_scene_groups(train_expl
     assert workers(*big, "--env-threads", "1") == 1
     assert workers("--num-envs", "8", "--no-shared-scenes", "--env-threads", "16") == 8
     assert workers(*big, "--env-workers", "1") == 1
+    # By default each of the four train streams gets one group of a quarter of the agents.
+    for agents, size in ((8, 2), (16, 4), (64, 16), (2, 1)):
+        args = parse_dataclass_args(train_explorer.Args, ["--num-envs", str(agents)])
+        assert train_explorer.group_size(args) == size
+    eight = parse_dataclass_args(train_explorer.Args, ["--num-envs", "8"])
+    assert set(train_explorer.agent_streams(eight)) == set(TRAIN_MIX)
 
 
 def test_training_with_the_chain_in_workers_and_a_bfloat16_update(train_explorer, tmp_path):
