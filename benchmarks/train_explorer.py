@@ -22,7 +22,9 @@ percentage points minus the collision penalty, summed over the macro-step.
 One readable file in the manner of CleanRL: the arguments are the dataclass below (each field
 a ``--flag``). Writes under ``output_dir``: ``learning_curve.csv`` and ``.png`` after every
 rollout (mean final coverage of the episodes finished, per training scene kind, refusals per
-100 steps, env steps per second), ``profile.json`` (where a step's time goes: the env, the map
+100 steps, env steps per second), ``progress.csv`` (PPO's statistics per update: losses,
+explained variance, KL; a resumed run moves the earlier file to ``progress_until_<env
+steps>_steps.csv``), ``profile.json`` (where a step's time goes: the env, the map
 and goal wrappers, the policy's forward passes, the PPO update), checkpoints every
 ``checkpoint_every`` env steps, ``final_model.zip``, and ``explorer.zip`` (the final model
 without the optimiser's state, at most 5 MB: what ``naruto_agent/rl/checkpoints/`` ships), each
@@ -54,6 +56,7 @@ import torch
 from gymnasium.vector import AutoresetMode
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.logger import configure
 
 from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
@@ -99,10 +102,11 @@ class Args:
     """entropy bonus"""
     features_dim: int = 128
     """size of the features extractor's output"""
-    update_dtype: str = "float32"
+    update_dtype: str = "auto"
     """precision of the PPO update's forward and backward passes: "bfloat16" runs them under
-    autocast (about twice as fast on CPUs with bfloat16 units); the parameters, the
-    optimiser and the rollouts' forward passes stay float32"""
+    autocast (about twice as fast on CPUs with bfloat16 instructions), "float32" as they are,
+    "auto" bfloat16 where the CPU has those instructions; the parameters, the optimiser and
+    the rollouts' forward passes stay float32"""
     seed: int = 0
     """seed of the envs and of PPO"""
     torch_threads: int | None = None
@@ -469,6 +473,30 @@ def plot(path: Path) -> None:
 
 
 UPDATE_DTYPES = {"float32": None, "bfloat16": torch.bfloat16}
+#: CPU flags (Linux ``/proc/cpuinfo``) of instructions that compute in bfloat16.
+BFLOAT16_CPU_FLAGS = ("avx512_bf16", "amx_bf16")
+
+
+def cpu_has_bfloat16(cpuinfo: str | None = None) -> bool:
+    """Whether the CPU computes in bfloat16 natively (elsewhere autocast to it is slower);
+    read from ``cpuinfo`` (default: ``/proc/cpuinfo``; False where there is none)."""
+    if cpuinfo is None:
+        try:
+            cpuinfo = Path("/proc/cpuinfo").read_text()
+        except OSError:
+            return False
+    flags = set()
+    for line in cpuinfo.splitlines():
+        if line.startswith("flags"):
+            flags.update(line.partition(":")[2].split())
+    return any(flag in flags for flag in BFLOAT16_CPU_FLAGS)
+
+
+def update_dtype(args: Args) -> str:
+    """The update's precision: ``update_dtype``, with "auto" resolved for this CPU."""
+    if args.update_dtype == "auto":
+        return "bfloat16" if cpu_has_bfloat16() else "float32"
+    return args.update_dtype
 
 
 class AutocastPPO(PPO):
@@ -484,9 +512,10 @@ class AutocastPPO(PPO):
 
 
 def main(args: Args) -> dict[str, Any]:
-    if args.update_dtype not in UPDATE_DTYPES:
+    if args.update_dtype not in (*UPDATE_DTYPES, "auto"):
         raise SystemExit(
-            f"--update-dtype must be one of {sorted(UPDATE_DTYPES)}, got {args.update_dtype!r}"
+            f"--update-dtype must be one of {['auto', *sorted(UPDATE_DTYPES)]}, "
+            f"got {args.update_dtype!r}"
         )
     output_dir = Path(args.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
@@ -527,13 +556,20 @@ def main(args: Args) -> dict[str, Any]:
                 "features_extractor_kwargs": {"features_dim": args.features_dim},
             },
         )
-    model.update_dtype = args.update_dtype
+    model.update_dtype = update_dtype(args)
     rows = 0
     if (output_dir / "learning_curve.csv").exists():
         rows = sum(1 for _ in (output_dir / "learning_curve.csv").open()) - 1
         if checkpoint is None:
             (output_dir / "learning_curve.csv").unlink()  # a fresh run: a fresh curve
             rows = 0
+    # PPO's own statistics per update (losses, explained variance, KL) into progress.csv; a
+    # resumed run keeps the earlier ones (the logger starts its file anew).
+    progress = output_dir / "progress.csv"
+    if checkpoint is not None and progress.exists():
+        steps = model.num_timesteps * args.steps_per_goal
+        progress.rename(output_dir / f"progress_until_{steps}_steps.csv")
+    model.set_logger(configure(str(output_dir), ["csv"]))
     curve = LearningCurve(args, bare, chain, rows)
     callbacks: list[BaseCallback] = [
         curve,
@@ -550,6 +586,8 @@ def main(args: Args) -> dict[str, Any]:
     profile = curve.profile()
     summary = {
         "args": asdict(args),
+        "update_dtype": update_dtype(args),
+        "env_workers": env_workers(args),
         "env_steps": model.num_timesteps * args.steps_per_goal,
         "resumed_from": str(checkpoint) if checkpoint else None,
         "profile": profile,

@@ -95,3 +95,21 @@ def test_training_with_the_chain_in_workers_and_a_bfloat16_update(train_explorer
         train_explorer.main(
             parse_dataclass_args(train_explorer.Args, ["--update-dtype", "float16"])
         )
+
+
+def test_the_update_runs_in_bfloat16_by_default_only_where_the_cpu_computes_in_it(
+    train_explorer,
+):
+    zen4 = "processor\t: 0\nflags\t\t: fpu avx2 avx512f avx512_bf16\n"
+    older = "processor\t: 0\nflags\t\t: fpu avx2 avx512f\n"
+    sapphire = "flags\t\t: fpu avx512f amx_bf16 amx_tile\n"
+    assert train_explorer.cpu_has_bfloat16(zen4)
+    assert train_explorer.cpu_has_bfloat16(sapphire)
+    assert not train_explorer.cpu_has_bfloat16(older)
+    assert not train_explorer.cpu_has_bfloat16("")
+    args = parse_dataclass_args(train_explorer.Args, [])
+    assert args.update_dtype == "auto"
+    expected = "bfloat16" if train_explorer.cpu_has_bfloat16() else "float32"
+    assert train_explorer.update_dtype(args) == expected
+    explicit = parse_dataclass_args(train_explorer.Args, ["--update-dtype", "float32"])
+    assert train_explorer.update_dtype(explicit) == "float32"
