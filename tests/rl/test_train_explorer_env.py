@@ -113,3 +113,36 @@ def test_the_update_runs_in_bfloat16_by_default_only_where_the_cpu_computes_in_i
     assert train_explorer.update_dtype(args) == expected
     explicit = parse_dataclass_args(train_explorer.Args, ["--update-dtype", "float32"])
     assert train_explorer.update_dtype(explicit) == "float32"
+
+
+def test_a_bfloat16_update_moves_the_parameters_as_the_float32_one(train_explorer):
+    """From the same start and the same rollout, the update under bfloat16 autocast changes
+    the policy's parameters in nearly the same direction and by nearly as much."""
+    import torch
+
+    from naruto_gym.rl.explorer_env import EXPLORER_ENV, wrap_explorer
+    from naruto_gym.rl.explorer_sb3 import ExplorerFeaturesExtractor
+    from naruto_gym.rl.sb3 import Sb3VecEnv
+    from naruto_gym.vector import make_vector_env
+
+    settings = {**EXPLORER_ENV, "max_episode_steps": 40, "autoreset_mode": "SameStep"}
+
+    def update(dtype: str) -> tuple[torch.Tensor, torch.Tensor]:
+        venv = Sb3VecEnv(wrap_explorer(make_vector_env(4, scene="procedural:small:7", **settings)))
+        model = train_explorer.AutocastPPO(
+            "MultiInputPolicy", venv, n_steps=4, batch_size=8, n_epochs=2, seed=0, device="cpu",
+            policy_kwargs={"features_extractor_class": ExplorerFeaturesExtractor},
+        )  # fmt: skip
+        model.update_dtype = dtype
+        start = torch.nn.utils.parameters_to_vector(model.policy.parameters()).detach().clone()
+        model.learn(16)  # one rollout of 4 decisions per agent, one update of 4 steps
+        venv.close()
+        return start, torch.nn.utils.parameters_to_vector(model.policy.parameters()).detach()
+
+    start, full = update("float32")
+    same_start, half = update("bfloat16")
+    assert torch.equal(start, same_start)
+    assert not torch.equal(full, half)  # the autocast is in effect
+    moved, moved_half = full - start, half - start
+    assert torch.nn.functional.cosine_similarity(moved, moved_half, dim=0) > 0.9
+    assert 0.8 < float(moved_half.norm() / moved.norm()) < 1.25
