@@ -88,10 +88,17 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
     Args:
         observation_space: ``Dict`` with ``map``, ``panorama``, ``pose`` and ``candidates``.
         features_dim: output size.
+
+    Attributes:
+        compute_dtype: None (float32), or a lower precision (``torch.bfloat16``) the layers
+            compute in under autocast, e.g. during a learner's update on a CPU with bfloat16
+            instructions (about twice as fast); the features come out float32 either way, so
+            the policy's and value's heads after it keep their precision.
     """
 
     def __init__(self, observation_space: spaces.Dict, features_dim: int = 128) -> None:
         super().__init__(observation_space, features_dim)
+        self.compute_dtype: torch.dtype | None = None
         missing = {"map", "panorama", "pose", "candidates"} - set(observation_space.spaces)
         if missing:
             raise ValueError(
@@ -137,14 +144,19 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
         self.head = torch.nn.Sequential(torch.nn.Linear(width_out, features_dim), torch.nn.ReLU())
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
-        return self.head(
-            torch.cat(
-                [
-                    self.map(_channels_last(observations["map"])),
-                    self.panorama(_channels_last(observations["panorama"])),
-                    self.pose(observations["pose"].flatten(1)),
-                    self.candidates(observations["candidates"].flatten(1)),
-                ],
-                1,
+        lower = self.compute_dtype
+        with torch.autocast(
+            observations["map"].device.type, dtype=lower or torch.bfloat16, enabled=bool(lower)
+        ):
+            features = self.head(
+                torch.cat(
+                    [
+                        self.map(_channels_last(observations["map"])),
+                        self.panorama(_channels_last(observations["panorama"])),
+                        self.pose(observations["pose"].flatten(1)),
+                        self.candidates(observations["candidates"].flatten(1)),
+                    ],
+                    1,
+                )
             )
-        )
+        return features.float()

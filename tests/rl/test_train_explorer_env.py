@@ -116,8 +116,10 @@ def test_the_update_runs_in_bfloat16_by_default_only_where_the_cpu_computes_in_i
 
 
 def test_a_bfloat16_update_moves_the_parameters_as_the_float32_one(train_explorer):
-    """From the same start and the same rollout, the update under bfloat16 autocast changes
-    the policy's parameters in nearly the same direction and by nearly as much."""
+    """From the same start and the same rollout, the update with the features extractor in
+    bfloat16 changes the policy's parameters in nearly the same direction and by nearly as
+    much (cosine 0.998 and the same norm within 1 % when written; the whole update under
+    autocast gave 0.96, its log-probabilities and values rounded to bfloat16)."""
     import torch
 
     from naruto_gym.rl.explorer_env import EXPLORER_ENV, wrap_explorer
@@ -144,5 +146,5 @@ def test_a_bfloat16_update_moves_the_parameters_as_the_float32_one(train_explore
     assert torch.equal(start, same_start)
     assert not torch.equal(full, half)  # the autocast is in effect
     moved, moved_half = full - start, half - start
-    assert torch.nn.functional.cosine_similarity(moved, moved_half, dim=0) > 0.9
-    assert 0.8 < float(moved_half.norm() / moved.norm()) < 1.25
+    assert torch.nn.functional.cosine_similarity(moved, moved_half, dim=0) > 0.98
+    assert 0.9 < float(moved_half.norm() / moved.norm()) < 1.1
