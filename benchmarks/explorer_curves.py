@@ -2,8 +2,8 @@
 
 Reads the ``learning_curve.csv`` of each run folder (``benchmarks/train_explorer.py``'s
 output), bins the final coverage of the training episodes by env steps (each rollout's mean
-weighted by its episodes), and writes a Markdown table of the bins and a plot of the binned
-curves: the way to tell whether a change of the recipe (the update's precision, say) learns
+weighted by its episodes), and writes a Markdown table and a plot of the bins every run
+reached: the way to tell whether a change of the recipe (the update's precision, say) learns
 as well, at equal env steps.
 
     python benchmarks/explorer_curves.py --runs runs/float32 runs/bfloat16 \\
@@ -49,9 +49,14 @@ def binned(path: Path, bin_steps: int) -> dict[int, tuple[float, int]]:
     return {start: (total / count, count) for start, (total, count) in sorted(sums.items())}
 
 
+def common_bins(curves: dict[str, dict[int, tuple[float, int]]]) -> list[int]:
+    """The bins every run reached."""
+    return sorted(set.intersection(*(set(curve) for curve in curves.values())))
+
+
 def table(curves: dict[str, dict[int, tuple[float, int]]], bin_steps: int) -> str:
     """The bins every run reached, one row each, and the mean over them."""
-    common = sorted(set.intersection(*(set(curve) for curve in curves.values())))
+    common = common_bins(curves)
     labels = list(curves)
     lines = [
         "| env steps | " + " | ".join(f"{label} final coverage (%)" for label in labels) + " |",
@@ -73,10 +78,11 @@ def plot(curves: dict[str, dict[int, tuple[float, int]]], bin_steps: int, path: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    common = common_bins(curves)
     figure, axis = plt.subplots(figsize=(6.5, 3.8))
     for label, curve in curves.items():
-        starts = np.array(list(curve))
-        axis.plot(starts + bin_steps / 2, [100 * mean for mean, _ in curve.values()], label=label)
+        means = [100 * curve[start][0] for start in common]
+        axis.plot(np.array(common) + bin_steps / 2, means, label=label)
     axis.set_xlabel("env steps")
     axis.set_ylabel("final coverage of training episodes (%)")
     axis.legend()
