@@ -7,7 +7,7 @@ reached: the way to tell whether a change of the recipe (the update's precision,
 as well, at equal env steps.
 
     python benchmarks/explorer_curves.py --runs runs/float32 runs/bfloat16 \\
-        --labels float32 bfloat16 --output benchmarks/results/explorer_update_dtype/curves
+        --labels float32 bfloat16 --output-file benchmarks/results/explorer_update_dtype/curves.md
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ class Args:
     """a label per run (default: the folders' names)"""
     bin_steps: int = 100_000
     """env steps per bin"""
-    output: str = "curves"
-    """written as OUTPUT.md (the table) and OUTPUT.png (the plot)"""
+    output_file: str = "curves.md"
+    """the Markdown table written; the plot goes beside it (.png)"""
 
 
 def binned(path: Path, bin_steps: int) -> dict[int, tuple[float, int]]:
@@ -103,7 +103,7 @@ def main(args: Args) -> str:
             raise SystemExit(f"{path} not found: give folders written by train_explorer.py")
         curves[label] = binned(path, args.bin_steps)
     text = table(curves, args.bin_steps)
-    output = Path(args.output)
+    output = Path(args.output_file)
     output.parent.mkdir(parents=True, exist_ok=True)
     output.with_suffix(".md").write_text(text)
     plot(curves, args.bin_steps, output.with_suffix(".png"))

@@ -36,7 +36,7 @@ def test_bins_weigh_rollouts_by_their_episodes_and_compare_common_bins(curves, t
     args = parse_dataclass_args(
         curves.Args,
         ["--runs", first, second, "--labels", "f32", "b16", "--bin-steps", "100",
-         "--output", str(tmp_path / "out" / "curves")],
+         "--output-file", str(tmp_path / "out" / "curves.md")],
     )  # fmt: skip
     text = curves.main(args)
     assert "| 0-100 | 80.0 | 70.0 |" in text and "| 100-200 | 60.0 | 80.0 |" in text
