@@ -47,6 +47,38 @@ def accepted_keywords() -> frozenset[str]:
     return VECTOR_KEYWORDS | {item.name for item in dataclasses.fields(EnvSettings)}
 
 
+
+def agent_scenes(scene: Any, num_envs: int) -> list[Any] | SharedSceneStreams:
+    """Each of ``num_envs`` agents' scene: ``scene`` for all, or one entry of a list per
+    agent (a :class:`SharedSceneStreams` as it is: it places the agents itself).
+
+    Raises:
+        ValueError: a list whose length is not ``num_envs``.
+    """
+    if isinstance(scene, SharedSceneStreams):
+        return scene
+    scenes = scene if isinstance(scene, (list, tuple)) else [scene] * num_envs
+    if len(scenes) != num_envs:
+        raise ValueError(f"scene list has {len(scenes)} entries for num_envs={num_envs}")
+    return list(scenes)
+
+
+def agent_seeds(seed: int | list[int | None] | None, num_envs: int) -> list[int | None]:
+    """A reset's seed per agent: an int gives agent ``i`` ``seed + i``, a list one each, None
+    none.
+
+    Raises:
+        ValueError: a list whose length is not ``num_envs``.
+    """
+    if seed is None:
+        return [None] * num_envs
+    if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+        return [int(seed) + i for i in range(num_envs)]
+    seeds = list(seed)
+    if len(seeds) != num_envs:
+        raise ValueError(f"seed list has length {len(seeds)}; it must match num_envs={num_envs}")
+    return seeds
+
 class BatchedEnvBase(gym.vector.VectorEnv):
     """The Gymnasium ``VectorEnv`` parts both batched envs share (see ``NarutoReconVectorEnv``
     for the keywords and the behaviour).
@@ -106,14 +138,7 @@ class BatchedEnvBase(gym.vector.VectorEnv):
 
     # -- construction helpers ----------------------------------------------------------------
     def _agent_scenes(self, scene: Any) -> list[Any] | SharedSceneStreams:
-        """Each agent's scene: ``scene`` for all, or one entry of a list per agent (a
-        :class:`SharedSceneStreams` as it is: it places the agents itself)."""
-        if isinstance(scene, SharedSceneStreams):
-            return scene
-        scenes = scene if isinstance(scene, (list, tuple)) else [scene] * self.num_envs
-        if len(scenes) != self.num_envs:
-            raise ValueError(f"scene list has {len(scenes)} entries for num_envs={self.num_envs}")
-        return list(scenes)
+        return agent_scenes(scene, self.num_envs)
 
     def _check_pose_actions(self, several_scenes: bool) -> None:
         """Pose actions are bounded by one scene's box: refuse them across several scenes."""
@@ -134,16 +159,7 @@ class BatchedEnvBase(gym.vector.VectorEnv):
         self, seed: int | list[int | None] | None, options: dict[str, Any] | None
     ) -> tuple[list[int | None], np.ndarray, dict[str, Any]]:
         """A reset's per-agent seeds, its ``reset_mask`` and the options left."""
-        if seed is None:
-            seeds: list[int | None] = [None] * self.num_envs
-        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            seeds = [int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(
-                    f"seed list has length {len(seeds)}; it must match num_envs={self.num_envs}"
-                )
+        seeds = agent_seeds(seed, self.num_envs)
         options = dict(options or {})
         mask = options.pop("reset_mask", None)
         if mask is None:

@@ -26,6 +26,7 @@ import numpy as np
 from gymnasium.vector.utils import batch_space
 
 from naruto_gym.utils.threads import resolve_threads
+from naruto_gym.vector.base import agent_scenes, agent_seeds
 from naruto_gym.vector.sharded import ShardedAgents, resolve_workers
 from naruto_gym.vector.shared_scenes import SharedSceneStreams
 from naruto_gym.vector.vector_env import NarutoReconVectorEnv
@@ -85,9 +86,11 @@ class ShardedWrappedEnv(gym.vector.VectorEnv):
         self.num_envs = int(num_envs)
         self.thread_count = resolve_threads(threads)
         count = resolve_workers(workers, self.num_envs, self.thread_count)
+        scenes = agent_scenes(scene, self.num_envs)
+        # Agent 0's scene (its stream, for shared scene streams).
+        first = scenes.agent_streams(1)[0] if isinstance(scenes, SharedSceneStreams) else scenes[0]
         build = WrappedShare(wrap)
-        probe = build(num_envs=1, scene=_first_scene(scene, self.num_envs),
-                      **{**env_kwargs, "threads": 1})
+        probe = build(num_envs=1, scene=first, **{**env_kwargs, "threads": 1})
         try:
             self.single_observation_space = probe.single_observation_space
             self.metadata = dict(probe.metadata)
@@ -96,7 +99,7 @@ class ShardedWrappedEnv(gym.vector.VectorEnv):
         self._agents = ShardedAgents(
             build,
             self.num_envs,
-            scene if isinstance(scene, SharedSceneStreams) else _per_agent(scene, self.num_envs),
+            scenes,
             env_kwargs,
             self.single_observation_space,
             count,
@@ -121,14 +124,7 @@ class ShardedWrappedEnv(gym.vector.VectorEnv):
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Every agent's reset: ``seed`` an int (agent ``i`` gets ``seed + i``, as one
         process), a list of one per agent, or None; ``options`` go to every share."""
-        if seed is None or isinstance(seed, (int, np.integer)):
-            seeds = [None if seed is None else int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != self.num_envs:
-                raise ValueError(
-                    f"seed list has length {len(seeds)}; it must match num_envs={self.num_envs}"
-                )
+        seeds = agent_seeds(seed, self.num_envs)
         options = dict(options or {})
         if "reset_mask" in options:
             raise ValueError(
@@ -152,18 +148,4 @@ class ShardedWrappedEnv(gym.vector.VectorEnv):
         agents = getattr(self, "_agents", None)
         if agents is not None:
             agents.close()
-
-
-def _per_agent(scene: Any, num_envs: int) -> list[Any]:
-    scenes = list(scene) if isinstance(scene, (list, tuple)) else [scene] * num_envs
-    if len(scenes) != num_envs:
-        raise ValueError(f"scene list has {len(scenes)} entries for num_envs={num_envs}")
-    return scenes
-
-
-def _first_scene(scene: Any, num_envs: int) -> Any:
-    """Agent 0's scene (its stream, for shared scene streams)."""
-    if isinstance(scene, SharedSceneStreams):
-        return scene.agent_streams(1)[0]
-    return _per_agent(scene, num_envs)[0]
 
