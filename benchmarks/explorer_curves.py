@@ -7,7 +7,7 @@ reached: the way to tell whether a change of the recipe (the update's precision,
 as well, at equal env steps.
 
     python benchmarks/explorer_curves.py --runs runs/float32 runs/bfloat16 \\
-        --labels float32 bfloat16 --output-file benchmarks/results/explorer_update_dtype/curves.md
+        --labels float32 bfloat16 --output-file runs/curves.md
 """
 
 from __future__ import annotations

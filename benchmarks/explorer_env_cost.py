@@ -135,17 +135,15 @@ def training_configurations(args: Args) -> dict[str, dict[str, Any]]:
     """The training script's arguments of each training configuration timed: "before", the
     env changes in one process, then the chain in worker processes, then the bfloat16
     update."""
-    names = list(configurations(args))
-    after = configurations(args)[names[-1]]
+    env = configurations(args)
+    (before, before_env), *_, (after, after_env) = env.items()
+    one_process = {"env_workers": 1, "update_dtype": "float32"}
+    workers = {"env_workers": None, "update_dtype": "float32"}
     return {
-        names[0]: {**configurations(args)[names[0]], "env_workers": 1, "update_dtype": "float32"},
-        f"{names[-1]}, one process": {**after, "env_workers": 1, "update_dtype": "float32"},
-        "and the chain in worker processes": {
-            **after,
-            "env_workers": None,
-            "update_dtype": "float32",
-        },
-        "and the update in bfloat16": {**after, "env_workers": None, "update_dtype": "bfloat16"},
+        before: {**before_env, **one_process},
+        f"{after}, one process": {**after_env, **one_process},
+        "and the chain in worker processes": {**after_env, **workers},
+        "and the update in bfloat16": {**after_env, **workers, "update_dtype": "bfloat16"},
     }
 
 

@@ -709,8 +709,9 @@ def test_a_refused_step_never_blocks_the_cell_the_walker_stands_in():
 
 def test_an_agents_walk_does_not_depend_on_the_other_agents_of_its_batch():
     """Each agent's candidates, wander and moves are its own: the first four agents of a
-    batch of eight walk as a batch of those four does (an agent's wander once read the path
-    lengths of the agent searched last), on the training mix's scenes."""
+    batch of eight walk as a batch of those four does (an agent's wander reads the path
+    lengths of its own candidate search, not those of the agent searched last), on the
+    training mix's scenes."""
     settings = {
         **EXPLORER_ENV,
         "max_episode_steps": 40,
