@@ -4,7 +4,9 @@ Reads the ``learning_curve.csv`` of each run folder (``benchmarks/train_explorer
 output), bins the final coverage of the training episodes by env steps (each rollout's mean
 weighted by its episodes), and writes a Markdown table and a plot of the bins every run
 reached: the way to tell whether a change of the recipe (the update's precision, say) learns
-as well, at equal env steps.
+as well, at equal env steps. Where a run folder holds a ``progress.csv`` (PPO's statistics per
+update), a second table gives the critic's explained variance and value loss per bin: whether
+and when the value function starts to explain the returns.
 
     python benchmarks/explorer_curves.py --runs runs/float32 runs/bfloat16 \\
         --labels float32 bfloat16 --output-file runs/curves.md
@@ -47,6 +49,49 @@ def binned(path: Path, bin_steps: int) -> dict[int, tuple[float, int]]:
             entry[0] += float(row["final_coverage"]) * episodes
             entry[1] += episodes
     return {start: (total / count, count) for start, (total, count) in sorted(sums.items())}
+
+
+def binned_updates(progress: Path, curve: Path, bin_steps: int
+                   ) -> dict[int, tuple[float, float]]:
+    """Per bin (its first env step): PPO's mean explained variance and value loss over the
+    updates in it. ``progress.csv`` counts decisions; the learning curve beside it (the same
+    rollouts, in env steps) gives env steps per decision."""
+    with curve.open() as handle:
+        env_steps = [int(row["env_steps"]) for row in csv.DictReader(handle)]
+    with progress.open() as handle:
+        rows = [row for row in csv.DictReader(handle) if row.get("train/explained_variance")]
+    if not rows or not env_steps:
+        return {}
+    with progress.open() as handle:
+        decisions = max(int(row["time/total_timesteps"]) for row in csv.DictReader(handle))
+    per_decision = max(env_steps) / decisions
+    sums: dict[int, list[float]] = {}
+    for row in rows:
+        steps = int(row["time/total_timesteps"]) * per_decision
+        entry = sums.setdefault(int(steps) // bin_steps * bin_steps, [0.0, 0.0, 0])
+        entry[0] += float(row["train/explained_variance"])
+        entry[1] += float(row["train/value_loss"])
+        entry[2] += 1
+    return {start: (ev / count, loss / count)
+            for start, (ev, loss, count) in sorted(sums.items())}
+
+
+def updates_table(updates: dict[str, dict[int, tuple[float, float]]], bin_steps: int) -> str:
+    """One row per bin any run reached: explained variance and value loss of each run."""
+    labels = list(updates)
+    starts = sorted(set().union(*(set(bins) for bins in updates.values())))
+    lines = [
+        "| env steps | " + " | ".join(f"{label} explained variance | {label} value loss"
+                                       for label in labels) + " |",
+        "|---|" + "---|---|" * len(labels),
+    ]
+    for start in starts:
+        cells = " | ".join(
+            f"{round(updates[label][start][0], 2) + 0.0:.2f} | {updates[label][start][1]:.0f}"
+            if start in updates[label] else "- | -" for label in labels
+        )
+        lines.append(f"| {start:,}-{start + bin_steps:,} | {cells} |")
+    return "\n".join(lines) + "\n"
 
 
 def common_bins(curves: dict[str, dict[int, tuple[float, int]]]) -> list[int]:
@@ -96,13 +141,18 @@ def main(args: Args) -> str:
     labels = args.labels or [Path(run).name for run in args.runs]
     if len(labels) != len(args.runs):
         raise SystemExit(f"{len(labels)} labels for {len(args.runs)} runs: give one per run")
-    curves = {}
+    curves, updates = {}, {}
     for label, run in zip(labels, args.runs, strict=True):
         path = Path(run) / "learning_curve.csv"
         if not path.is_file():
             raise SystemExit(f"{path} not found: give folders written by train_explorer.py")
         curves[label] = binned(path, args.bin_steps)
+        if (Path(run) / "progress.csv").is_file():
+            updates[label] = binned_updates(Path(run) / "progress.csv", path, args.bin_steps)
     text = table(curves, args.bin_steps)
+    if any(updates.values()):
+        text += "\nPPO's critic per bin (`progress.csv`):\n\n" + updates_table(
+            {label: bins for label, bins in updates.items() if bins}, args.bin_steps)
     output = Path(args.output_file)
     output.parent.mkdir(parents=True, exist_ok=True)
     output.with_suffix(".md").write_text(text)

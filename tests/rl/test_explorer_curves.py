@@ -47,3 +47,24 @@ def test_bins_weigh_rollouts_by_their_episodes_and_compare_common_bins(curves, t
         curves.main(parse_dataclass_args(curves.Args, ["--runs", first, "--labels", "a", "b"]))
     with pytest.raises(SystemExit, match="learning_curve.csv"):
         curves.main(parse_dataclass_args(curves.Args, ["--runs", str(tmp_path)]))
+
+
+def test_the_critic_table_bins_ppo_updates_by_env_steps(curves, tmp_path):
+    """progress.csv counts decisions: the learning curve beside it gives env steps per
+    decision; a run without progress.csv has no critic table."""
+    run = Path(_run(tmp_path / "a", [(100, 1, "0.5"), (200, 1, "0.6"), (300, 1, "0.7")]))
+    (run / "progress.csv").write_text(
+        "time/total_timesteps,train/explained_variance,train/value_loss\n"
+        "5,,\n10,-0.0001,300\n15,0.5,100\n"
+    )  # 15 decisions for 300 env steps: 20 env steps each
+    bins = curves.binned_updates(run / "progress.csv", run / "learning_curve.csv", 250)
+    assert bins[0] == pytest.approx((-0.0001, 300.0)) and bins[250] == pytest.approx((0.5, 100.0))
+    other = _run(tmp_path / "b", [(100, 1, "0.5")])
+    text = curves.main(parse_dataclass_args(
+        curves.Args, ["--runs", str(run), other, "--bin-steps", "250",
+                      "--output-file", str(tmp_path / "out" / "curves.md")]))
+    assert "| 0-250 | 0.00 | 300 |" in text and "| 250-500 | 0.50 | 100 |" in text
+    assert "b explained variance" not in text
+    assert curves.main(parse_dataclass_args(
+        curves.Args, ["--runs", other, "--output-file", str(tmp_path / "o2" / "c.md")])
+    ).count("explained variance") == 0
