@@ -58,6 +58,7 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import configure
+from stable_baselines3.common.vec_env import VecEnv, VecNormalize
 
 from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
@@ -101,6 +102,10 @@ class Args:
     """discount per goal (0.95 over K=20 steps is about 0.9975 per env step)"""
     ent_coef: float = 0.01
     """entropy bonus"""
+    normalize_reward: bool = False
+    """scale the rewards PPO learns from by a running estimate of the discounted return's
+    spread (``VecNormalize``; coverage gains in percentage points otherwise give returns in
+    the hundreds); saved beside each checkpoint and read back on --resume"""
     features_dim: int = 128
     """size of the features extractor's output"""
     update_dtype: str = "auto"
@@ -420,6 +425,9 @@ class Checkpoints(BaseCallback):
             path = self.folder / f"explorer_{steps}_steps.zip"
             self.model.save(path)
             save_settings(path, self.settings)
+            normalizer = self.model.get_vec_normalize_env()
+            if normalizer is not None:
+                normalizer.save(str(reward_stats_path(path)))
             self.next += self.every
         return True
 
@@ -433,6 +441,21 @@ class WallClockBudget(BaseCallback):
 
     def _on_step(self) -> bool:
         return time.perf_counter() < self.deadline
+
+
+def reward_stats_path(checkpoint: Path) -> Path:
+    """Where the reward normaliser's statistics of ``checkpoint`` are kept."""
+    return checkpoint.with_name(f"{checkpoint.stem}_reward_stats.pkl")
+
+
+def normalized_rewards(venv: VecEnv, args: Args, checkpoint: Path | None) -> VecEnv:
+    """``venv`` with its rewards normalised (``--normalize-reward``), the statistics read
+    from beside ``checkpoint`` when resuming; ``venv`` itself otherwise."""
+    if not args.normalize_reward:
+        return venv
+    if checkpoint is not None and reward_stats_path(checkpoint).is_file():
+        return VecNormalize.load(str(reward_stats_path(checkpoint)), venv)
+    return VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=args.gamma)
 
 
 def latest_checkpoint(output_dir: Path) -> Path | None:
@@ -548,6 +571,7 @@ def main(args: Args) -> dict[str, Any]:
         raise SystemExit(
             f"--resume: no checkpoint in {output_dir / 'checkpoints'}; train without --resume first"
         )
+    venv = normalized_rewards(venv, args, checkpoint)
     if checkpoint is not None:
         model = AutocastPPO.load(checkpoint, env=venv, device="cpu")
         print(f"resuming from {checkpoint} ({model.num_timesteps * args.steps_per_goal} steps)")

@@ -148,3 +148,26 @@ def test_a_bfloat16_update_moves_the_parameters_as_the_float32_one(train_explore
     moved, moved_half = full - start, half - start
     assert torch.nn.functional.cosine_similarity(moved, moved_half, dim=0) > 0.98
     assert 0.9 < float(moved_half.norm() / moved.norm()) < 1.1
+
+
+def test_normalized_rewards_are_saved_with_each_checkpoint_and_resumed(train_explorer, tmp_path):
+    """--normalize-reward: PPO learns from rewards scaled by the running return statistics,
+    which each checkpoint keeps beside it and --resume reads back."""
+    flags = [
+        "--num-envs", "4", "--agents-per-scene", "2", "--env-workers", "1", "--n-steps", "2",
+        "--batch-size", "8", "--n-epochs", "1", "--max-episode-steps", "40",
+        "--checkpoint-every", "160", "--normalize-reward", "--output-dir", str(tmp_path),
+    ]  # fmt: skip
+    train_explorer.main(parse_dataclass_args(train_explorer.Args,
+                                             ["--total-timesteps", "320", *flags]))
+    checkpoint = train_explorer.latest_checkpoint(tmp_path)
+    stats = train_explorer.reward_stats_path(checkpoint)
+    assert stats.is_file()
+    args = parse_dataclass_args(train_explorer.Args, ["--total-timesteps", "480", *flags])
+    args.resume = True
+    venv = train_explorer.normalized_rewards(train_explorer.make_env(args)[0], args, checkpoint)
+    try:
+        assert venv.norm_reward and not venv.norm_obs and venv.ret_rms.count > 1  # read back
+    finally:
+        venv.close()
+    assert train_explorer.main(args)["env_steps"] == 480
