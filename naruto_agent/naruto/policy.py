@@ -274,33 +274,37 @@ class NarutoPolicy(Policy):
         new_map, self._stalled = new_map or self._stalled, False
         new_map = new_map or self._replanning
         cut_before, plan_before = self.machine.collisions, self.machine.plan
+        # On the way out of a stay the watchdog cut short (the agent has stayed there long
+        # already) a held move is counted at once and planned around in the same frame.
+        leaving = (plan_before is not None and not plan_before.info.get("recovery")
+                   and self._within_cut_stay(position))
+        held_here: list[bool] = []
+
+        def move_check(start: np.ndarray, end: np.ndarray) -> bool:
+            free = self._move_check(start, end)
+            if not free and leaving and not held_here:
+                held_here.append(True)
+                self._note_hold(position, self.machine.plan)
+                self._replanning = True  # the plan around it moves at once
+            return free
+
         pose = self.machine.step(
             np.asarray(observation["pose"], dtype=np.float64),
             new_map=new_map,
             collided=bool((info or {}).get("collided", False)),
             plan=self._plan,
-            move_is_free=self._move_check,
+            move_is_free=move_check,
+            plan_when_held=leaving,
         )
         # A move held by the agent's checks or refused by the env taught the map where not to
-        # go: the next frame plans again instead of waiting for the next mapping step. The
-        # monitor counts the holds per place and per goal (a spot whose plans keep being held
-        # fails); a held recovery, or a move held on the way out of a stay the watchdog cut
-        # short (the agent has stayed there long already), is followed by a recovery that
-        # moves at once.
-        self._replanning = self.machine.collisions > cut_before
-        if self._replanning:
+        # go: the next frame plans again instead of waiting for the next mapping step.
+        unplanned = self.machine.collisions - cut_before - len(held_here) > 0
+        if unplanned:
             # A hold that ended the step standing held the plan in hand; one followed by a
             # new plan in the same step held the one before.
-            held = self.machine.plan if self.machine.state == State.STAYING else plan_before
-            if held is not None and held.info.get("recovery"):
-                self.monitor.request_recovery()  # the next step of the escalation, at once
-            else:
-                if self._in_cut_stay(position) and self._clear_to_wander(position):
-                    self.monitor.request_recovery()
-                else:
-                    self.monitor.move_held(position)
-                if held is not None:
-                    self.monitor.goal_held(held.goal)
+            self._note_hold(position, self.machine.plan if self.machine.state == State.STAYING
+                            else plan_before)
+        self._replanning = unplanned or (bool(held_here) and self.machine.state == State.STAYING)
         # Control is the state machine's own work; the phases it called are timed apart.
         called = sum(self.timings[name] for name in inner) - before
         self.timings["control"] += time.perf_counter() - clock - called
@@ -396,13 +400,32 @@ class NarutoPolicy(Policy):
             if not self.config.lazy_planner_view:
                 self.agent_map.refresh()
 
-    def _in_cut_stay(self, position: np.ndarray) -> bool:
-        """Whether the agent is within the stay the watchdog last cut short; asked at a hold,
-        and a hold outside the stay forgets it (the next cut replaces it too)."""
+    def _note_hold(self, position: np.ndarray, held: Plan | None) -> None:
+        """A move of ``held`` was held or refused at ``position``: the monitor counts the
+        holds per place and per goal (a spot whose plans keep being held fails); a held
+        recovery, or a move held on the way out of a stay the watchdog cut short, is
+        followed by a recovery that moves at once."""
+        if held is not None and held.info.get("recovery"):
+            self.monitor.request_recovery()  # the next step of the escalation, at once
+            return
+        if self._in_cut_stay(position) and self._clear_to_wander(position):
+            self.monitor.request_recovery()
+        else:
+            self.monitor.move_held(position)
+        if held is not None:
+            self.monitor.goal_held(held.goal)
+
+    def _within_cut_stay(self, position: np.ndarray) -> bool:
+        """Whether the agent is within the stay the watchdog last cut short."""
         if self._cut_stay is None:
             return False
         spots, radius = self._cut_stay
-        if np.min(np.linalg.norm(spots - position, axis=1)) < radius:
+        return bool(np.min(np.linalg.norm(spots - position, axis=1)) < radius)
+
+    def _in_cut_stay(self, position: np.ndarray) -> bool:
+        """:meth:`_within_cut_stay`, asked at a hold: a hold outside the stay forgets it (the
+        next cut replaces it too)."""
+        if self._within_cut_stay(position):
             return True
         self._cut_stay = None
         return False

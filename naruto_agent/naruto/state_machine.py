@@ -164,6 +164,7 @@ class NarutoStateMachine:
         collided: bool,
         plan: PlanFunction,
         move_is_free: MoveCheck,
+        plan_when_held: bool = False,
     ) -> np.ndarray:
         """Advance one frame and return the 4x4 camera-to-world pose to command.
 
@@ -174,6 +175,8 @@ class NarutoStateMachine:
             plan: ``plan(position, rotation) -> Plan | None`` (goal search + E-RRT).
             move_is_free: ``move_is_free(from, to)``, the agent's own check of a move on its
                 map.
+            plan_when_held: a move ``move_is_free`` holds is planned around in this frame
+                (once) instead of the frame ending standing.
         """
         pose = np.asarray(pose, dtype=np.float64)
         position = pose[:3, 3].copy()
@@ -185,7 +188,8 @@ class NarutoStateMachine:
                 self._path.clear()
                 self._go(State.STAYING)
         self._commanded = None
-        for _ in range(len(State) + 2):  # every state emits or moves on; no cycle is longer
+        for _ in range(2 * (len(State) + 2)):  # every state emits or moves on; at most one
+            # cycle is planned again
             if self.state == State.STAYING:
                 if not new_map:
                     return self._emit(position, rotation)
@@ -221,6 +225,9 @@ class NarutoStateMachine:
                     self.collisions += 1
                     self._path.clear()
                     self._go(State.STAYING)
+                    if plan_when_held:
+                        plan_when_held, new_map = False, True
+                        continue
                     return self._emit(position, rotation)
                 self._path.popleft()
                 desired = self._look_at(node, rotation)

@@ -200,7 +200,8 @@ def test_public_seams_wrap_the_move_check_refresh_the_view_and_learn_refusals(ep
 def test_a_held_move_is_planned_around_at_the_next_frame():
     """A move the agent's own checks hold cuts the plan short and blocks the space in the
     map; the agent plans again at the next frame instead of standing until the next mapping
-    step (a wait of up to a mapping period, five frames, for each hold)."""
+    step (a wait of up to a mapping period, five frames, for each hold). Without the stall
+    watchdog: no stay is cut short, where a hold is planned around in its own frame."""
     held: list[int] = []  # the frames of the held moves
     plans_held: set[int] = set()
 
@@ -217,7 +218,7 @@ def test_a_held_move_is_planned_around_at_the_next_frame():
             return check(start, end)
         return wrapped
 
-    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu", stall_watchdog=False)
     policy.wrap_move_check(hold_first_move_of_each_plan)
     run = run_episode(80, policy=policy)
     assert len(held) >= 2, held
@@ -290,10 +291,15 @@ def test_moves_held_in_one_place_lead_to_a_recovery_the_watchdog_lets_run():
 @pytest.mark.parametrize("stay, holds", [("here", 1), (np.array([50.0, 50.0, 1.0]), 3)])
 def test_a_move_held_on_the_way_out_of_a_cut_stay_leads_to_a_recovery_at_once(stay, holds):
     """The watchdog cut a look-around short here: the agent has stayed long already, so the
-    first move held on its way out is followed by a recovery that moves; a stay cut short
-    elsewhere changes nothing (three holds in one place)."""
+    first move held on its way out is followed by a recovery that moves, in the same frame
+    (the frame does not end standing); a stay cut short elsewhere changes nothing (three
+    holds in one place, each ending its frame)."""
     policy, env, _, under_way, held = _hold_normal_plans_from(30, stay)
     assert under_way is not None and held == holds, (under_way, held)
+    if holds == 1:
+        assert under_way == 31 and policy.machine.history[-1] != State.STAYING, under_way
+    else:
+        assert State.STAYING in policy.machine.history[31:under_way]
     env.close()
 
 
