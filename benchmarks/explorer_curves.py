@@ -87,7 +87,7 @@ def updates_table(updates: dict[str, dict[int, tuple[float, float]]], bin_steps:
     ]
     for start in starts:
         cells = " | ".join(
-            f"{round(updates[label][start][0], 2) + 0.0:.2f} | {updates[label][start][1]:.0f}"
+            f"{round(updates[label][start][0], 2) + 0.0:.2f} | {updates[label][start][1]:.3g}"
             if start in updates[label] else "- | -" for label in labels
         )
         lines.append(f"| {start:,}-{start + bin_steps:,} | {cells} |")
