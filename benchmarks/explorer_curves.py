@@ -59,12 +59,11 @@ def binned_updates(progress: Path, curve: Path, bin_steps: int
     with curve.open() as handle:
         env_steps = [int(row["env_steps"]) for row in csv.DictReader(handle)]
     with progress.open() as handle:
-        rows = [row for row in csv.DictReader(handle) if row.get("train/explained_variance")]
+        every = list(csv.DictReader(handle))
+    rows = [row for row in every if row.get("train/explained_variance")]
     if not rows or not env_steps:
         return {}
-    with progress.open() as handle:
-        decisions = max(int(row["time/total_timesteps"]) for row in csv.DictReader(handle))
-    per_decision = max(env_steps) / decisions
+    per_decision = max(env_steps) / max(int(row["time/total_timesteps"]) for row in every)
     sums: dict[int, list[float]] = {}
     for row in rows:
         steps = int(row["time/total_timesteps"]) * per_decision
