@@ -17,17 +17,12 @@ take a user's policy as they find it.
 
 from __future__ import annotations
 
-import hashlib
-import importlib
-import importlib.util
 import inspect
-import os
-import sys
 from collections.abc import Callable
-from pathlib import Path
 from types import ModuleType
 from typing import Any, TypeVar
 
+from naruto_agent.import_paths import import_source, is_file_source
 from naruto_agent.policies.base import Policy
 
 PolicyT = TypeVar("PolicyT", bound=type[Policy])
@@ -105,9 +100,7 @@ def policy_class(name: str) -> type[Policy]:
             "'package.module:ClassName' or 'path/to/file.py:ClassName'"
         )
     source, _, attribute = target.rpartition(":")
-    module = _load_policy_file(source) if is_policy_file(source) else _import_policy_module(
-        source, target
-    )
+    module = import_source(source, target, "policy")
     cls = getattr(module, attribute, None)
     if cls is None:
         defined = ", ".join(_policy_classes_in(module)) or "none"
@@ -129,74 +122,7 @@ def policy_class(name: str) -> type[Policy]:
 def is_policy_file(source: str) -> bool:
     """True when the part of a policy name before ``:ClassName`` is a file path (it ends in
     ``.py`` or holds a path separator), not a dotted module name."""
-    return source.endswith(".py") or "/" in source or os.sep in source
-
-
-def _import_policy_module(module_name: str, target: str) -> ModuleType:
-    """Import a module by name; one that is not on ``sys.path`` is looked for in the working
-    directory too (appended to ``sys.path``, so it never shadows an installed module)."""
-    try:
-        return importlib.import_module(module_name)
-    except ModuleNotFoundError as error:
-        top = module_name.partition(".")[0]
-        cwd = os.getcwd()
-        if error.name != top:  # the module was found; something it imports was not
-            raise ValueError(f"cannot import policy {target!r}: {error}") from error
-        if cwd in sys.path or not _importable_from(cwd, top):
-            raise ValueError(
-                f"cannot import policy {target!r}: {error} (searched sys.path and the working "
-                f"directory {cwd}; name a file instead: 'path/to/file.py:ClassName')"
-            ) from error
-        sys.path.append(cwd)
-    except ImportError as error:
-        raise ValueError(f"cannot import policy {target!r}: {error}") from error
-    try:
-        return importlib.import_module(module_name)
-    except ImportError as error:
-        raise ValueError(f"cannot import policy {target!r}: {error}") from error
-
-
-def _importable_from(folder: str, top: str) -> bool:
-    """True when ``folder`` holds the module or package ``top``."""
-    base = Path(folder) / top
-    return base.with_suffix(".py").is_file() or (base / "__init__.py").is_file()
-
-
-def _load_policy_file(source: str) -> ModuleType:
-    """Execute a policy file once per path (later calls get the same module, so its classes
-    and registrations stay the same objects).
-
-    Raises:
-        ValueError: the file does not exist, is not a ``.py`` file or fails to load.
-    """
-    path = Path(source).expanduser()
-    if not path.is_absolute():
-        path = Path.cwd() / path
-    if not path.is_file():
-        raise ValueError(
-            f"policy file {source!r} does not exist (looked at {path}); give a path to a .py "
-            "file, absolute or relative to the working directory"
-        )
-    if path.suffix != ".py":
-        raise ValueError(f"policy file {source!r} is not a .py file")
-    path = path.resolve()
-    digest = hashlib.sha1(str(path).encode()).hexdigest()[:10]
-    module_name = f"_naruto_policy_file_{digest}_{path.stem}"
-    if module_name in sys.modules:
-        return sys.modules[module_name]
-    spec = importlib.util.spec_from_file_location(module_name, path)
-    if spec is None or spec.loader is None:
-        raise ValueError(f"cannot load policy file {source!r}")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[module_name] = module  # dataclasses and pickling look classes up there
-    try:
-        spec.loader.exec_module(module)
-    except Exception as error:  # the user's file: any error is a load failure
-        del sys.modules[module_name]
-        raise ValueError(
-            f"cannot load policy file {source!r}: {type(error).__name__}: {error}"
-        ) from error
-    return module
+    return is_file_source(source)
 
 
 def _policy_classes_in(module: ModuleType) -> list[str]:
