@@ -56,6 +56,7 @@ _GPU_EPISODE = f"{RESULTS}/gpu_h200/naruto_episode_office0_neural_triton_400step
 _GPU_SCALING = f"{RESULTS}/gpu_h200/vector_scaling_16cpu.json"
 _EXPLORER = f"{RESULTS}/explorer_candidates"
 _EXPLORER_PAGE = "docs/benchmarks/explorer.md"
+_OPEN_SCANS_PAGE = "docs/benchmarks/open-scans.md"
 _BOARD = "docs/benchmarks/leaderboard.md"  # generated from the suite run's folder
 _MEAN_STD = "{mean:.1f} ± {std:.1f}"
 _ROOM = "rows[scene=replica_like_room]"
@@ -108,6 +109,26 @@ def _explorer_figures(label: str, result: str) -> tuple[Figure, ...]:
         Figure(_EXPLORER_PAGE, pattern, source, key, fmt, scale)
         for pattern, key, fmt, scale in cells
     )
+
+
+def _escape_timing_figures() -> tuple[Figure, ...]:
+    """The open-scans page's table of what the escape check costs per move, against
+    ``open_scans/escape_timing.json``."""
+    source = f"{RESULTS}/open_scans/escape_timing.json"
+    cells = [
+        (r"\| published \(a 32 x 64 panorama every move\) \| (\d+) µs", "published_escape_us"),
+        (r"lattice not yet filled around the agent \| (\d+) µs", "scanned_space_cold_escape_us"),
+        (r"lattice known around the agent \| \*\*(\d+) µs", "scanned_space_warm_escape_us"),
+    ]
+    rows = [Figure(_OPEN_SCANS_PAGE, pattern, source, key, "{:.0f}") for pattern, key in cells]
+    ratio = Figure(
+        _OPEN_SCANS_PAGE,
+        r"\(([\d.]+)x less than published\)",
+        source,
+        "published_over_scanned_warm_escape",
+        "{:.1f}",
+    )
+    return (*rows, ratio)
 
 
 FIGURES: tuple[Figure, ...] = (
@@ -455,12 +476,13 @@ FIGURES: tuple[Figure, ...] = (
     ),
     Figure(
         _EXPLORER_PAGE,
-        r"\| after: shared scenes, panorama rows within 30 degrees, one process \| [\d,]+ \| "
+        r"\| shared scenes, panorama rows within 30 degrees, one process \| [\d,]+ \| "
         r"[\d,]+ \| [\d,]+ \| ([\d,]+) \|",
         f"{_EXPLORER}/env_configs_64_agents.json",
         "training_env_steps_per_s.after: shared scenes, panorama rows within 30 deg, one process",
         "{:,.0f}",
     ),
+    *_escape_timing_figures(),
     *_explorer_figures("small, closed (24)", "closed_small"),
     *_explorer_figures("apartment, closed (24)", "closed_apartment"),
     *_explorer_figures("small, open (24)", "open_small"),
