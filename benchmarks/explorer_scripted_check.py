@@ -1,12 +1,13 @@
-"""Do the explorer's goal actions let a trivial choice explore? Results: docs/benchmarks/explorer.md
+"""Which scripted choice of the explorer's candidates explores best? Results: docs/rl.md
 
 Runs scripted choices through the explorer's wrappers (the egocentric map observation and the
 candidate goal actions, :mod:`naruto_gym.rl.goal_actions`) and the harness's ``frontier`` and
 ``random`` baselines on the same scenes and seed, and writes the coverage curves (every env
-step) and their area (the mean coverage over the episode's steps) to ``output_dir/check.json``:
-
-* ``candidate 0``: always the nearest candidate by path;
-* ``random candidate``: a candidate drawn uniformly among the valid slots at every decision.
+step) and their area (the mean coverage over the episode's steps) to ``output_dir/check.json``.
+The scripted choices are the rules of the ``goal-walker`` policy
+(:data:`naruto_agent.rl.scripted_explorer.CHOICE_RULES`: ``nearest`` is always candidate 0,
+``random`` a candidate drawn uniformly among the valid slots at every decision); on the train
+split this run picks the policy's default rule.
 
 Coverage only (no reconstruction), the harness's env settings at ``--image-scale``; the
 wrappers' env has the explorer's (32, 64) panorama (the panorama does not count towards
@@ -15,6 +16,9 @@ coverage). Baseline curves already in ``check.json`` for the same settings are r
 
     nice -n 10 python benchmarks/explorer_scripted_check.py \\
         --output-dir benchmarks/results/explorer_candidates
+    nice -n 10 python benchmarks/explorer_scripted_check.py --baselines \\
+        --scenes procedural:small:0 procedural:small:1 procedural:small:2 \\
+        --output-dir benchmarks/results/explorer_rules/small
 """
 
 from __future__ import annotations
@@ -32,11 +36,11 @@ from naruto_agent.benchmark.efficiency import mean_over_steps
 from naruto_agent.benchmark.runner import run_episode
 from naruto_agent.benchmark.spec import EpisodeSpec
 from naruto_agent.cli_args import parse_dataclass_args
+from naruto_agent.rl.scripted_explorer import CHOICE_RULES, choose_candidate
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation
 from naruto_gym.rl.explorer_env import EXPLORER_ENV
 from naruto_gym.rl.goal_actions import GoalActions
 
-SCRIPTED = ("candidate 0", "random candidate")
 BASELINES = ("frontier", "random")
 
 
@@ -48,6 +52,10 @@ class Args:
     """scenes (the small class's first test scenes by default)"""
     seed: int = 0
     """episode seed (the env's reset and the random choices)"""
+    rules: list[str] = field(default_factory=lambda: list(CHOICE_RULES))
+    """the scripted choices run (goal-walker's rules)"""
+    baselines: bool = True
+    """run the harness's frontier and random too (--no-baselines: the rules alone)"""
     max_episode_steps: int = 400
     """episode length in env steps"""
     steps_per_goal: int = 20
@@ -75,8 +83,8 @@ class CoverageCurve(gym.Wrapper):
         return result
 
 
-def scripted(args: Args, scene: str, choice: str) -> dict[str, Any]:
-    """One episode of a scripted choice through the wrappers."""
+def scripted(args: Args, scene: str, rule: str) -> dict[str, Any]:
+    """One episode of a scripted choice rule through the wrappers."""
     env = gym.make(
         "NarutoRecon-v0",
         scene=scene,
@@ -93,7 +101,7 @@ def scripted(args: Args, scene: str, choice: str) -> dict[str, Any]:
     while len(recorder.curve) < args.max_episode_steps:
         count = int(observation["candidates"][:, 0].sum())
         valid += count
-        action = 0 if choice == "candidate 0" or count == 0 else int(rng.integers(count))
+        action = choose_candidate(observation["candidates"], rule, rng)
         observation, _, terminated, truncated, _ = wrapped.step(action)
         decisions += 1
         if terminated or truncated:
@@ -121,32 +129,51 @@ def baseline(args: Args, scene: str, policy: str) -> dict[str, Any]:
     return {"coverage_curve": record["coverage_curve"], "refusals": record["collisions"]}
 
 
+def rule_label(rule: str) -> str:
+    """A rule's name in ``check.json`` (apart from the harness's ``random`` policy)."""
+    return f"{rule} candidate"
+
+
+def _reusable(stored: dict[str, Any], settings: dict[str, Any], policy: str) -> bool:
+    """Whether a stored run of ``policy`` was made with these settings: the episode's (a
+    baseline does not walk the candidates, so it ignores ``steps_per_goal``)."""
+    ignored = {"rules", "baselines", "steps_per_goal"}
+    if policy not in BASELINES:
+        ignored -= {"steps_per_goal"}
+    before = stored.get("settings", {})
+    return {k: v for k, v in before.items() if k not in ignored} == {
+        k: v for k, v in settings.items() if k not in ignored
+    }
+
+
 def main(args: Args) -> dict[str, Any]:
+    for rule in args.rules:
+        if rule not in CHOICE_RULES:
+            raise ValueError(f"unknown rule {rule!r}; use some of {', '.join(CHOICE_RULES)}")
     output_dir = Path(args.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     path = output_dir / "check.json"
     settings = {key: value for key, value in asdict(args).items() if key != "rerun_baselines"}
     stored = json.loads(path.read_text()) if path.exists() else {}
-    same = {k: v for k, v in stored.get("settings", {}).items() if k != "steps_per_goal"} == {
-        k: v for k, v in settings.items() if k != "steps_per_goal"
-    }
+    policies = (*map(rule_label, args.rules), *(BASELINES if args.baselines else ()))
     runs: dict[str, dict[str, Any]] = {}
     for scene in args.scenes:
-        for policy in SCRIPTED + BASELINES:
+        for policy in policies:
             key = f"{scene}/{policy}"
-            if policy in BASELINES and same and not args.rerun_baselines:
-                if key in stored.get("runs", {}):
-                    runs[key] = stored["runs"][key]
-                    continue
+            again = policy in BASELINES and args.rerun_baselines
+            if key in stored.get("runs", {}) and not again and _reusable(stored, settings, policy):
+                runs[key] = stored["runs"][key]
+                continue
             run = (
-                scripted(args, scene, policy)
-                if policy in SCRIPTED
-                else baseline(args, scene, policy)
+                baseline(args, scene, policy)
+                if policy in BASELINES
+                else scripted(args, scene, args.rules[policies.index(policy)])
             )
             run["final"] = run["coverage_curve"][-1]
             run["auc"] = round(mean_over_steps(run["coverage_curve"], args.max_episode_steps), 4)
             runs[key] = run
             print(f"{key}: final {run['final']:.3f} auc {run['auc']:.3f}", flush=True)
+            path.write_text(json.dumps({"settings": settings, "runs": runs}, indent=1))
     table = {
         policy: {
             "final": [runs[f"{s}/{policy}"]["final"] for s in args.scenes],
@@ -155,7 +182,7 @@ def main(args: Args) -> dict[str, Any]:
                 float(np.mean([runs[f"{s}/{policy}"]["auc"] for s in args.scenes])), 4
             ),
         }
-        for policy in SCRIPTED + BASELINES
+        for policy in policies
     }
     result = {"settings": settings, "table": table, "runs": runs}
     path.write_text(json.dumps(result, indent=1))

@@ -33,6 +33,8 @@ POLICIES: dict[str, type[Policy]] = {}
 LAZY_POLICIES: dict[str, str] = {
     "naruto": "naruto_agent.naruto:NarutoPolicy",
     "explorer": "naruto_agent.rl.explorer_policy:MapGoalExplorer",
+    "explorer-untrained": "naruto_agent.rl.explorer_policy:UntrainedMapGoalExplorer",
+    "goal-walker": "naruto_agent.rl.scripted_explorer:GoalWalkerPolicy",
 }
 """Registered names resolved by import path on first lookup (their modules are costly to
 import)."""

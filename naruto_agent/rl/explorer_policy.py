@@ -1,8 +1,10 @@
-"""The map-and-goal explorer trained by ``benchmarks/train_explorer.py``, as a harness policy.
+"""The map-and-goal explorer trained by ``benchmarks/train_explorer.py``, as a harness policy,
+and its untrained twin.
 
     naruto-benchmark --policies random frontier explorer
     naruto-benchmark --policies explorer --policy-kwargs \\
         '{"explorer": {"model_path": "runs/explorer/final_model.zip"}}'
+    naruto-benchmark --policies explorer explorer-untrained goal-walker
 
 It builds the egocentric map from the observations it is handed
 (:class:`~naruto_gym.rl.egocentric_map.EgocentricMapBuilder`), finds the candidate goals on
@@ -14,11 +16,20 @@ candidates, the map's options, the panorama size) are read from the JSON file sa
 model (``<model>.json``, written by the training script), so a model and its settings cannot
 disagree. Without ``model_path`` it loads the checkpoint shipped in the package
 (:data:`PACKAGED_MODEL`), when there is one.
+
+The **untrained twin** (``weights="untrained"``, registered as ``explorer-untrained`` so that
+its records and rows stay apart from the explorer's) is the same checkpoint with every layer
+re-initialised as PPO initialises a new model, drawn afresh at every episode from the
+episode's seed: the same settings, map, candidates and walker, a network that has learned
+nothing. Paired with the explorer on the same scenes and seeds, it measures what the training
+adds; :class:`~naruto_agent.rl.scripted_explorer.GoalWalkerPolicy` (``goal-walker``) is the
+same walker with a fixed, scripted choice.
 """
 
 from __future__ import annotations
 
 import json
+from abc import abstractmethod
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +38,7 @@ import numpy as np
 from naruto_agent.policies.base import Info, Observation, Policy
 from naruto_agent.policies.registry import register_policy
 from naruto_agent.policies.watchdog import StallEvent
+from naruto_gym.motion.actions import DISCRETE_ACTIONS
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
 from naruto_gym.rl.goal_walker import GoalWalker
 from naruto_gym.sensors.panorama import EquirectangularCamera
@@ -47,6 +59,24 @@ DEFAULT_SETTINGS: dict[str, Any] = {
 def settings_path(model_path: Path) -> Path:
     """The JSON file of a model's training settings: ``<model without .zip>.json``."""
     return model_path.with_suffix(".json")
+
+
+def read_settings(model_path: str | Path) -> dict[str, Any]:
+    """The training settings of a model (:data:`DEFAULT_SETTINGS` under what its JSON file
+    holds; the defaults alone without one).
+
+    Raises:
+        ValueError: settings of the old grid goals (``goal_grid``): train the model again.
+    """
+    stored = settings_path(Path(model_path))
+    settings = {**DEFAULT_SETTINGS, **(json.loads(stored.read_text()) if stored.exists() else {})}
+    if "goal_grid" in settings:
+        raise ValueError(
+            f"{model_path} was trained on the old grid goals (goal_grid in {stored}); the "
+            f"explorer now picks among num_candidates candidate goals: train it again "
+            f"with benchmarks/train_explorer.py"
+        )
+    return settings
 
 
 def save_settings(model_path: Path, settings: dict[str, Any]) -> Path:
@@ -92,79 +122,69 @@ def export_checkpoint(model_path: str | Path, out_path: str | Path) -> Path:
     return out_path
 
 
-@register_policy("explorer")
-class MapGoalExplorer(Policy):
-    """A PPO model over the egocentric map that picks candidate goals walked by a planner.
+#: What ``MapGoalExplorer(weights=...)`` acts with: the checkpoint's weights, or its untrained
+#: twin's (every layer re-initialised from the episode's seed).
+WEIGHTS = ("trained", "untrained")
+
+
+def reinitialise_weights(model: Any, seed: int) -> None:
+    """Give an SB3 model's policy fresh weights, as a new model with the same settings gets
+    them (the policy's own initialisation), drawn from ``seed``; the global torch random state
+    is left as it was."""
+    import torch
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(seed))
+        fresh = model.policy_class(
+            model.observation_space, model.action_space, model.lr_schedule, **model.policy_kwargs
+        )
+    model.policy = fresh.to(model.device)
+
+
+class CandidateGoalPolicy(Policy):
+    """The explorer's agent without its choice: the egocentric map built from the observations
+    (:class:`~naruto_gym.rl.egocentric_map.EgocentricMapBuilder`), the candidate goals found on
+    it, one action chosen every ``steps_per_goal`` steps by :meth:`choose`, walked by the
+    planner (:class:`~naruto_gym.rl.goal_walker.GoalWalker`), and a stall watchdog whose
+    recovery walks out of the stay.
 
     Args:
-        model_path: the SB3 ``.zip`` (its ``.json`` settings beside it); None: the packaged
-            checkpoint.
-        deterministic: act with the mode of the action distribution (False samples).
+        settings: the training settings (:data:`DEFAULT_SETTINGS`' keys, and
+            ``panorama_horizon_deg`` where the map reads only that band of the panorama).
         stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
-            walk out of one (:meth:`recover_from_stall`); False: the model and walker alone.
-
-    Raises:
-        FileNotFoundError: no ``model_path`` and no packaged checkpoint, or a missing file
-            (the message says how to train one).
-        ValueError: the model's action space does not match its settings.
+            walk out of one (:meth:`recover_from_stall`); False: the choice and walker alone.
     """
 
     action_modes = ("discrete",)
     required_observations = ("depth", "pose", "panorama")
 
-    def __init__(
-        self,
-        model_path: str | None = None,
-        deterministic: bool = False,
-        stall_watchdog: bool = True,
-    ) -> None:
+    def __init__(self, settings: dict[str, Any], stall_watchdog: bool = True) -> None:
         super().__init__()
-        from stable_baselines3 import PPO
-
-        path = Path(model_path) if model_path is not None else PACKAGED_MODEL
-        if not path.exists():
-            hint = (
-                (
-                    "no explorer checkpoint is shipped in this version: train one with "
-                    "benchmarks/train_explorer.py and pass model_path=<output_dir>/"
-                    "final_model.zip"
-                )
-                if model_path is None
-                else ("pass the .zip that benchmarks/train_explorer.py wrote")
-            )
-            raise FileNotFoundError(f"explorer model {path} not found; {hint}")
-        stored = settings_path(path)
-        self.settings = {
-            **DEFAULT_SETTINGS,
-            **(json.loads(stored.read_text()) if stored.exists() else {}),
-        }
-        if "goal_grid" in self.settings:
-            raise ValueError(
-                f"{path} was trained on the old grid goals (goal_grid in {stored}); the "
-                f"explorer now picks among num_candidates candidate goals: train it again "
-                f"with benchmarks/train_explorer.py"
-            )
-        self.model = PPO.load(path, device="cpu")
-        goals = int(self.settings["num_candidates"])
-        expected = goals + (10 if self.settings["primitive_actions"] else 0)
-        if int(self.model.action_space.n) != expected:
-            raise ValueError(
-                f"{path} acts in {self.model.action_space.n} actions, but its settings "
-                f"({stored}) give {expected}: keep the .json the training wrote beside it"
-            )
-        self.deterministic = bool(deterministic)
+        self.settings = {**DEFAULT_SETTINGS, **settings}
         self.steps_per_goal = int(self.settings["steps_per_goal"])
         self.map: EgocentricMapBuilder | None = None
         self.walker: GoalWalker | None = None
-        self._until_decision = 0  # steps until the model picks the next action
+        self._until_decision = 0  # steps until the next choice
         self._panorama_stride = (1, 1)
         self._band: EquirectangularCamera | None = None
         self.use_stall_watchdog(enabled=stall_watchdog)
 
+    @property
+    def action_count(self) -> int:
+        """Actions :meth:`choose` picks among: the candidate slots, then the 10 discrete moves
+        where the settings have ``primitive_actions``."""
+        moves = len(DISCRETE_ACTIONS) if self.settings["primitive_actions"] else 0
+        return int(self.settings["num_candidates"]) + moves
+
+    @abstractmethod
+    def choose(self, observation: dict[str, np.ndarray]) -> int:
+        """The action of a decision (0 .. :attr:`action_count` - 1; a candidate slot, an empty
+        one meaning the nearest candidate) from the explorer's observation: the map's
+        (``map``, ``panorama``, ``pose``...) and the ``candidates`` feature table
+        (:data:`~naruto_gym.rl.goal_candidates.CANDIDATE_FEATURES`, nearest first)."""
+
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
         super().reset(observation, info, seed)
-        if seed is not None:
-            self.model.set_random_seed(seed)
         trained = tuple(self.settings["panorama_shape"])
         given = np.shape(observation["panorama"])
         if given[0] % trained[0] or given[1] % trained[1]:
@@ -219,10 +239,9 @@ class MapGoalExplorer(Policy):
         if self.check_stall(observation, info) is not None:
             self._until_decision = self.steps_per_goal  # the recovery's walk gets a macro-step
         elif self._until_decision == 0:
-            learning = {key: value[0] for key, value in self.map.observe(batch).items()}
-            learning["candidates"] = self.walker.refresh_candidates()[0]
-            action, _ = self.model.predict(learning, deterministic=self.deterministic)
-            self.walker.set_actions(np.array([int(action)]))
+            choice = {key: value[0] for key, value in self.map.observe(batch).items()}
+            choice["candidates"] = self.walker.refresh_candidates()[0]
+            self.walker.set_actions(np.array([int(self.choose(choice))]))
             self._until_decision = self.steps_per_goal
         self._until_decision -= 1
         return int(self.walker.next_moves()[0])
@@ -231,7 +250,98 @@ class MapGoalExplorer(Policy):
         """Walk out of the stay: the goal in hand (or a repeated move) is given up for the
         nearest candidate past the stay's every position by the stay radius and a step, or
         the reachable place farthest from the trail (:meth:`GoalWalker.leave
-        <naruto_gym.rl.goal_walker.GoalWalker.leave>`); the model picks again a whole
+        <naruto_gym.rl.goal_walker.GoalWalker.leave>`); the next choice comes a whole
         macro-step later."""
         assert self.walker is not None
         return self.walker.leave(0, *self.stay_of(event))
+
+
+@register_policy("explorer")
+class MapGoalExplorer(CandidateGoalPolicy):
+    """A PPO model over the egocentric map that picks candidate goals walked by a planner.
+
+    Args:
+        model_path: the SB3 ``.zip`` (its ``.json`` settings beside it); None: the packaged
+            checkpoint.
+        deterministic: act with the mode of the action distribution (False samples).
+        stall_watchdog: watch the walk for stalls (:mod:`naruto_agent.policies.watchdog`) and
+            walk out of one (:meth:`recover_from_stall`); False: the model and walker alone.
+        weights: ``"trained"``, the checkpoint's; ``"untrained"``, its untrained twin's: every
+            layer re-initialised at each episode from the episode's seed (0 without one), as
+            PPO initialises a new model of the same settings (:func:`reinitialise_weights`).
+
+    Raises:
+        FileNotFoundError: no ``model_path`` and no packaged checkpoint, or a missing file
+            (the message says how to train one).
+        ValueError: the model's action space does not match its settings, or ``weights`` is
+            not one of :data:`WEIGHTS`.
+    """
+
+    def __init__(
+        self,
+        model_path: str | None = None,
+        deterministic: bool = False,
+        stall_watchdog: bool = True,
+        weights: str = "trained",
+    ) -> None:
+        from stable_baselines3 import PPO
+
+        if weights not in WEIGHTS:
+            raise ValueError(
+                f"weights must be one of {WEIGHTS} (the checkpoint's, or its untrained "
+                f"twin's), got {weights!r}"
+            )
+        path = Path(model_path) if model_path is not None else PACKAGED_MODEL
+        if not path.exists():
+            hint = (
+                (
+                    "no explorer checkpoint is shipped in this version: train one with "
+                    "benchmarks/train_explorer.py and pass model_path=<output_dir>/"
+                    "final_model.zip"
+                )
+                if model_path is None
+                else ("pass the .zip that benchmarks/train_explorer.py wrote")
+            )
+            raise FileNotFoundError(f"explorer model {path} not found; {hint}")
+        super().__init__(read_settings(path), stall_watchdog)
+        self.model = PPO.load(path, device="cpu")
+        if int(self.model.action_space.n) != self.action_count:
+            raise ValueError(
+                f"{path} acts in {self.model.action_space.n} actions, but its settings "
+                f"({settings_path(path)}) give {self.action_count}: keep the .json the "
+                f"training wrote beside it"
+            )
+        self.deterministic = bool(deterministic)
+        self.weights = weights
+
+    def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
+        if self.weights == "untrained":
+            reinitialise_weights(self.model, 0 if seed is None else seed)
+        if seed is not None:
+            self.model.set_random_seed(seed)
+        super().reset(observation, info, seed)
+
+    def choose(self, observation: dict[str, np.ndarray]) -> int:
+        action, _ = self.model.predict(observation, deterministic=self.deterministic)
+        return int(action)
+
+
+@register_policy("explorer-untrained")
+class UntrainedMapGoalExplorer(MapGoalExplorer):
+    """The explorer's untrained twin under its own name (records and leaderboard rows apart
+    from the explorer's): :class:`MapGoalExplorer` with ``weights="untrained"``.
+
+    Args:
+        model_path: the checkpoint whose settings and architecture the twin has (None: the
+            packaged one).
+        deterministic: act with the mode of the action distribution (False samples).
+        stall_watchdog: watch the walk for stalls.
+    """
+
+    def __init__(
+        self,
+        model_path: str | None = None,
+        deterministic: bool = False,
+        stall_watchdog: bool = True,
+    ) -> None:
+        super().__init__(model_path, deterministic, stall_watchdog, weights="untrained")
