@@ -16,14 +16,13 @@ from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import resolve_threads
 
-#: How an env makes its pinhole frames by default, one env or batched: the reference ray cast,
-#: so that a default env gives the frames every published figure and the behaviour
-#: fingerprint were made with. ``"auto"`` (the rasterizer where it is cheaper) is the setting
-#: for throughput, which the learning entry points (``naruto_gym.rl``) pass: the rasterizer's
-#: depths differ from the ray cast's by float rounding (and, at exact edge ties, by another
-#: triangle), which flips decisions of the frontier and NARUTO policies, so fixed-seed
-#: episodes take other paths with it (docs/environment.md, "Pinhole backends").
-PINHOLE_BACKEND = "raycast"
+#: How an env makes its pinhole frames by default, one env or batched: ``"auto"``, the exact
+#: rasterizer wherever it is the faster (at most 4 triangles per pixel for one frame, 16 for a
+#: batched env's frames drawn together), else the ray cast. Its frames are the reference ray
+#: cast's up to float rounding of the depths (float64 against Embree's float32) and exact edge
+#: ties; ``pinhole_backend="raycast"`` gives the reference frames bit for bit
+#: (docs/environment.md, "Pinhole backends").
+PINHOLE_BACKEND = "auto"
 
 
 @dataclass(frozen=True)
