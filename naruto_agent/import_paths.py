@@ -73,9 +73,10 @@ def _import_module(module_name: str, target: str, what: str) -> ModuleType:
 
 
 def _importable_from(folder: str, top: str) -> bool:
-    """True when ``folder`` holds the module or package ``top``."""
+    """True when ``folder`` holds the module or package ``top`` (a package may be a folder
+    without ``__init__.py``, as ``examples/`` is)."""
     base = Path(folder) / top
-    return base.with_suffix(".py").is_file() or (base / "__init__.py").is_file()
+    return base.with_suffix(".py").is_file() or base.is_dir()
 
 
 def _load_file(source: str, what: str) -> ModuleType:

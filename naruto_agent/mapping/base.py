@@ -1,18 +1,19 @@
-"""What every mapper offers the agent, and the device setting they share.
+"""What every mapper offers the agent (:class:`Mapper`), and the checks mappers share.
 
-A mapper turns posed RGB-D frames into a map. The agent needs four things from it: a
-planner's view (an SDF volume and an uncertainty volume on a coarse grid), a mesh to score,
-an SDF to query at arbitrary points (MAD), and a way to save and restore it.
+A mapper turns posed RGB-D frames into a map. The NARUTO agent reads from it: the measure of
+explored space (``observed_space``), a planner's view (an SDF volume and an uncertainty volume
+on a coarse grid), an SDF to query at arbitrary points (MAD) and a mesh to score.
 """
 
 from __future__ import annotations
 
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import torch
 import trimesh
 
+from naruto_agent.mapping.observed_space import ObservedSpace
 from naruto_agent.mapping.sdf_volume import SdfVolume
 
 
@@ -70,42 +71,96 @@ def check_frame(
     return rgb, depth, pose
 
 
+#: The methods the NARUTO agent calls on its mapper (:class:`Mapper`).
+MAPPER_METHODS = ("integrate", "integrate_panorama", "planner_view", "sdf", "extract_mesh")
+#: Every member the NARUTO agent reads from its mapper: :data:`MAPPER_METHODS` and the
+#: observed space.
+MAPPER_MEMBERS = ("observed_space", *MAPPER_METHODS)
+
+
 @runtime_checkable
 class Mapper(Protocol):
-    """The interface shared by :class:`~naruto_agent.mapping.NeuralMapper` and
-    :class:`~naruto_agent.mapping.TsdfUncertaintyMapper`."""
+    """Everything the NARUTO agent reads from its mapper (``docs/mappers.md``).
 
-    @property
-    def device(self) -> torch.device:
-        """Where the map lives."""
-        ...
+    :class:`~naruto_agent.mapping.TsdfUncertaintyMapper` and
+    :class:`~naruto_agent.mapping.NeuralMapper` are mappers; a mapper of one's own is named by
+    ``NarutoPolicy(mapper_kind="package.module:ClassName")`` (see
+    :mod:`naruto_agent.mapping.registry`). World frame: metres, z up; poses camera-to-world
+    with OpenCV camera axes; SDFs positive in free space. ``isinstance(x, Mapper)`` checks
+    that the members exist; :func:`missing_members` also checks what ``observed_space`` is.
+    The project's mappers also offer ``device``, ``state_dict()`` and ``load_state_dict()``,
+    which the agent does not read.
+
+    Attributes:
+        observed_space: the unknown / free / occupied grid of every frame's rays, with its
+            frontier (:class:`~naruto_agent.mapping.observed_space.ObservedSpace`): the agent
+            reads its observed fraction (progress), free voxels (candidate goals), frontier
+            and measured top (the scan's extent). The mapper feeds it: ``integrate_depth``
+            with each frame, ``integrate_panorama`` with each panorama.
+    """
+
+    observed_space: ObservedSpace
 
     def integrate(
         self, rgb: np.ndarray, depth: np.ndarray, camera_to_world: np.ndarray, frame_index: int
     ) -> bool:
         """Take one frame; the mapper applies its own keyframe / mapping schedule.
 
-        Returns True when the map changed (a mapping step ran), so the planner knows when to
-        query it again.
+        Args:
+            rgb: (H, W, 3) uint8 colour image.
+            depth: (H, W) float32 z-depth in metres, 0 where there is no hit.
+            camera_to_world: 4x4 pose, OpenCV camera axes (x right, y down, z forward).
+            frame_index: the frame's index in the episode (0 for the first).
+
+        Returns:
+            True when the map changed (a mapping step ran): the agent reads
+            :meth:`planner_view` again only after such a step.
         """
         ...
 
-    def planner_view(self, voxel_size: float = 0.1) -> tuple[SdfVolume, SdfVolume]:
-        """(SDF volume in metres, uncertainty volume: 0 except on surface voxels)."""
+    def integrate_panorama(self, panorama: np.ndarray, position: np.ndarray) -> None:
+        """Take a depth panorama (equirectangular, radial distance in metres, 0 where there
+        is no hit) taken at world ``position``; the project's mappers add its rays to
+        :attr:`observed_space` (``observed_space.integrate_panorama``)."""
         ...
 
-    def extract_mesh(self, voxel_size: float = 0.02) -> trimesh.Trimesh:
-        """Marching-cubes mesh with vertex colours."""
+    def planner_view(self, voxel_size: float = 0.1) -> tuple[SdfVolume, SdfVolume]:
+        """The planner's map on one grid of ``voxel_size`` voxels over the scene's bounds.
+
+        Returns:
+            (SDF volume in metres, positive in free space; uncertainty volume on the same
+            grid: a variance, 0 except on surface voxels and the frontier, highest where the
+            map knows least). Both share shape, origin and voxel size.
+        """
         ...
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
-        """(N,) signed distance in metres at (N, 3) world points (positive in free space)."""
+        """(N,) signed distance in metres at (N, 3) world points (positive in free space);
+        read by the scoring (MAD) and by ``Policy.reconstruction()``."""
         ...
 
-    def state_dict(self) -> dict[str, Any]:
-        """Everything needed to restore the map."""
+    def extract_mesh(self, voxel_size: float = 0.02) -> trimesh.Trimesh:
+        """The map's surface as a world-frame mesh in metres (vertex colours if any), for the
+        scores and the pictures; ``voxel_size`` is the resolution asked for (2 cm: the
+        final mesh; coarser for previews)."""
         ...
 
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Restore a map saved by :meth:`state_dict`."""
-        ...
+
+def missing_members(mapper: object) -> list[str]:
+    """What ``mapper`` lacks of :class:`Mapper`, each with what it should be (empty: none).
+
+    Methods must be callable; ``observed_space`` must be an
+    :class:`~naruto_agent.mapping.observed_space.ObservedSpace`.
+    """
+    missing = [f"{name}()" for name in MAPPER_METHODS if not callable(getattr(mapper, name, None))]
+    observed = getattr(mapper, "observed_space", None)
+    if not isinstance(observed, ObservedSpace):
+        what = "missing" if observed is None else f"a {type(observed).__name__}"
+        missing.insert(0, f"observed_space (an ObservedSpace; got {what})")
+    return missing
+
+
+def missing_methods(cls: type) -> list[str]:
+    """The methods of :data:`MAPPER_METHODS` that class ``cls`` does not define (its
+    ``observed_space`` may be set in ``__init__``, so only an instance can show it)."""
+    return [f"{name}()" for name in MAPPER_METHODS if not callable(getattr(cls, name, None))]

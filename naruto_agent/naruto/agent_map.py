@@ -1,7 +1,8 @@
 """The NARUTO agent's map of one episode, as its planner and move checks read it.
 
-:class:`AgentMap` wraps the mapper (TSDF or neural) and holds the *planner view*: the SDF and
-uncertainty volumes on the planner's grid (0.1 m voxels over the scene's bounding box), with
+:class:`AgentMap` wraps the mapper (TSDF, neural or one's own: a
+:class:`~naruto_agent.mapping.Mapper`) and holds the *planner view*: the SDF and uncertainty
+volumes on the planner's grid (0.1 m voxels over the scene's bounding box), with
 the space the agent learned to avoid (:class:`~naruto_agent.naruto.recovery.BlockedSpace`)
 blocked in the SDF and the targets of reached goals damped in the uncertainty. The view is
 read from the mapper only when a mapping step made it stale and someone needs it.
@@ -11,14 +12,13 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from naruto_agent.mapping import NeuralMapper, SdfVolume, TsdfUncertaintyMapper
+from naruto_agent.mapping import Mapper, SdfVolume, make_mapper
 from naruto_agent.mapping.observed_space import ObservedSpace
-from naruto_agent.naruto.config import NarutoConfig
+from naruto_agent.naruto.config import MAPPERS, NarutoConfig
 from naruto_agent.naruto.recovery import BlockedSpace
 from naruto_agent.planning import FreeSpaceComponents
 from naruto_agent.policies.base import EnvContext
@@ -26,29 +26,32 @@ from naruto_agent.policies.base import EnvContext
 
 def build_mapper(
     name: str, context: EnvContext, config: NarutoConfig, device: str, rng: np.random.Generator,
-) -> TsdfUncertaintyMapper | NeuralMapper:
-    """The mapper of a new episode.
+    settings: dict[str, Any] | None = None,
+) -> Mapper:
+    """The mapper of a new episode (:func:`~naruto_agent.mapping.make_mapper`).
 
     Args:
-        name: ``"tsdf"`` or ``"neural"``.
+        name: ``"tsdf"``, ``"neural"``, another registered name or an import path.
         context: the env's context (bounds and camera).
-        config: the agent's settings (the mapper's own section is used).
+        config: the agent's settings: ``"tsdf"`` and ``"neural"`` take their own section.
         device: the mapper's device.
-        rng: the agent's randomness; the neural mapper draws its seed from it.
+        rng: the agent's randomness; a mapper with a seed (the neural one) draws it from it.
+        settings: keyword arguments of any other mapper.
+
+    Raises:
+        ValueError: the mapper cannot be built, or lacks what the agent reads.
     """
-    if name == "tsdf":
-        return TsdfUncertaintyMapper(context.bounds, context.camera,
-                                     replace(config.tsdf, device=device))
-    neural = replace(config.neural, device=device, seed=int(rng.integers(2**31 - 1)))
-    return NeuralMapper(context.bounds, context.camera, neural)
+    if name in MAPPERS:
+        settings = {"config": getattr(config, name)}
+    return make_mapper(name, context.bounds, context.camera, device=device, rng=rng,
+                       settings=settings)
 
 
 class AgentMap:
     """The mapper and the planner view of one episode, with the blocked space applied.
 
     Args:
-        mapper: the episode's mapper (anything with ``integrate``, ``integrate_panorama``,
-            ``planner_view`` and ``observed_space`` as the project's mappers have them).
+        mapper: the episode's mapper (a :class:`~naruto_agent.mapping.Mapper`).
         config: the agent's settings.
         timings: the dict the ``"mapping"`` and ``"planner_view"`` seconds are added to (a
             new one when None).
@@ -63,7 +66,7 @@ class AgentMap:
         timings: seconds spent by phase.
     """
 
-    def __init__(self, mapper: Any, config: NarutoConfig,
+    def __init__(self, mapper: Mapper, config: NarutoConfig,
                  timings: dict[str, float] | None = None) -> None:
         self.mapper = mapper
         self.config = config

@@ -19,9 +19,11 @@ from naruto_agent.planning import PlannerConfig
 from naruto_agent.policies.config import pop_guard_settings, refuse_renamed_settings
 from naruto_gym.utils.checks import check_integer, check_number
 
-#: The mappers the agent can build (``NarutoPolicy(mapper_kind=...)``).
+#: The shipped mappers, each with its settings section of the same name.
 MAPPERS = ("tsdf", "neural")
-"""Names of the mappers the agent can run on (``NarutoPolicy(mapper_kind=...)``)."""
+"""The shipped mappers (``NarutoPolicy(mapper_kind=...)``), each set by the
+:class:`NarutoConfig` section of its name; any other registered name or import path is
+taken too (:mod:`naruto_agent.mapping.registry`)."""
 
 
 def _goal_search_defaults() -> GoalSearchConfig:

@@ -20,6 +20,10 @@ Mappers (``mapper_kind=``; ``policy.mapper`` is the mapper object of the episode
 * ``"neural"``: :class:`~naruto_agent.mapping.NeuralMapper`, the published system (neural
   field, NLL-trained uncertainty grid, active ray sampling); slow on a CPU, so use it with a
   GPU (``device="auto"`` picks CUDA).
+* one's own: a name registered with :func:`~naruto_agent.mapping.register_mapper`, or an
+  import path ``"package.module:ClassName"`` / ``"path/to/file.py:ClassName"`` of a class
+  with every member of :class:`~naruto_agent.mapping.Mapper` (``docs/mappers.md``), built
+  with ``mapper_settings``.
 
 The agent never gets stuck for good: a move the env refuses (``collided`` /
 ``collision_reason`` in the step info) blocks its target in the agent's own map, and when
@@ -40,13 +44,14 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import trimesh
 
 from naruto_agent.guards import ScanGuard
-from naruto_agent.mapping import NeuralMapper, SdfVolume, TsdfUncertaintyMapper
+from naruto_agent.mapping import Mapper, SdfVolume
+from naruto_agent.mapping.registry import mapper_factory
 from naruto_agent.naruto.agent_map import AgentMap, build_mapper
 from naruto_agent.naruto.config import MAPPERS, NarutoConfig, build_config
 from naruto_agent.naruto.goal_planning import GoalPlanner
@@ -84,8 +89,14 @@ class NarutoPolicy(Policy):
     """NARUTO: uncertainty-aware goal search + E-RRT on the agent's own map ("pose" actions).
 
     Args:
-        mapper_kind: ``"tsdf"`` (fast, default) or ``"neural"`` (the published mapper; slow on
-            a CPU).
+        mapper_kind: ``"tsdf"`` (fast, default), ``"neural"`` (the published mapper; slow on
+            a CPU), another registered name, or ``"package.module:ClassName"`` /
+            ``"path/to/file.py:ClassName"`` of a mapper of one's own
+            (:mod:`naruto_agent.mapping.registry`); one that lacks a member of
+            :class:`~naruto_agent.mapping.Mapper` is refused here (a class's methods) or at
+            ``reset`` (what the built mapper holds).
+        mapper_settings: keyword arguments of a mapper of one's own (the shipped ones take
+            the ``tsdf`` and ``neural`` sections of ``config`` instead).
         config: full settings; ``settings`` override its fields (see
             :func:`~naruto_agent.naruto.config.build_config`).
         device: device of the mapper and the planner's nearest-neighbour search ("auto":
@@ -95,6 +106,7 @@ class NarutoPolicy(Policy):
 
     Attributes:
         mapper_kind: the kind of mapper each episode builds (``mapper`` is the object).
+        mapper_settings: the keyword arguments of a mapper of one's own.
         config: the settings.
         machine: the state machine (``machine.history`` holds the state of every action).
         monitor: progress, failed plans and goals of the episode.
@@ -114,9 +126,10 @@ class NarutoPolicy(Policy):
 
     def __init__(
         self,
-        mapper_kind: Literal["tsdf", "neural"] = "tsdf",
+        mapper_kind: str = "tsdf",
         config: NarutoConfig | None = None,
         device: str = "auto",
+        mapper_settings: dict[str, Any] | None = None,
         **settings: Any,
     ) -> None:
         super().__init__()
@@ -125,9 +138,16 @@ class NarutoPolicy(Policy):
                 f"NarutoPolicy's mapper= was renamed: pass mapper_kind={settings['mapper']!r} "
                 "(policy.mapper is the mapper object)"
             )
-        if mapper_kind not in MAPPERS:
-            raise ValueError(f"mapper_kind must be one of {MAPPERS}, got {mapper_kind!r}")
+        try:
+            mapper_factory(mapper_kind)
+        except ValueError as error:
+            raise ValueError(f"mapper_kind: {error}") from error
+        if mapper_settings and mapper_kind in MAPPERS:
+            raise ValueError(f"mapper_settings are for a mapper of one's own; the {mapper_kind} "
+                             f"mapper's settings are its section: pass {mapper_kind}="
+                             f"{dict(mapper_settings)!r}")
         self.mapper_kind = mapper_kind
+        self.mapper_settings = dict(mapper_settings or {})
         self.device = device
         self.config = build_config(config, **settings)
         self.machine = NarutoStateMachine(self.config.max_rotation_step_deg,
@@ -153,7 +173,7 @@ class NarutoPolicy(Policy):
 
     # -- the episode's state, read-only ------------------------------------------------------
     @property
-    def mapper(self) -> TsdfUncertaintyMapper | NeuralMapper | None:
+    def mapper(self) -> Mapper | None:
         """The map of the current episode (None before ``reset``)."""
         return None if self.agent_map is None else self.agent_map.mapper
 
@@ -213,7 +233,7 @@ class NarutoPolicy(Policy):
         super().reset(observation, info, seed)
         self._rng = np.random.default_rng(self.config.seed if seed is None else seed)
         mapper = build_mapper(self.mapper_kind, self.context, self.config, self.device,
-                              self._rng)
+                              self._rng, self.mapper_settings)
         if not self.config.stay_in_scanned_space:
             mapper.observed_space.configure(support_below_m=None)
         self.machine.reset()
