@@ -40,8 +40,8 @@ CURVE_COLUMNS = (
     "completion_cm",
     "accuracy_cm",
 )
-#: What the whole-surface completion ratio counts, printed beside it: the observable ratio
-#: is the one to read, as no camera inside a room sees the outer faces of its walls.
+#: What the whole-surface completion figures count, printed beside them: the observable ones
+#: are those to read, as no camera inside a room sees the outer faces of its walls.
 WHOLE_SURFACE_NOTE = (
     "counts every face of the mesh, the outer faces of walls and other sides no camera "
     "inside can see included"
@@ -283,11 +283,12 @@ def summary_text(metrics: dict[str, Any], folder: Path) -> str:
             f"{metrics['policy']} on {metrics['scene']}, seed {metrics['seed']}: "
             f"{metrics['steps']} steps, {height} x {width} (H x W) frames",
             f"  observable completion ratio {number('observable_completion_ratio_pct', '%')} "
-            f"(of the surface a camera inside the scene can see) | accuracy "
-            f"{number('accuracy_cm', 'cm')} | completion {number('completion_cm', 'cm')}",
-            f"  whole-surface completion ratio {number('completion_ratio_pct', '%')}: "
-            f"{WHOLE_SURFACE_NOTE}",
-            f"  map: {metrics['map']}, {metrics['mesh_faces']:,} faces",
+            f"| observable completion {number('observable_completion_cm', 'cm')} "
+            f"(of the surface a camera inside the scene can see)",
+            f"  whole-surface completion ratio {number('completion_ratio_pct', '%')} "
+            f"| whole-surface completion {number('completion_cm', 'cm')}: {WHOLE_SURFACE_NOTE}",
+            f"  map: {metrics['map']}, {metrics['mesh_faces']:,} faces | accuracy "
+            f"{number('accuracy_cm', 'cm')} (its surface to the ground truth)",
             f"  coverage {metrics['coverage_pct']:.2f} % | path length "
             f"{metrics['path_length_m']:.2f} m | collisions {metrics['collisions']} | time "
             f"per step {times['total']:.0f} ms ({phases})",

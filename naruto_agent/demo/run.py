@@ -9,6 +9,7 @@ evaluation points, the goals the policy chose, and subsampled ``rgb_array`` fram
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import inspect
 import json
@@ -24,7 +25,7 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from naruto_agent.cli_args import parse_dataclass_args
+from naruto_agent.cli_args import dataclass_parser
 from naruto_agent.demo.episode import Episode
 from naruto_agent.episode_loop import (
     EpisodeHook,
@@ -51,7 +52,7 @@ class DemoArgs:
     """Settings of the demo."""
 
     policy: str = "naruto"
-    """passive, random, frontier, naruto, or a Policy subclass as 'package.module:ClassName'
+    """a registered policy (listed below), or a Policy subclass as 'package.module:ClassName'
     (a module in the working directory is found) or 'path/to/file.py:ClassName'"""
     scene: str = "replica_like_room"
     """catalogue name, 'NAME:OPENINGS', 'procedural:room:SEED', or a mesh path ('PATH@AXIS'
@@ -108,10 +109,25 @@ class DemoArgs:
     """show a progress bar"""
 
 
+def build_parser() -> argparse.ArgumentParser:
+    """The demo's ``argparse`` parser, one flag per field of :class:`DemoArgs`; its epilog
+    lists the registered policies, read from the registry (every name ``--policy`` takes)."""
+    from naruto_agent.policies import policy_names
+
+    parser = dataclass_parser(
+        DemoArgs, description="Run one episode and write what to look at.", prog="naruto-demo"
+    )
+    parser.epilog = (
+        f"registered policies: {', '.join(policy_names())}; any other Policy subclass as "
+        "package.module:ClassName or path/to/file.py:ClassName."
+    )
+    return parser
+
+
 def parse_args(argv: list[str] | None = None) -> DemoArgs:
     """Parse command-line flags (``--policy naruto --max-episode-steps 500 ...``) into
     :class:`DemoArgs`."""
-    return parse_dataclass_args(DemoArgs, argv, "Run one episode and write what to look at.")
+    return DemoArgs(**vars(build_parser().parse_args(argv)))
 
 
 def check_args(args: DemoArgs) -> None:

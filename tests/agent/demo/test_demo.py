@@ -99,13 +99,20 @@ def test_printed_summary_names_the_scores(naruto_run, capsys):
     ):
         assert words in text
     assert f"{metrics['completion_ratio_pct']:.2f} %" in text
-    # The observable ratio comes first; the whole-surface one says what it counts.
+    # The observable figures come first, together; the whole-surface ones are labelled so
+    # and say what they count; no line mixes the two surfaces.
     lines = text.splitlines()
     assert lines[1].startswith(
-        f"  observable completion ratio {metrics['observable_completion_ratio_pct']:.2f} %"
+        f"  observable completion ratio {metrics['observable_completion_ratio_pct']:.2f} % "
+        f"| observable completion {metrics['observable_completion_cm']:.2f} cm"
     )
-    assert lines[2].startswith("  whole-surface completion ratio ")
-    assert "outer faces of walls" in lines[2]
+    assert "whole-surface" not in lines[1]
+    assert lines[2].startswith(
+        f"  whole-surface completion ratio {metrics['completion_ratio_pct']:.2f} % "
+        f"| whole-surface completion {metrics['completion_cm']:.2f} cm"
+    )
+    assert "outer faces of walls" in lines[2] and "observable" not in lines[2]
+    assert f"accuracy {metrics['accuracy_cm']:.2f} cm" in lines[3]
     assert text.index("observable completion ratio") < text.index("whole-surface")
     assert "68 x 120 (H x W) frames" in text  # height first, as the docs write "170 x 300"
 
@@ -143,7 +150,7 @@ def test_gif_holds_the_subsampled_frames(naruto_run):
         last = np.asarray(gif.convert("RGB"))
     assert last.std() > 0  # a picture, not a blank frame
     # The agent's map from above is the right-hand panel: part mapped, part not yet.
-    right = last[:, -last.shape[1] // 5:].reshape(-1, 3).astype(int)
+    right = last[:, -last.shape[1] // 5 :].reshape(-1, 3).astype(int)
     unmapped = np.all(np.abs(right - UNMAPPED_RGB) <= 12, axis=1)
     assert 0.05 < unmapped.mean() < 0.95
 
