@@ -25,13 +25,19 @@ from pathlib import Path
 from typing import Any
 
 from naruto_agent.benchmark import suite
+from naruto_agent.benchmark.checks import leaderboard_differences, leaderboard_note
 from naruto_agent.benchmark.executors import pending_specs, run_local, run_ray
 from naruto_agent.benchmark.plots import plot_curves, plot_trajectories
 from naruto_agent.benchmark.records import load_records, write_json_atomic
 from naruto_agent.benchmark.runner import run_episode_safe
 from naruto_agent.benchmark.spec import EpisodeSpec, build_specs
 from naruto_agent.benchmark.suite_report import write_statistics
-from naruto_agent.benchmark.tables import failure_lines, markdown_table, summarise
+from naruto_agent.benchmark.tables import (
+    failure_lines,
+    markdown_table,
+    protocol_lines,
+    summarise,
+)
 from naruto_agent.cli_args import dataclass_parser
 
 DEFAULT_MAX_EPISODE_STEPS = 500
@@ -105,6 +111,17 @@ class Args:
     the viewer extra; local workers only)"""
     progress: bool = True
     """show a progress bar"""
+    # How the scores are made (docs/replica.md, docs/mp3d.md).
+    ground_truth: str = "auto"
+    """what the scores are measured against: auto (a Replica scene's mesh_culled.ply when
+    its folder holds one, a ground_truth.json's mesh, else the scene mesh) or full (never
+    the culled mesh)"""
+    reference_image_scale: float = 0.25
+    """camera resolution factor the reference map is fused at, whatever --image-scale the
+    policy sees (0.25: the leaderboard's, so its scores compare with the leaderboard's)"""
+    release_reading: bool = False
+    """add the published release's reading of the same scores to results.md (its accuracy is
+    our completion, its completion ratio our precision)"""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -138,14 +155,21 @@ def _json_dict(text: str, name: str) -> dict[str, Any]:
     return value
 
 
-def write_reports(output_dir: str | Path, plots: bool = True) -> dict[str, Any]:
-    """Table, summary and plots of every record under ``output_dir``; returns the summary."""
+def write_reports(
+    output_dir: str | Path, plots: bool = True, release_reading: bool = False
+) -> dict[str, Any]:
+    """Table, summary and plots of every record under ``output_dir``; returns the summary.
+
+    ``release_reading`` adds the published release's reading of the scores to the table;
+    the lines under it say what the scores were measured against and how the run's settings
+    differ from the leaderboard's (:func:`~naruto_agent.benchmark.tables.protocol_lines`)."""
     output_dir = Path(output_dir)
     records = load_records(output_dir)
     rows = summarise(records)
-    table = markdown_table(rows)
-    (output_dir / "results.md").write_text(table)
-    summary = {"rows": rows, "episodes": len(records)}
+    protocol = protocol_lines(records)
+    table = markdown_table(rows, release_reading)
+    (output_dir / "results.md").write_text(table + "".join(f"\n{line}\n" for line in protocol))
+    summary = {"rows": rows, "episodes": len(records), "protocol": protocol}
     write_json_atomic(output_dir / "summary.json", summary)
     if plots and records:
         plot_curves(records, output_dir / "curves.png")
@@ -207,6 +231,8 @@ def episode_specs(args: Args, argv: list[str] | None = None) -> list[EpisodeSpec
         device=args.reference_device,
         policy_kwargs=_json_dict(args.policy_kwargs, "policy-kwargs"),
         env_kwargs=_json_dict(args.env_kwargs, "env-kwargs"),
+        ground_truth=args.ground_truth,
+        reference_image_scale=args.reference_image_scale,
     )
     if not args.suite:
         return build_specs(
@@ -229,6 +255,7 @@ def run(args: Args, argv: list[str] | None = None) -> int:
     check_policies(args.policies)
     specs = episode_specs(args, argv)
     todo = pending_specs(specs, args.output_dir)
+    _print_leaderboard_notes(specs)
     print(
         f"{len(specs)} episodes, {len(specs) - len(todo)} already done, running {len(todo)} "
         f"({'Ray ' + args.ray_address if args.ray_address else f'{args.workers} workers'})",
@@ -243,7 +270,7 @@ def run(args: Args, argv: list[str] | None = None) -> int:
             failed = run_local(
                 todo, args.output_dir, args.workers, args.progress, **recording_fn(args)
             )
-    summary = write_reports(args.output_dir, args.plots)
+    summary = write_reports(args.output_dir, args.plots, args.release_reading)
     output_dir = Path(args.output_dir)
     print((output_dir / "results.md").read_text())
     print(
@@ -255,6 +282,19 @@ def run(args: Args, argv: list[str] | None = None) -> int:
         print(f"{len(failures)} failed episode(s); the traceback is in each record:")
         print("\n".join(failures))
     return failed
+
+
+def _print_leaderboard_notes(specs: list[EpisodeSpec]) -> None:
+    """Say, before the run, how its settings differ from the leaderboard's (nothing when they
+    do not)."""
+    notes = []
+    for spec in specs:
+        found = leaderboard_differences(spec.as_dict())
+        note = leaderboard_note(found["differences"], found["scores_comparable"])
+        if note and note not in notes:
+            notes.append(note)
+    for note in notes:
+        print(f"note: {note}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -22,12 +22,14 @@ from typing import Any
 
 import numpy as np
 
+from naruto_agent.benchmark.checks import leaderboard_differences
 from naruto_agent.benchmark.records import STATUS_FAILED, STATUS_OK, source_commit
-from naruto_agent.benchmark.spec import EpisodeSpec
+from naruto_agent.benchmark.reference_frames import ReferenceFusion, reference_camera
+from naruto_agent.benchmark.spec import EpisodeSpec, SceneSpec
+from naruto_agent.benchmark.step_progress import step_hooks
 from naruto_agent.episode_loop import (
     EpisodeHook,
     EvalPoints,
-    FrameFusion,
     StepRecords,
     run_episode_loop,
 )
@@ -74,12 +76,15 @@ def run_episode(
         records = StepRecords()
         hooks: list[EpisodeHook] = []
         reconstruction = None
+        truth, truth_scene = _ground_truth(spec, base)
         if spec.reconstruct:
             from naruto_gym.evaluation import EpisodeReconstruction
 
-            reconstruction = EpisodeReconstruction(base.camera, device=spec.device)
-            hooks.append(FrameFusion(reconstruction))
+            camera = reference_camera(spec.reference_image_scale)
+            reconstruction = EpisodeReconstruction(camera, device=spec.device)
+            hooks.append(ReferenceFusion(reconstruction))
         hooks.append(records)
+        hooks.extend(step_hooks(spec.episode_id))  # moves the harness's progress bar
         recorder = _recorder(spec, base, record_dir)
         if recorder is not None:
             map_mesh = reconstruction.mesh if reconstruction is not None else None
@@ -87,7 +92,13 @@ def run_episode(
         completion_curve: list[dict[str, Any]] = []
 
         def evaluate(step: int, last: bool) -> None:
-            scores = _score(reconstruction, base, spec.checkpoint_samples, spec.eval_samples_per_m2)
+            scores = _score(
+                reconstruction,
+                base,
+                truth_scene,
+                spec.checkpoint_samples,
+                spec.eval_samples_per_m2,
+            )
             completion_curve.append({"step": step, **_curve_point(scores)})
             if recorder is not None:
                 recorder.log_scores(step, scores)
@@ -112,8 +123,10 @@ def run_episode(
         own_metrics: dict[str, Any] | None = None
         if reconstruction is not None:
             clock = time.perf_counter()
-            metrics = _score(reconstruction, base, spec.eval_samples, spec.eval_samples_per_m2)
-            own_metrics = _score_own_map(policy, base, spec)
+            metrics = _score(
+                reconstruction, base, truth_scene, spec.eval_samples, spec.eval_samples_per_m2
+            )
+            own_metrics = _score_own_map(policy, base, spec, truth_scene)
             evaluation_s += time.perf_counter() - clock
             completion_curve.append({"step": steps_run, **_curve_point(metrics)})
         per_step = max(steps_run, 1)
@@ -129,6 +142,11 @@ def run_episode(
             "steps_run": steps_run,
             "action_mode": policy.preferred_action_mode,
             "camera": base.camera.as_dict(),
+            # How the scores were made: the reference map's camera, the ground truth, and
+            # what differs from the leaderboard's settings.
+            "reference_camera": None if reconstruction is None else reconstruction.camera.as_dict(),
+            "ground_truth": truth.as_dict(),
+            "leaderboard": leaderboard_differences(spec.as_dict()),
             "metrics": metrics,
             "own_map_metrics": own_metrics,
             "coverage_final": records.coverage[-1],
@@ -186,12 +204,24 @@ def _recorder(spec: EpisodeSpec, env: Any, record_dir: str | None) -> Any | None
     return recorder
 
 
+def _ground_truth(spec: EpisodeSpec, env: Any) -> tuple[Any, Any]:
+    """The episode's :class:`~naruto_gym.evaluation.GroundTruth` and its surface (the env's
+    scene unless the scene folder names another, e.g. Replica's ``mesh_culled.ply``)."""
+    from naruto_gym.evaluation import find_ground_truth, load_ground_truth
+
+    scene = SceneSpec(spec.scene, spec.up_axis, spec.mesh_units)
+    truth = find_ground_truth(
+        scene.scene if scene.is_path else None, spec.up_axis, spec.ground_truth
+    )
+    return truth, load_ground_truth(truth, env.scene, spec.mesh_units)
+
+
 def _score(
-    reconstruction: Any, env: Any, num_samples: int, samples_per_m2: float
+    reconstruction: Any, env: Any, truth_scene: Any, num_samples: int, samples_per_m2: float
 ) -> dict[str, Any]:
     """Metrics of the episode's reference map, on the whole and on the observable surface."""
     return reconstruction.evaluate(
-        env.scene,
+        truth_scene,
         num_samples=num_samples,
         reference_samples_per_m2=samples_per_m2 or None,
         renderer=env.renderer,
@@ -199,19 +229,34 @@ def _score(
     )
 
 
-def _score_own_map(policy: Any, env: Any, spec: EpisodeSpec) -> dict[str, Any] | None:
+def _score_own_map(
+    policy: Any, env: Any, spec: EpisodeSpec, truth_scene: Any
+) -> dict[str, Any] | None:
     """Metrics of the policy's own map (MAD with its SDF), None for a policy without one."""
     own = policy.reconstruction()
     if own is None:
         return None
     if len(own.mesh.faces) == 0:
         return {"note": "the policy's own map has no surface"}
-    return env.evaluate(
-        own.mesh,
+    settings = dict(
         num_samples=spec.eval_samples,
         reference_samples_per_m2=spec.eval_samples_per_m2 or None,
         sdf=own.sdf,
     )
+    if truth_scene is env.scene:
+        return env.evaluate(own.mesh, **settings)
+    from naruto_gym.evaluation import evaluate_reconstruction, trajectory_length
+
+    metrics = evaluate_reconstruction(
+        own.mesh,
+        truth_scene,
+        poses=env.poses,
+        camera=env.camera,
+        renderer=env.renderer,
+        observable_mask=env.observable_surface.mask,
+        **settings,
+    )
+    return {**metrics.as_dict(), "trajectory_length_m": trajectory_length(env.poses)}
 
 
 def _curve_point(scores: dict[str, Any]) -> dict[str, Any]:

@@ -28,7 +28,11 @@ SPEC_ENV_KEYWORDS = frozenset(
 )
 #: Fields added to :class:`EpisodeSpec` after records were stored, with their defaults: the
 #: hash leaves them out at these values.
-HASH_OMITS_AT_DEFAULT: dict[str, Any] = {"mesh_units": "m"}
+HASH_OMITS_AT_DEFAULT: dict[str, Any] = {
+    "mesh_units": "m",
+    "ground_truth": "auto",
+    "reference_image_scale": 0.25,
+}
 _NO_DEFAULT = object()
 
 
@@ -144,6 +148,12 @@ class EpisodeSpec:
             :mod:`naruto_gym.evaluation.metrics`.
         device: Open3D device of the reference mapper.
         mesh_units: length unit of a mesh file (``"m"``, ``"cm"``, ``"mm"``).
+        ground_truth: what the scores are measured against: ``"auto"`` (the culled ground
+            truth where the scene folder holds one) or ``"full"``; see
+            :mod:`naruto_gym.evaluation.ground_truth`.
+        reference_image_scale: the camera resolution factor the reference map is fused at,
+            whatever ``image_scale`` the policy sees (0.25, the leaderboard's); see
+            :mod:`naruto_agent.benchmark.reference_frames`.
     """
 
     scene: str
@@ -161,6 +171,8 @@ class EpisodeSpec:
     eval_samples_per_m2: float = 2_000.0
     device: str = "auto"
     mesh_units: str = "m"
+    ground_truth: str = "auto"
+    reference_image_scale: float = 0.25
 
     def __post_init__(self) -> None:
         check_integer("seed", self.seed, low=0)
@@ -175,6 +187,8 @@ class EpisodeSpec:
                 "unit with --up-axis / --mesh-units or PATH@AXIS)"
             )
         check_number("image_scale", self.image_scale, low=0.0)
+        check_number("reference_image_scale", self.reference_image_scale, low=0.0)
+        check_choice("ground_truth", self.ground_truth, ("auto", "full"))
         check_bool("reconstruct", self.reconstruct)
         check_integer("eval_points", self.eval_points, low=0)
         check_integer("eval_samples", self.eval_samples, low=1)

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from naruto_agent.benchmark.checks import leaderboard_differences, leaderboard_note
 from naruto_agent.benchmark.records import STATUS_FAILED, STATUS_OK, read_record
 from naruto_agent.benchmark.spec import EpisodeSpec
 
@@ -32,6 +33,14 @@ COLUMNS: tuple[tuple[str, str, int], ...] = (
     ("Policy ms/step", "time_per_step_ms.policy", 1),
     ("Env ms/step", "time_per_step_ms.env", 1),
     ("Map ms/step", "time_per_step_ms.mapping", 1),
+)
+#: The published release's reading of the same reference-map scores
+#: (:data:`naruto_gym.evaluation.metrics.RELEASE_READING`: it passes the meshes in swapped
+#: order), for setting a run beside published tables.
+RELEASE_COLUMNS: tuple[tuple[str, str, int], ...] = (
+    ("Release acc. (cm)", "metrics.completion_cm", 2),
+    ("Release comp. (cm)", "metrics.accuracy_cm", 2),
+    ("Release comp. ratio (%)", "metrics.precision_pct", 1),
 )
 
 
@@ -60,7 +69,7 @@ def summarise(
 
     The std is the sample standard deviation over seeds (0 with one seed).
     """
-    keys = keys or tuple(key for _, key, _ in COLUMNS)
+    keys = keys or tuple(dict.fromkeys(key for _, key, _ in COLUMNS + RELEASE_COLUMNS))
     groups: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
     for record in records:
         groups[(record["scene"], record["policy"])].append(record)
@@ -86,20 +95,66 @@ def summarise(
     return rows
 
 
-def markdown_table(rows: list[dict[str, Any]]) -> str:
-    """Markdown table of :func:`summarise` rows (mean +- std over seeds)."""
-    header = ["Scene", "Policy", "Seeds", "Failed", "Steps", *[title for title, _, _ in COLUMNS]]
+def markdown_table(rows: list[dict[str, Any]], release_reading: bool = False) -> str:
+    """Markdown table of :func:`summarise` rows (mean +- std over seeds).
+
+    Args:
+        rows: :func:`summarise` rows.
+        release_reading: add :data:`RELEASE_COLUMNS`, the published release's reading of the
+            same scores, after the table's columns.
+    """
+    columns = COLUMNS + RELEASE_COLUMNS if release_reading else COLUMNS
+    header = ["Scene", "Policy", "Seeds", "Failed", "Steps", *[title for title, _, _ in columns]]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for row in rows:
         cells = [row["scene"], row["policy"], str(len(row["seeds"])), str(row["failed"])]
         cells.append("/".join(str(step) for step in row["steps"]) or "-")
-        for _, key, decimals in COLUMNS:
-            stat = row[key]
+        for _, key, decimals in columns:
+            stat = row.get(key)
             cells.append(
                 "-" if stat is None else f"{stat['mean']:.{decimals}f} ± {stat['std']:.{decimals}f}"
             )
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def ground_truth_label(record: dict[str, Any]) -> str:
+    """What an episode was scored against (``"culled ground truth (mesh_culled.ply)"``,
+    ``"full mesh"``, ...); a record without the field was scored against its scene's mesh."""
+    return (record.get("ground_truth") or {}).get("label") or "full mesh"
+
+
+def record_leaderboard(record: dict[str, Any]) -> dict[str, Any]:
+    """An episode's differences from the leaderboard's settings
+    (:func:`~naruto_agent.benchmark.checks.leaderboard_differences`). A record without a
+    ``reference_camera`` fused its reference map from the policy's frames, so a policy
+    camera other than the leaderboard's makes its scores incomparable."""
+    found = record.get("leaderboard") or leaderboard_differences(record.get("config") or {})
+    if "reference_camera" not in record and found["differences"]:
+        return {**found, "scores_comparable": False}
+    return found
+
+
+def protocol_lines(records: list[dict[str, Any]]) -> list[str]:
+    """The lines printed beside a table that say how its scores were made: the ground truth
+    of each scene, and the settings that differ from the leaderboard's (with whether the
+    scores still compare)."""
+    scenes: dict[str, set[str]] = defaultdict(set)
+    for record in records:
+        scenes[ground_truth_label(record)].add(record["scene"])
+    lines = [
+        f"Ground truth: {label}: {', '.join(sorted(names))}."
+        for label, names in sorted(scenes.items())
+    ]
+    notes = {}
+    for record in records:
+        found = record_leaderboard(record)
+        note = leaderboard_note(found["differences"], found["scores_comparable"])
+        if note:
+            notes.setdefault(note, []).append(record["episode_id"])
+    for note, episodes in notes.items():
+        lines.append(f"Note ({len(episodes)} episodes): {note}")
+    return lines
 
 
 def failure_reason(record: dict[str, Any]) -> str:

@@ -6,6 +6,7 @@ from naruto_gym.evaluation.culling import (
     cull_mesh,
     visible_vertex_mask,
 )
+from naruto_gym.evaluation.ground_truth import GroundTruth, find_ground_truth, load_ground_truth
 from naruto_gym.evaluation.metrics import (
     ReconstructionMetrics,
     mean_absolute_distance_cm,
@@ -14,6 +15,7 @@ from naruto_gym.evaluation.metrics import (
     point_to_mesh_distance,
     reconstruction_metrics,
     reference_sample_count,
+    release_reading,
     trajectory_length,
 )
 from naruto_gym.evaluation.scoring import EpisodeReconstruction, evaluate_reconstruction
@@ -24,16 +26,20 @@ __all__ = [
     "CullingCache",
     "CullingSettings",
     "EpisodeReconstruction",
+    "GroundTruth",
     "ReconstructionMetrics",
     "TsdfFusionMapper",
     "cull_mesh",
     "evaluate_reconstruction",
+    "find_ground_truth",
+    "load_ground_truth",
     "mean_absolute_distance_cm",
     "mesh_area",
     "nearest_distances",
     "point_to_mesh_distance",
     "reconstruction_metrics",
     "reference_sample_count",
+    "release_reading",
     "resolve_open3d_device",
     "sample_mesh_surface",
     "trajectory_length",

@@ -12,7 +12,10 @@ Definitions (as in NARUTO, Feng et al., CVPR 2024, and the works it compares wit
   truth, and **F-score** (%): the harmonic mean of precision and completion ratio.
 
 The released NARUTO evaluation passes the two meshes in swapped order, which exchanges
-accuracy with completion; this module uses the definitions above.
+accuracy with completion; this module uses the definitions above, and
+:func:`release_reading` gives the release's reading of the same scores: its "accuracy" is
+the completion above, its "completion" the accuracy, and its "completion ratio" the share
+of *reconstruction* samples within 5 cm of the ground truth, the precision above.
 
 Surfaces are compared through area-uniform point samples (200,000 per mesh by default,
 seeded), nearest neighbours through a KD-tree (``scipy.spatial.cKDTree``, all cores).
@@ -30,7 +33,7 @@ meshes up to 100 m^2 nothing changes: both are the same ``num_samples`` points, 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -160,9 +163,7 @@ def mesh_area(vertices: np.ndarray, faces: np.ndarray) -> float:
     return float(0.5 * np.linalg.norm(cross, axis=1).sum())
 
 
-def reference_sample_count(
-    area_m2: float, num_samples: int, samples_per_m2: float | None
-) -> int:
+def reference_sample_count(area_m2: float, num_samples: int, samples_per_m2: float | None) -> int:
     """Samples a mesh of ``area_m2`` gets as the reference of nearest distances: at least
     ``num_samples``, at least ``samples_per_m2`` per m^2 (None: no density bound), at most
     :data:`MAX_REFERENCE_SAMPLES`."""
@@ -185,6 +186,30 @@ def _reference_and_queries(
     if count == num_samples:
         return points, points
     return sample_mesh_surface(arrays[0], arrays[1], count, seed + 1, what=what), points
+
+
+def canonical_mesh(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The same surface with its vertices and triangles in an order fixed by their geometry.
+
+    Seeded samples of a mesh depend on the order of its triangles, and a mapper's mesh
+    extraction may list them in another order on every call (threads); in this order the
+    scores of a surface do not depend on how it was listed. Vertices are sorted by their
+    coordinates (equal ones merged), each triangle starts at its lowest vertex (its winding
+    kept), and triangles are sorted by their vertices.
+
+    Returns:
+        (vertices (V', 3) float64, faces (F, 3) int64), F the same as given.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    if len(faces) == 0:
+        return vertices, faces.reshape(0, 3)
+    unique, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    faces = inverse.reshape(-1)[faces]
+    start = np.argmin(faces, axis=1)
+    faces = np.take_along_axis(faces, (start[:, None] + np.arange(3)) % 3, axis=1)
+    order = np.lexsort((faces[:, 2], faces[:, 1], faces[:, 0]))
+    return unique, faces[order]
 
 
 # -- metrics ---------------------------------------------------------------------------
@@ -314,8 +339,7 @@ def _sdf_values(sdf: Callable[[np.ndarray], np.ndarray], points: np.ndarray) -> 
     values = np.asarray(sdf(points), dtype=np.float64).reshape(-1)
     if values.shape != (len(points),):
         raise ValueError(
-            f"the SDF callable must return one value per point ({len(points)}), "
-            f"got {values.shape}"
+            f"the SDF callable must return one value per point ({len(points)}), got {values.shape}"
         )
     if not np.isfinite(values).all():
         raise ValueError(
@@ -356,6 +380,34 @@ def mean_absolute_distance_cm(
             )
         values = point_to_mesh_distance(gt_points, *arrays)
     return float(np.mean(np.abs(values)) * 100.0)
+
+
+RELEASE_READING: dict[str, str] = {
+    "release_accuracy_cm": "completion_cm",
+    "release_completion_cm": "accuracy_cm",
+    "release_completion_ratio_pct": "precision_pct",
+}
+"""The published release's names of the scores, each mapped to the score it computes under
+this module's definitions (the release passes the meshes in swapped order)."""
+
+
+def release_reading(metrics: Mapping[str, Any]) -> dict[str, float | None]:
+    """The published release's reading of scores made by this module.
+
+    Args:
+        metrics: a :class:`ReconstructionMetrics` ``as_dict()`` (or any mapping with
+            ``accuracy_cm``, ``completion_cm`` and ``precision_pct``; a missing one reads as
+            None).
+
+    Returns:
+        ``release_accuracy_cm`` (our completion), ``release_completion_cm`` (our accuracy) and
+        ``release_completion_ratio_pct`` (our precision): the figures the release would print
+        for the same reconstruction and ground truth, to set beside published tables.
+    """
+    return {
+        name: None if metrics.get(ours) is None else float(metrics[ours])
+        for name, ours in RELEASE_READING.items()
+    }
 
 
 def trajectory_length(poses: np.ndarray) -> float:

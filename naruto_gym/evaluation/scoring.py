@@ -31,6 +31,7 @@ from naruto_gym.evaluation.metrics import (
     DEFAULT_REFERENCE_SAMPLES_PER_M2,
     DEFAULT_THRESHOLD_M,
     ReconstructionMetrics,
+    canonical_mesh,
     reconstruction_metrics,
     trajectory_length,
 )
@@ -113,6 +114,8 @@ def evaluate_reconstruction(
             "the reconstruction has no triangles; nothing to score (did the mapper fuse any "
             "frame with valid depth?)"
         )
+    # The seeded samples then depend on the surface only, not on the order it is listed in.
+    vertices, faces = canonical_mesh(vertices, faces)
     note = ""
     culled = None
     if cull and poses is not None:
