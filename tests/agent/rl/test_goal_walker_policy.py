@@ -19,15 +19,7 @@ from naruto_agent.rl.scripted_explorer import (
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation
 from naruto_gym.rl.goal_actions import GoalActions
 from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES
-from naruto_gym.sensors.pinhole import PinholeCamera
-
-ENV = {
-    "action_mode": "discrete",
-    "camera": PinholeCamera(16, 16, 8, 8, 7.5, 7.5),
-    "panorama_shape": (32, 64),
-    "coverage_samples": 1000,
-    "scene": "procedural:room:7",
-}
+from tests.agent.rl.small_env import ENV
 
 
 def _table(rows: list[dict[str, float]], slots: int = 6) -> np.ndarray:

@@ -19,18 +19,10 @@ from naruto_agent.rl.explorer_policy import (  # noqa: E402
     MapGoalExplorer,
     UntrainedMapGoalExplorer,
 )
-from naruto_gym.sensors.pinhole import PinholeCamera  # noqa: E402
+from tests.agent.rl.small_env import ENV  # noqa: E402
 
 if not PACKAGED_MODEL.exists():
     pytest.skip("no explorer checkpoint is shipped", allow_module_level=True)
-
-ENV = {
-    "action_mode": "discrete",
-    "camera": PinholeCamera(16, 16, 8, 8, 7.5, 7.5),
-    "panorama_shape": (32, 64),
-    "coverage_samples": 1000,
-    "scene": "procedural:room:7",
-}
 
 
 def _episode(policy: MapGoalExplorer, seed: int, steps: int = 45) -> list[int]:
