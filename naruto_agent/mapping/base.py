@@ -162,5 +162,8 @@ def missing_members(mapper: object) -> list[str]:
 
 def missing_methods(cls: type) -> list[str]:
     """The methods of :data:`MAPPER_METHODS` that class ``cls`` does not define (its
-    ``observed_space`` may be set in ``__init__``, so only an instance can show it)."""
+    ``observed_space`` may be set in ``__init__``, so only an instance can show it; a class
+    that forwards members with ``__getattr__`` shows none until it has an instance)."""
+    if hasattr(cls, "__getattr__"):
+        return []
     return [f"{name}()" for name in MAPPER_METHODS if not callable(getattr(cls, name, None))]
