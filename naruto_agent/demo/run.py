@@ -67,8 +67,9 @@ class DemoArgs:
     seed: int = 0
     """seed of the start pose and of the policy"""
     mapper_kind: str = "tsdf"
-    """the policy's mapper, for a policy that takes one (NARUTO: tsdf, fast, or neural, the
-    published one, slow on a CPU)"""
+    """the policy's mapper, for a policy that takes one (NARUTO: tsdf, fast; neural, the
+    published one, slow on a CPU; or one's own as 'package.module:ClassName', see
+    docs/mappers.md)"""
     device: str = "auto"
     """device of the policy's mapper, for a policy that takes one (auto: CUDA when present)"""
     reference_device: str = "auto"
