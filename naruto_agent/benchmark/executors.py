@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import queue
 import signal
 import threading
 import time
@@ -26,9 +27,12 @@ from tqdm.auto import tqdm
 from naruto_agent.benchmark.records import STATUS_OK, is_done, write_json_atomic
 from naruto_agent.benchmark.runner import failed_record, run_episode_safe
 from naruto_agent.benchmark.spec import EpisodeSpec
+from naruto_agent.benchmark.step_progress import report_steps_to
 from naruto_gym.utils.threads import available_cpus
 
 MAX_POOL_RESTARTS_PER_EPISODE = 1
+#: Seconds the driver waits for an episode to finish before it counts the steps reported.
+REPORT_WAIT_S = 0.5
 
 
 def pending_specs(specs: Iterable[EpisodeSpec], output_dir: str | Path) -> list[EpisodeSpec]:
@@ -36,24 +40,78 @@ def pending_specs(specs: Iterable[EpisodeSpec], output_dir: str | Path) -> list[
     return [spec for spec in specs if not is_done(spec.record_path(output_dir), spec.config_hash)]
 
 
-class _Progress:
-    """Writes records as they come and keeps a progress bar."""
+class RunProgress:
+    """Writes records as they come and keeps a progress bar of the steps taken.
 
-    def __init__(self, output_dir: Path, total: int, show: bool) -> None:
+    The bar counts steps of every episode to run: running episodes move it as they step
+    (:meth:`steps`, fed by :mod:`naruto_agent.benchmark.step_progress`), and a finished one
+    adds the steps it did not report (all of them where its steps are not reported: Ray tasks,
+    an episode that failed or ended early).
+
+    Args:
+        output_dir: the run's output folder.
+        specs: the episodes to run.
+        show: show the bar.
+
+    Attributes:
+        failed: episodes recorded as failed so far.
+        finished: episodes recorded so far.
+        total_steps: the steps of all episodes (the bar's total).
+        steps_counted: the steps counted on the bar so far.
+        steps_reported: per episode id, the steps counted on the bar.
+        steps_while_running: steps counted on the bar before their episode's record came.
+    """
+
+    def __init__(self, output_dir: Path, specs: list[EpisodeSpec], show: bool) -> None:
         self.output_dir = output_dir
-        self.bar = tqdm(total=total, desc="episodes", disable=not show, unit="ep")
+        self.total_episodes = len(specs)
+        self.total_steps = sum(spec.steps for spec in specs)
+        self.steps_counted = 0
+        self.bar = tqdm(total=self.total_steps, desc="steps", disable=not show, unit="step")
         self.failed = 0
+        self.finished = 0
+        self.steps_reported: dict[str, int] = {}
+        self.steps_while_running = 0
+        self._steps_of = {spec.episode_id: spec.steps for spec in specs}
+
+    def steps(self, episode_id: str, count: int) -> None:
+        """Count ``count`` more steps of a running episode (never beyond its length)."""
+        done = self.steps_reported.get(episode_id, 0)
+        count = max(0, min(count, self._steps_of.get(episode_id, 0) - done))
+        if count:
+            self.steps_reported[episode_id] = done + count
+            self.steps_while_running += count
+            self._count(count)
 
     def done(self, spec: EpisodeSpec, record: dict[str, Any]) -> None:
+        """Write ``spec``'s record and count the steps of it the bar has not counted."""
         write_json_atomic(spec.record_path(self.output_dir), record)
+        self.finished += 1
         if record.get("status") != STATUS_OK:
             self.failed += 1
-        self.bar.update(1)
+        self._count(spec.steps - self.steps_reported.get(spec.episode_id, 0))
+        self.steps_reported[spec.episode_id] = spec.steps
         status = record.get("status")
-        self.bar.set_postfix_str(f"{spec.episode_id}: {status}; failed {self.failed}")
+        self.bar.set_postfix_str(
+            f"episodes {self.finished}/{self.total_episodes}, failed {self.failed}; "
+            f"{spec.episode_id}: {status}"
+        )
+
+    def drain(self, reports: Any) -> None:
+        """Count the steps waiting in a queue of ``(episode_id, steps)`` reports."""
+        while True:
+            try:
+                episode_id, count = reports.get_nowait()
+            except queue.Empty:
+                return
+            self.steps(episode_id, count)
 
     def close(self) -> None:
         self.bar.close()
+
+    def _count(self, steps: int) -> None:
+        self.steps_counted += steps
+        self.bar.update(steps)
 
 
 def stop_with_parent(parent_pid: int, interval_s: float = 1.0) -> None:
@@ -68,9 +126,10 @@ def stop_with_parent(parent_pid: int, interval_s: float = 1.0) -> None:
     threading.Thread(target=watch, name="naruto-stop-with-parent", daemon=True).start()
 
 
-def start_worker(parent_pid: int, threads: int) -> None:
+def start_worker(parent_pid: int, threads: int, step_reports: Any = None) -> None:
     """Initializer of a local worker process: it stops with its parent
-    (:func:`stop_with_parent`) and takes its share of the CPUs.
+    (:func:`stop_with_parent`), takes its share of the CPUs and reports the steps of its
+    episodes to ``step_reports`` (a queue of ``(episode_id, steps)``; None: no reports).
 
     The libraries an episode loads after this (torch, Open3D's OpenMP loops, the env's compiled
     loops in a worker process) size their thread pools from ``OMP_NUM_THREADS``. Unset, each
@@ -80,6 +139,8 @@ def start_worker(parent_pid: int, threads: int) -> None:
     """
     os.environ.setdefault("OMP_NUM_THREADS", str(threads))
     stop_with_parent(parent_pid)
+    if step_reports is not None:
+        report_steps_to(lambda episode_id, steps: step_reports.put((episode_id, steps)))
 
 
 def run_local(
@@ -88,6 +149,7 @@ def run_local(
     workers: int = 2,
     progress: bool = True,
     episode_fn: Callable[[dict[str, Any]], dict[str, Any]] = run_episode_safe,
+    reporter: RunProgress | None = None,
 ) -> int:
     """Run episodes in ``workers`` spawned processes (in this process when ``workers`` is 0).
 
@@ -96,29 +158,33 @@ def run_local(
         output_dir: output folder; records go to ``output_dir/records/...``.
         workers: worker processes (spawn start method: Open3D/Embree are not fork-safe), each
             with an equal share of the CPUs for its thread pools (:func:`start_worker`).
-        progress: show a progress bar.
+        progress: show a progress bar of the steps taken, moved by running episodes.
         episode_fn: picklable function from a spec dict to a record (for tests).
+        reporter: the records' writer and progress bar (default: a :class:`RunProgress`
+            of ``specs`` that shows its bar when ``progress``).
 
     Returns:
         The number of failed episodes.
     """
     output_dir = Path(output_dir)
-    reporter = _Progress(output_dir, len(specs), progress)
+    reporter = reporter or RunProgress(output_dir, specs, progress)
     try:
         if workers <= 0:
+            report_steps_to(reporter.steps)
             for spec in specs:
                 reporter.done(spec, episode_fn(spec.as_dict()))
             return reporter.failed
         attempts = dict.fromkeys(range(len(specs)), 0)
         remaining = list(range(len(specs)))
         context = multiprocessing.get_context("spawn")
+        step_reports = context.Queue()
         share = max(1, available_cpus() // workers)
         while remaining:
             pool = ProcessPoolExecutor(
                 max_workers=workers,
                 mp_context=context,
                 initializer=start_worker,
-                initargs=(os.getpid(), share),
+                initargs=(os.getpid(), share, step_reports),
             )
             try:
                 futures: dict[Future, int] = {
@@ -127,7 +193,10 @@ def run_local(
                 remaining = []
                 outstanding = set(futures)
                 while outstanding:
-                    finished, outstanding = wait(outstanding, return_when=FIRST_COMPLETED)
+                    finished, outstanding = wait(
+                        outstanding, timeout=REPORT_WAIT_S, return_when=FIRST_COMPLETED
+                    )
+                    reporter.drain(step_reports)
                     for future in finished:
                         index = futures[future]
                         try:
@@ -154,6 +223,7 @@ def run_local(
             pool.shutdown(wait=True)
         return reporter.failed
     finally:
+        report_steps_to(None)
         reporter.close()
 
 
@@ -173,7 +243,7 @@ def run_ray(
         address: ``"auto"`` (a running cluster), ``"HOST:PORT"``, or ``"local"`` to start a
             local Ray instance. An already initialised Ray (``ray.init`` called by the user) is
             used as it is.
-        progress: show a progress bar.
+        progress: show a progress bar of the steps taken (moved as each episode finishes).
         num_cpus_per_episode: CPUs Ray reserves for each episode.
         local_cpus: CPUs of a ``"local"`` instance (default: all).
 
@@ -195,7 +265,7 @@ def run_ray(
         else:
             ray.init(address=address, log_to_driver=False)
     remote_episode = ray.remote(num_cpus=num_cpus_per_episode, max_retries=1)(run_episode_safe)
-    reporter = _Progress(Path(output_dir), len(specs), progress)
+    reporter = RunProgress(Path(output_dir), specs, progress)
     try:
         refs = {remote_episode.remote(spec.as_dict()): spec for spec in specs}
         outstanding = list(refs)
