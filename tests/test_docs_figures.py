@@ -603,3 +603,37 @@ def test_a_drifted_figure_fails(tmp_path: Path) -> None:
     assert check_figure(spread, tmp_path) is None
     with pytest.raises(KeyError, match=r"0 items match \[scene=c\]"):
         lookup({"rows": [{"scene": "a"}]}, "rows[scene=c].ms")
+
+
+def stall_check_rows(stall_check: dict[str, Any]) -> dict[str, tuple[str, str, str]]:
+    """Per policy of ``stall_check.json``: its longest stay, mean coverage (%) and mean path
+    (m) over its episodes, as the open-scans page's summary table prints them."""
+    episodes: dict[str, list[dict[str, Any]]] = {}
+    for episode in stall_check["episodes"]:
+        episodes.setdefault(episode["policy"], []).append(episode)
+    return {
+        policy: (
+            str(max(e["longest_stay_steps"] for e in rows)),
+            f"{100.0 * sum(e['coverage'] for e in rows) / len(rows):.1f}",
+            f"{sum(e['path_m'] for e in rows) / len(rows):.1f}",
+        )
+        for policy, rows in episodes.items()
+    }
+
+
+def test_the_open_scans_page_prints_the_stall_checks_summary() -> None:
+    """The stall check's summary table (longest stay, mean coverage and path per policy) is
+    the one ``open_scans/stall_check.json`` gives, with a row for every policy it ran."""
+    source = ROOT / RESULTS / "open_scans" / "stall_check.json"
+    expected = stall_check_rows(json.loads(source.read_text(encoding="utf-8")))
+    page = (ROOT / _OPEN_SCANS_PAGE).read_text(encoding="utf-8")
+    printed = {
+        policy: (stay, coverage, path)
+        for policy, stay, coverage, path in re.findall(
+            r"^\| (\w[\w-]*) \| (\d+) \| ([\d.]+) \| ([\d.]+) \|$", page, re.M
+        )
+    }
+    assert printed == expected, (
+        f"{_OPEN_SCANS_PAGE}'s stall-check summary {printed} differs from {source.name}'s "
+        f"{expected}: update the page's table from the result file"
+    )
