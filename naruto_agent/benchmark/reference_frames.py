@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from naruto_agent.episode_loop import EpisodeHook
+from naruto_agent.episode_loop import FrameFusion
 from naruto_gym.envs.settings import EnvSettings
 from naruto_gym.sensors.pinhole import PinholeCamera, RgbdRenderer
 
@@ -35,7 +35,22 @@ def reference_max_depth_m() -> float:
     return float(EnvSettings().max_depth_m)
 
 
-class ReferenceFusion(EpisodeHook):
+class ReferenceFrames:
+    """What :class:`ReferenceFusion` hands its frames to: it adds each frame to the reference
+    map, or, with a ``renderer``, the renderer's frame at the same pose instead."""
+
+    def __init__(self, reconstruction: Any) -> None:
+        self.reconstruction = reconstruction
+        self.renderer: RgbdRenderer | None = None
+
+    def add_frame(self, rgb: Any, depth: Any, camera_to_world: Any) -> None:
+        """Add the frame at ``camera_to_world`` (rendered anew with a renderer)."""
+        if self.renderer is not None:
+            rgb, depth = self.renderer.render(camera_to_world)
+        self.reconstruction.add_frame(rgb, depth, camera_to_world)
+
+
+class ReferenceFusion(FrameFusion):
     """Fuses a frame of the reference camera at every pose of the episode (the reset's
     included) into ``reconstruction``, under the ``mapping`` phase.
 
@@ -46,18 +61,16 @@ class ReferenceFusion(EpisodeHook):
     frames (same camera and range: no extra work) or frames must be rendered for the map.
     """
 
-    phase = "mapping"
-
     def __init__(self, reconstruction: Any) -> None:
-        self.reconstruction = reconstruction
-        self.renderer: RgbdRenderer | None = None
+        self.frames = ReferenceFrames(reconstruction)
+        super().__init__(self.frames)
 
     def before_reset(self, env: Any, policy: Any) -> None:
         base = env.unwrapped
-        camera = self.reconstruction.camera
+        camera = self.frames.reconstruction.camera
         max_depth_m = reference_max_depth_m()
         same = base.camera == camera and float(base.settings.max_depth_m) == max_depth_m
-        self.renderer = (
+        self.frames.renderer = (
             None
             if same
             else RgbdRenderer(
@@ -73,20 +86,4 @@ class ReferenceFusion(EpisodeHook):
     @property
     def renders_own_frames(self) -> bool:
         """Whether the map's frames are rendered apart from the observations."""
-        return self.renderer is not None
-
-    def on_reset(self, observation: dict[str, Any], info: dict[str, Any]) -> None:
-        self._fuse(observation)
-
-    def on_step(
-        self, step: int, observation: dict[str, Any], info: dict[str, Any], last: bool
-    ) -> None:
-        self._fuse(observation)
-
-    def _fuse(self, observation: dict[str, Any]) -> None:
-        pose = observation["pose"]
-        if self.renderer is None:
-            self.reconstruction.add_frame(observation["rgb"], observation["depth"], pose)
-            return
-        rgb, depth = self.renderer.render(pose)
-        self.reconstruction.add_frame(rgb, depth, pose)
+        return self.frames.renderer is not None
