@@ -10,17 +10,47 @@
 # Debian's chromium (apt-get) and playwright (PyPI); the test starts /usr/bin/chromium
 # through playwright, so `playwright install` (a download of its own browsers) is not needed.
 #
-# torch comes from TORCH_INDEX_URL, by default PyTorch's CPU wheel index, the same as
+# torch is the CPU build (PyPI's Linux wheel brings several GB of CUDA libraries): from pip's
+# configured sources when they already serve it (a wheel folder, a mirror; a dry-run resolve
+# checks, fetching no wheel), else from PyTorch's CPU wheel index, the same as
 #   pip install torch --index-url https://download.pytorch.org/whl/cpu
-# (PyPI's Linux wheel brings several GB of CUDA libraries). A machine whose pip already
-# serves the CPU wheel can set TORCH_INDEX_URL= (empty: pip's configured index).
+# TORCH_INDEX_URL=URL takes torch from URL; TORCH_INDEX_URL= (empty) from pip's configured
+# sources, unchecked.
+#
+#   bash scripts/setup.sh --torch-index   # say where torch would come from, install nothing
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON="${PYTHON:-python3}"
-EXTRAS="${1:-test}"
 TORCH_VERSION="2.13.0"
-TORCH_INDEX_URL="${TORCH_INDEX_URL-https://download.pytorch.org/whl/cpu}"
+CPU_TORCH_INDEX_URL="https://download.pytorch.org/whl/cpu"
 PIP=("$PYTHON" -m pip install --quiet --disable-pip-version-check)
+
+# torch_index: the pip arguments that choose torch's index, one a line (none: pip's
+# configured sources).
+torch_index() {
+    if [ -n "${TORCH_INDEX_URL+set}" ]; then
+        if [ -n "$TORCH_INDEX_URL" ]; then
+            printf '%s\n' --index-url "$TORCH_INDEX_URL"
+        fi
+        return 0
+    fi
+    if "${PIP[@]}" --dry-run --no-deps --ignore-installed --retries 1 --timeout 30 \
+            --report - "torch==$TORCH_VERSION" 2>/dev/null \
+        | "$PYTHON" -c 'import json, sys
+sys.exit(not any("+cpu" in item["metadata"]["version"] for item in json.load(sys.stdin)["install"]))' \
+            2>/dev/null; then
+        return 0
+    fi
+    printf '%s\n' --index-url "$CPU_TORCH_INDEX_URL"
+}
+
+if [ "${1:-}" = "--torch-index" ]; then
+    mapfile -t index < <(torch_index)
+    configured="pip's configured sources"
+    echo "torch==$TORCH_VERSION from: ${index[1]:-$configured}"
+    exit 0
+fi
+EXTRAS="${1:-test}"
 
 # apt_install PACKAGE...: install system packages, as root or through sudo.
 apt_install() {
@@ -41,10 +71,7 @@ fi
 # torch first, pinned, so that the package's torch range never pulls a CUDA build.
 if ! "$PYTHON" -c "import torch, sys; sys.exit(torch.__version__.split('+')[0] != '$TORCH_VERSION')" \
         2>/dev/null; then
-    index=()
-    if [ -n "$TORCH_INDEX_URL" ]; then
-        index=(--index-url "$TORCH_INDEX_URL")
-    fi
+    mapfile -t index < <(torch_index)
     "${PIP[@]}" "torch==$TORCH_VERSION" "${index[@]}"
 fi
 "${PIP[@]}" -e ".[$EXTRAS]"
