@@ -73,9 +73,9 @@ def check_frame(
 
 #: The methods the NARUTO agent calls on its mapper (:class:`Mapper`).
 MAPPER_METHODS = ("integrate", "integrate_panorama", "planner_view", "sdf", "extract_mesh")
-#: Every member the NARUTO agent reads from its mapper: :data:`MAPPER_METHODS` and the
-#: observed space.
 MAPPER_MEMBERS = ("observed_space", *MAPPER_METHODS)
+"""Every member the NARUTO agent reads from its mapper (:class:`Mapper`): the observed space
+and :data:`MAPPER_METHODS`."""
 
 
 @runtime_checkable

@@ -165,3 +165,16 @@ def test_the_demo_refuses_a_bad_mapper_with_the_reason(user_folder, capsys):
         "lacks what the NARUTO agent reads: integrate_panorama(), planner_view(), sdf(), "
         "extract_mesh()"
     ) in capsys.readouterr().err
+
+
+def test_the_mappers_page_example_is_the_one_in_examples():
+    """docs/mappers.md shows examples/my_mapper.py in full (saved as my_mapper.py)."""
+    from tests.docs_examples import load_page
+
+    written = [b for b in load_page(REPO_ROOT / "docs" / "mappers.md") if b.write]
+    assert [b.write for b in written] == ["my_mapper.py"]
+    shipped = (REPO_ROOT / "examples" / "my_mapper.py").read_text(encoding="utf-8")
+    assert written[0].code == shipped, (
+        "docs/mappers.md's my_mapper.py block and examples/my_mapper.py differ: copy the file "
+        "into the page's block"
+    )
