@@ -62,6 +62,13 @@ IDLE_SEARCH_EVERY = 4
 IDLE_LOWEST_M = 0.6
 #: Each turn in place and the turn the other way.
 OPPOSITE_TURN = {TURN_LEFT: TURN_RIGHT, TURN_RIGHT: TURN_LEFT}
+#: Each step's direction, as an angle from the camera's heading.
+STEP_TURNS = {
+    MOVE_FORWARD: 0.0,
+    MOVE_BACKWARD: np.pi,
+    MOVE_LEFT: 0.5 * np.pi,
+    MOVE_RIGHT: -0.5 * np.pi,
+}
 #: Each step and the step that undoes it.
 OPPOSITE_STEP = {
     MOVE_FORWARD: MOVE_BACKWARD,
@@ -78,6 +85,12 @@ def _wrap(angle: float) -> float:
 def _heading(pose: np.ndarray) -> float:
     """The camera's optical axis' direction in the x-y plane (radians)."""
     return float(np.arctan2(pose[1, 2], pose[0, 2]))
+
+
+def _step_direction(pose: np.ndarray, move: int) -> np.ndarray:
+    """The unit x-y direction of a step (forward, backward, left or right) from ``pose``."""
+    heading = _heading(pose) + STEP_TURNS[move]
+    return np.array([np.cos(heading), np.sin(heading)])
 
 
 class GoalWalker:
@@ -157,6 +170,7 @@ class GoalWalker:
         self.moves_without_candidate = np.zeros(n, np.int64)  # idle or wandering, since a goal
         self.floor_heights = np.full(n, np.inf)  # lowest surface seen straight down
         self.climb_ceilings = np.full(n, np.inf)  # height of a refused climb, none above it
+        self.descent_floors = np.full(n, -np.inf)  # height of a refused descent, none below it
         self.glance_left = np.zeros(n, np.int64)  # look-down moves left of a glance
         self.glanced = np.zeros(n, bool)  # the goal's glance is done
         self.wandering = np.zeros(n, bool)  # walking to a place with no candidate in view
@@ -206,6 +220,7 @@ class GoalWalker:
         self.moves_without_candidate[envs] = 0
         self.floor_heights[envs] = np.inf
         self.climb_ceilings[envs] = np.inf
+        self.descent_floors[envs] = -np.inf
         self.glance_left[envs] = 0
         self.glanced[envs] = False
 
@@ -364,7 +379,9 @@ class GoalWalker:
         primitive = self.primitives[i]
         if primitive in (MOVE_UP, MOVE_DOWN):
             clearance = self.map.clearance_up if primitive == MOVE_UP else self.map.clearance_down
-            return int(primitive) if clearance[i] > self.step_m + VERTICAL_MARGIN_M else TURN_LEFT
+            allowed = self._may_climb(i) if primitive == MOVE_UP else self._may_descend(i)
+            roomy = clearance[i] > self.step_m + VERTICAL_MARGIN_M
+            return int(primitive) if roomy and allowed else TURN_LEFT
         grid, origin, cell_m = self.map.grids[i], self.map.origins[i], self.map.cell_m
         pose = self.map.poses[i]
         if move_is_safe(grid, origin, cell_m, pose, primitive, self.step_m, self.inflate):
@@ -377,14 +394,26 @@ class GoalWalker:
         self.last_positions[i] = self.map.poses[i][:3, 3]
         return move
 
-    def _refused(self, i: int) -> bool:
-        """Whether the env refused the forward move sent last (the agent did not move): the
-        cell it led into is marked blocked on the map, and the goal given up."""
-        if self.last_moves[i] != MOVE_FORWARD or not self._stood_still(i):
+    def _note_refusal(self, i: int) -> bool:
+        """Remember a move the env refused (the agent did not move), so that it is not sent
+        again from where it was refused: a refused step marks the cell it led into blocked
+        on the map (the planner, the safety check of primitive moves and the way out of a
+        stay then go around it), a refused climb or descent bounds the height for the
+        episode. The env's checks see what the map cannot (a hole in the floor, the top of
+        a partial scan, a thin or fragmented surface), so its refusal is the evidence.
+        Returns whether a step was refused."""
+        move = int(self.last_moves[i])
+        if move not in (*TRANSLATIONS, MOVE_UP, MOVE_DOWN) or not self._stood_still(i):
             return False
         pose = self.map.poses[i]
-        heading = _heading(pose)
-        direction = np.array([np.cos(heading), np.sin(heading)])
+        z = float(pose[2, 3])
+        if move == MOVE_UP:
+            self.climb_ceilings[i] = min(self.climb_ceilings[i], z)
+            return False
+        if move == MOVE_DOWN:
+            self.descent_floors[i] = max(self.descent_floors[i], z)
+            return False
+        direction = _step_direction(pose, move)
         standing = self.map.cell_of(i, pose[:2, 3])
         reach = self.step_m
         ahead = pose[:2, 3] + reach * direction
@@ -394,7 +423,16 @@ class GoalWalker:
         self.map.mark_blocked(i, float(ahead[0]), float(ahead[1]))
         return True
 
+    def _may_climb(self, i: int) -> bool:
+        """Whether a climb stays below every height the env refused a climb at."""
+        return float(self.map.poses[i][2, 3]) + self.step_m < self.climb_ceilings[i] - 1e-6
+
+    def _may_descend(self, i: int) -> bool:
+        """Whether a descent stays above every height the env refused a descent at."""
+        return float(self.map.poses[i][2, 3]) - self.step_m > self.descent_floors[i] + 1e-6
+
     def _choose(self, i: int) -> int:
+        refused_step = self._note_refusal(i)
         if self.primitives[i] >= 0:
             return self._primitive(i)
         if self.glance_left[i] > 0:
@@ -421,7 +459,7 @@ class GoalWalker:
             else:
                 self._refresh(i)
                 self._go_to(i, 0)
-        if self._refused(i) and self.phases[i] == WALK:
+        if refused_step and self.phases[i] == WALK:
             self.phases[i] = GIVEN_UP
         for _ in range(MAX_GOALS_PER_STEP):
             if self.phases[i] == IDLE:
@@ -490,7 +528,8 @@ class GoalWalker:
         """Whether to step down now: a full turn's worth of moves with nothing in reach, and
         room below."""
         below = self.map.clearance_down[i]
-        return self._idle_descent(i) and below > max(IDLE_LOWEST_M, self.step_m + VERTICAL_MARGIN_M)
+        roomy = below > max(IDLE_LOWEST_M, self.step_m + VERTICAL_MARGIN_M)
+        return self._idle_descent(i) and roomy and self._may_descend(i)
 
     def _height_move(self, i: int) -> int:
         """A vertical move towards the walking height above the floor, or -1 (at it, or
@@ -501,19 +540,16 @@ class GoalWalker:
         if below <= 0:
             return -1
         z = float(self.map.poses[i][2, 3])
-        if self.last_moves[i] == MOVE_UP and self._stood_still(i):
-            self.climb_ceilings[i] = min(self.climb_ceilings[i], z)  # the env refused it
         self.floor_heights[i] = min(self.floor_heights[i], z - below)
         height = z - self.floor_heights[i]
         least = self.step_m + VERTICAL_MARGIN_M
-        if height > WALK_HEIGHT_M + WALK_HEIGHT_TOLERANCE_M and below > least:
+        too_high = height > WALK_HEIGHT_M + WALK_HEIGHT_TOLERANCE_M
+        if too_high and below > least and self._may_descend(i):
             return MOVE_DOWN
         # Nothing measured above (an open scan's sky) is room to climb, up to where the env
         # refused a climb: without it an agent that starts low on an open scan walks its
         # whole episode there, below the furniture that fences its map's slice.
-        room_above = above > least or (
-            self.map.open_above[i] and z + self.step_m < self.climb_ceilings[i] - 1e-6
-        )
+        room_above = self._may_climb(i) and (above > least or self.map.open_above[i])
         if (
             (height < WALK_HEIGHT_M - WALK_HEIGHT_TOLERANCE_M or below < least)
             and room_above
