@@ -23,7 +23,8 @@ What it writes (``--output-dir``)::
         traj.txt                   office0/traj.txt
         cam_params.json            the release's camera
         frames/                    office0/results, when present
-        mesh_culled.ply            the culled mesh, when found
+        mesh_culled.ply            the culled mesh, when found: naruto-benchmark then scores
+                                   against it (naruto_gym.evaluation.ground_truth)
     data/replica/replica_scenes.json   what was checked, per scene
 
 Usage::
