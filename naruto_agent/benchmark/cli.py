@@ -60,9 +60,10 @@ class Args:
     max_episode_steps: int | None = None
     """length of every episode in steps (default 500; with --suite each scene's class
     budget)"""
-    up_axis: str = "z"
+    up_axis: str | None = None
     """up axis of the mesh paths written without @AXIS: z, y, -y, x, -x, -z or auto (from a
-    recognised dataset layout)"""
+    recognised dataset layout, for the external class also from the geometry); default z for
+    --scenes, auto for the external class"""
     mesh_units: str = "m"
     """length unit of the mesh paths (m, cm or mm), rescaled to metres on loading; catalogue
     and procedural scenes are in metres"""
@@ -99,7 +100,11 @@ class Args:
     """run the scene suite's split (test or train) instead of --scenes, every scene with its
     size class's budget"""
     size_class: list[str] = field(default_factory=list)
-    """size classes of --suite (small, apartment, house; default all)"""
+    """size classes of --suite (small, apartment, house; default all three), or external:
+    the scans of --scenes-dir, scenes the generator did not make"""
+    scenes_dir: str | None = None
+    """folder of meshes the external class runs, every mesh file under it a scene (default
+    ../shared/scenes, the sample scans)"""
     variant: str = "closed"
     """variant of the --suite scenes: closed or open (no ceiling, holes)"""
     suite_limit: int = 0
@@ -220,7 +225,7 @@ def episode_specs(args: Args, argv: list[str] | None = None) -> list[EpisodeSpec
     and machine then go to the output folder's ``suite.json``)."""
     suite_points = suite.DEFAULT_EVAL_POINTS if args.suite else DEFAULT_EVAL_POINTS
     settings = dict(
-        up_axis=args.up_axis,
+        up_axis=args.up_axis or "z",
         mesh_units=args.mesh_units,
         image_scale=args.image_scale,
         eval_points=suite_points if args.eval_points is None else args.eval_points,
@@ -242,7 +247,17 @@ def episode_specs(args: Args, argv: list[str] | None = None) -> list[EpisodeSpec
             args.max_episode_steps or DEFAULT_MAX_EPISODE_STEPS,
             **settings,
         )
-    scenes = suite.select_scenes(args.suite, args.size_class, args.variant, args.suite_limit)
+    if args.scenes_dir is not None and suite.EXTERNAL_CLASS not in args.size_class:
+        raise ValueError("--scenes-dir is the external class's folder: add --size-class external")
+    scenes = suite.select_scenes(
+        args.suite,
+        args.size_class,
+        args.variant,
+        args.suite_limit,
+        scenes_dir=args.scenes_dir,
+        up_axis=args.up_axis or "auto",
+        mesh_units=args.mesh_units,
+    )
     specs = suite.suite_specs(scenes, args.policies, args.seeds, args.max_episode_steps, **settings)
     suite.write_manifest(
         args.output_dir, suite.manifest_entries(scenes, args.max_episode_steps), args.suite, argv

@@ -230,7 +230,8 @@ def leaderboard_markdown(
             f"## {size_class}",
             "",
             class_table(summary[size_class], EFFICIENCY_KEYS),
-            "Map quality and the walk (refusals: moves the env refused):",
+            "Map quality and the walk (refusals: moves the env refused; stalled steps: steps "
+            "the policy's stall watchdog counted as stalled):",
             "",
             class_table(summary[size_class], QUALITY_KEYS),
         ]

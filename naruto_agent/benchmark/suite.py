@@ -20,6 +20,17 @@ from typing import Any
 
 from naruto_agent.benchmark.records import read_record, source_commit, write_json_atomic
 from naruto_agent.benchmark.spec import EpisodeSpec, build_specs, parse_scene
+from naruto_gym.scenes.external import (
+    EXTERNAL_CLASS,
+    EXTERNAL_VARIANT,
+    SAMPLE_SCANS,
+    SHARED_SCENES_DIR,
+    ExternalScan,
+    external_scans,
+    external_suite_scenes,
+    missing_sample_scans,
+    sample_scans_dir,
+)
 
 MANIFEST_FILE = "suite.json"
 SPLITS = ("test", "train")
@@ -41,19 +52,33 @@ def suite_module() -> Any:
 
 
 def select_scenes(
-    split: str, size_classes: list[str] | None = None, variant: str = "closed", limit: int = 0
+    split: str,
+    size_classes: list[str] | None = None,
+    variant: str = "closed",
+    limit: int = 0,
+    scenes_dir: str | os.PathLike | None = None,
+    up_axis: str = "auto",
+    mesh_units: str = "m",
 ) -> list[Any]:
     """The suite's :class:`SuiteScene` entries of a split, classes and variant.
 
     Args:
         split: ``"test"`` or ``"train"``.
-        size_classes: the classes (default: all).
-        variant: ``"closed"`` or ``"open"``.
+        size_classes: the classes (default: the generated ones); ``"external"`` adds the
+            external track (:mod:`naruto_gym.scenes.external`), test split only.
+        variant: ``"closed"`` or ``"open"`` (the generated classes; external scans are run
+            as they are).
         limit: keep the first ``limit`` scenes of each class (0: all), for quick checks.
+        scenes_dir: the external track's folder of meshes (default ``../shared/scenes``,
+            the sample scans).
+        up_axis: the up axis of the external meshes (``"auto"``: from each file's dataset
+            layout, else its geometry).
+        mesh_units: the length unit of the external meshes.
 
     Raises:
-        ValueError: an unknown split, class or variant (the message lists the known ones), or
-            a negative limit.
+        ValueError: an unknown split, class or variant (the message lists the known ones), a
+            negative limit, or an external folder with files that are not scans (every
+            problem listed).
     """
     if limit < 0:
         raise ValueError(f"the suite limit must be >= 0 (0: every scene), got {limit}")
@@ -61,14 +86,25 @@ def select_scenes(
     if split not in SPLITS:
         raise ValueError(f"unknown suite split {split!r}; use one of {', '.join(SPLITS)}")
     classes = tuple(size_classes) if size_classes else tuple(suite.SIZE_CLASSES)
-    unknown = [name for name in classes if name not in suite.SIZE_CLASSES]
+    known = (*suite.SIZE_CLASSES, EXTERNAL_CLASS)
+    unknown = [name for name in classes if name not in known]
     if unknown:
-        raise ValueError(
-            f"unknown size class(es) {unknown}; use some of {', '.join(suite.SIZE_CLASSES)}"
-        )
+        raise ValueError(f"unknown size class(es) {unknown}; use some of {', '.join(known)}")
     if variant not in suite.VARIANTS:
         raise ValueError(f"unknown variant {variant!r}; use one of {', '.join(suite.VARIANTS)}")
-    scenes = list(suite.suite_scenes(split=split, size_classes=classes, variants=(variant,)))
+    generated = tuple(name for name in classes if name != EXTERNAL_CLASS)
+    scenes = (
+        list(suite.suite_scenes(split=split, size_classes=generated, variants=(variant,)))
+        if generated
+        else []
+    )
+    if EXTERNAL_CLASS in classes:
+        if split != "test":
+            raise ValueError(
+                "the external class has test scenes only (scans no policy trains on); run it "
+                "with --suite test"
+            )
+        scenes += external_suite_scenes(external_track(scenes_dir, up_axis, mesh_units))
     if limit:
         taken: dict[str, int] = {}
         kept = []
@@ -78,6 +114,35 @@ def select_scenes(
                 kept.append(entry)
         scenes = kept
     return scenes
+
+
+def external_track(
+    scenes_dir: str | os.PathLike | None, up_axis: str = "auto", mesh_units: str = "m"
+) -> list[ExternalScan]:
+    """The external track's checked scans: those of ``scenes_dir``, or the sample scans of
+    ``../shared/scenes`` (those missing are named on stderr; the rest run).
+
+    Raises:
+        ValueError: no such folder (for the sample scans: where they come from), or files
+            that are not scans.
+    """
+    if scenes_dir is None:
+        folder = sample_scans_dir()
+        if not folder.is_dir():
+            raise ValueError(
+                f"the sample scans' folder {SHARED_SCENES_DIR} is not here (it lies beside "
+                "the repository's checkout, outside it for the scans' research-only "
+                "licences); give a folder of your own scans with --scenes-dir"
+            )
+        missing = missing_sample_scans(folder)
+        if missing:
+            print(
+                f"external track: {len(missing)} of the {len(SAMPLE_SCANS)} sample scans are "
+                f"missing from {folder} ({', '.join(missing)}); running the rest",
+                file=sys.stderr,
+            )
+        scenes_dir = folder
+    return external_scans(scenes_dir, up_axis, mesh_units)
 
 
 def suite_specs(
@@ -194,15 +259,17 @@ def read_manifest(output_dir: str | Path) -> dict[str, Any] | None:
     return read_record(Path(output_dir) / MANIFEST_FILE)
 
 
-GROUP_ORDER = ("small", "apartment", "house", "all", "other")
-"""How tables and plots order the groups: the size classes from small to house."""
+GROUP_ORDER = ("small", "apartment", "house", EXTERNAL_CLASS, "all", "other")
+"""How tables and plots order the groups: the size classes from small to house, then the
+external track."""
 
 
 def entry_group(entry: dict[str, Any]) -> str:
     """The group of a manifest entry: its size class, with ``" (open)"`` for the open variant
     (the variants are a second axis, never averaged together)."""
     variant = entry.get("variant", "closed")
-    return str(entry["size_class"]) + ("" if variant == "closed" else f" ({variant})")
+    plain = variant in ("closed", EXTERNAL_VARIANT)
+    return str(entry["size_class"]) + ("" if plain else f" ({variant})")
 
 
 def group_of(record: dict[str, Any], manifest: dict[str, Any] | None) -> str:

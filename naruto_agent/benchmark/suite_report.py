@@ -43,6 +43,7 @@ METRICS: tuple[tuple[str, str, int], ...] = (
     ("MAD (cm)", "mad_cm", 2),
     ("Path (m)", "path_m", 1),
     ("Refusals", "refusals", 1),
+    ("Stalled steps", "stalled_steps", 1),
 )
 EFFICIENCY_KEYS: tuple[str, ...] = (
     "observable_completion_ratio_pct", "auc_steps", "auc_path",
@@ -50,7 +51,8 @@ EFFICIENCY_KEYS: tuple[str, ...] = (
 )
 """The leaderboard's first table: how far and how fast."""
 QUALITY_KEYS: tuple[str, ...] = (
-    "completion_ratio_pct", "accuracy_cm", "completion_cm", "mad_cm", "path_m", "refusals"
+    "completion_ratio_pct", "accuracy_cm", "completion_cm", "mad_cm", "path_m", "refusals",
+    "stalled_steps",
 )
 """The leaderboard's second table: the map's quality and the walk."""
 PAIRED_METRICS: tuple[str, ...] = (
@@ -68,6 +70,7 @@ def episode_values(record: dict[str, Any]) -> dict[str, float | None]:
     }
     values.update(episode_efficiency(record))
     values["refusals"] = _number(record.get("collisions"))
+    values["stalled_steps"] = _number(record.get("stalled_steps"))
     return values
 
 

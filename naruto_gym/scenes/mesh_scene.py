@@ -342,6 +342,13 @@ def _geometry_colours(
     return np.full((len(faces), 3, 3), DEFAULT_SURFACE_RGB, dtype=np.uint8), None, None
 
 
+def rotation_to_z_up(up_axis: str) -> np.ndarray:
+    """The rotation that turns a file's ``up_axis`` (``"x"``, ``"-y"``, ...) to +z."""
+    if up_axis not in _UP_AXIS_TO_Z:
+        raise ValueError(f"up_axis must be one of {sorted(_UP_AXIS_TO_Z)}, got {up_axis!r}")
+    return _UP_AXIS_TO_Z[up_axis].copy()
+
+
 def scene_from_trimesh(
     geometry: trimesh.Trimesh | trimesh.Scene, name: str = "scene", up_axis: UpAxis = "z"
 ) -> Scene:
