@@ -51,7 +51,7 @@ __all__ = ["CHOICE_RULES", "DEFAULT_RULE", "GoalWalkerPolicy", "choose_candidate
 #: The scripted choices (module docstring).
 CHOICE_RULES = ("nearest", "largest", "size-per-metre", "ahead", "random")
 #: The rule of ``goal-walker`` without a ``rule`` keyword: the best on the train split.
-DEFAULT_RULE = "nearest"
+DEFAULT_RULE = "largest"
 #: Metres added to a candidate's path in ``size-per-metre`` (a candidate at the agent's feet
 #: is not worth infinitely more than one a step away).
 PATH_OFFSET_M = 1.0
