@@ -22,12 +22,37 @@ import os
 import sys
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 
 def is_file_source(source: str) -> bool:
     """True when the part of a name before ``:Name`` is a file path (it ends in ``.py`` or
     holds a path separator), not a dotted module name."""
     return source.endswith(".py") or "/" in source or os.sep in source
+
+
+def load_target(name: str, target: str, what: str, registered: list[str]) -> Any:
+    """What ``target`` (``"source:Name"``) names: the ``Name`` attribute of the module or file
+    ``source`` (None when it has none).
+
+    Args:
+        name: the name as the user gave it (a registered name, or the target itself).
+        target: ``"package.module:Name"`` or ``"path/to/file.py:Name"``.
+        what: what the name is of (``"policy"``, ``"mapper"``), for the messages.
+        registered: the registered names, for the message of a name that is neither.
+
+    Raises:
+        ValueError: ``target`` names no ``source:Name``, or its module or file does not load
+            (:func:`import_source`).
+    """
+    if ":" not in target:
+        hint = " (a file needs its class: 'FILE.py:ClassName')" if target.endswith(".py") else ""
+        raise ValueError(
+            f"unknown {what} {name!r}{hint}; use one of {registered}, "
+            "'package.module:ClassName' or 'path/to/file.py:ClassName'"
+        )
+    source, _, attribute = target.rpartition(":")
+    return getattr(import_source(source, target, what), attribute, None)
 
 
 def import_source(source: str, target: str, what: str) -> ModuleType:

@@ -23,7 +23,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from naruto_agent.import_paths import import_source
+from naruto_agent.import_paths import load_target
 from naruto_agent.mapping.base import MAPPER_MEMBERS, Mapper, missing_members, missing_methods
 from naruto_agent.mapping.config import NeuralMapperConfig
 from naruto_agent.mapping.neural_mapper import NeuralMapper
@@ -53,14 +53,7 @@ def register_mapper(name: str, *, replace: bool = False) -> Callable[[FactoryT],
     """
 
     def decorator(factory: FactoryT) -> FactoryT:
-        if not callable(factory):
-            raise TypeError(f"register_mapper({name!r}) needs a class or function, got {factory!r}")
-        lacking = missing_methods(factory) if isinstance(factory, type) else []
-        if lacking:
-            raise TypeError(
-                f"register_mapper({name!r}): {factory.__qualname__} lacks "
-                f"{', '.join(lacking)} ({_GUIDE})"
-            )
+        _refuse_incomplete(factory, f"register_mapper({name!r}): {factory!r}", TypeError)
         holder = MAPPERS.get(name)
         if holder is not None and holder is not factory and not replace:
             raise ValueError(
@@ -93,24 +86,22 @@ def mapper_factory(kind: str) -> Callable[..., Any]:
         raise ValueError(f"mapper_kind must be a string, got {kind!r}")
     if kind in MAPPERS:
         return MAPPERS[kind]
-    if ":" not in kind:
-        raise ValueError(
-            f"unknown mapper {kind!r}; use one of {mapper_names()}, "
-            "'package.module:ClassName' or 'path/to/file.py:ClassName'"
-        )
-    source, _, attribute = kind.rpartition(":")
-    module = import_source(source, kind, "mapper")
-    factory = getattr(module, attribute, None)
+    factory = load_target(kind, kind, "mapper", mapper_names())
     if factory is None:
+        source, _, attribute = kind.rpartition(":")
         raise ValueError(f"cannot import mapper {kind!r}: {source} has no {attribute!r}")
+    _refuse_incomplete(factory, f"mapper {kind!r}", ValueError)
+    return factory
+
+
+def _refuse_incomplete(factory: object, label: str, error: type[Exception]) -> None:
+    """Raise ``error`` naming what ``factory`` lacks: it is not callable, or it is a class
+    without a method of :class:`~naruto_agent.mapping.base.Mapper`."""
     if not callable(factory):
-        raise ValueError(f"mapper {kind!r} is not a class or function, got {factory!r}")
+        raise error(f"{label} is not a class or function, got {factory!r}")
     lacking = missing_methods(factory) if isinstance(factory, type) else []
     if lacking:
-        raise ValueError(
-            f"mapper {kind!r} lacks what the NARUTO agent reads: {', '.join(lacking)} ({_GUIDE})"
-        )
-    return factory
+        raise error(f"{label} lacks what the NARUTO agent reads: {', '.join(lacking)} ({_GUIDE})")
 
 
 def make_mapper(

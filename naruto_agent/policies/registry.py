@@ -22,7 +22,7 @@ from collections.abc import Callable
 from types import ModuleType
 from typing import Any, TypeVar
 
-from naruto_agent.import_paths import import_source, is_file_source
+from naruto_agent.import_paths import import_source, is_file_source, load_target
 from naruto_agent.policies.base import Policy
 
 PolicyT = TypeVar("PolicyT", bound=type[Policy])
@@ -95,16 +95,10 @@ def policy_class(name: str) -> type[Policy]:
     if name in POLICIES:
         return POLICIES[name]
     target = LAZY_POLICIES.get(name, name)
-    if ":" not in target:
-        hint = " (a file needs its class: 'FILE.py:ClassName')" if target.endswith(".py") else ""
-        raise ValueError(
-            f"unknown policy {name!r}{hint}; use one of {policy_names()}, "
-            "'package.module:ClassName' or 'path/to/file.py:ClassName'"
-        )
-    source, _, attribute = target.rpartition(":")
-    module = import_source(source, target, "policy")
-    cls = getattr(module, attribute, None)
+    cls = load_target(name, target, "policy", policy_names())
     if cls is None:
+        source, _, attribute = target.rpartition(":")
+        module = import_source(source, target, "policy")  # loaded already: no second run
         defined = ", ".join(_policy_classes_in(module)) or "none"
         raise ValueError(
             f"cannot import policy {target!r}: {source} has no {attribute!r} (its Policy "

@@ -168,7 +168,9 @@ def test_register_mapper_names_a_class_and_refuses_an_incomplete_one(clean_regis
     assert "recording-test" in mapper_names()
     with pytest.raises(ValueError, match="is taken by"):
         register_mapper("recording-test")(NoObservedSpace)
-    with pytest.raises(TypeError, match="lacks integrate_panorama\\(\\), planner_view\\(\\)"):
+    with pytest.raises(
+        TypeError, match="lacks what the NARUTO agent reads: integrate_panorama\\(\\), planner_view"
+    ):
         register_mapper("incomplete")(NoPanorama)
 
 
