@@ -20,7 +20,9 @@ percentile) over decisions of
 * ``best_minus_<rule>``: the same for each scripted rule of ``goal-walker``
   (:data:`~naruto_agent.rl.scripted_explorer.CHOICE_RULES`),
 
-and the share of decisions with no or one candidate (no leverage by construction). The JSON
+and the share of decisions with no or one candidate (no leverage by construction); the same
+per scene group (a size class and variant of the train split) under ``"groups"``. It prints the
+whole run's as a Markdown table (:func:`leverage_table`). The JSON
 (``--output``) is written after every decision; a rerun with the same settings resumes (an
 episode is played again from its seed, its measured decisions skipped).
 
@@ -211,6 +213,27 @@ def _stats(values: list[float]) -> dict[str, float | int | None]:
     }
 
 
+def scene_group(episode: str) -> str:
+    """The group of an episode key (``SCENE/seedN``): a generated scene's name with its seed
+    as ``*`` (``procedural:small:*:no_ceiling+holes``), any other scene itself."""
+    parts = episode.rpartition("/")[0].split(":")
+    if len(parts) >= 3 and parts[0] == "procedural" and parts[2].isdigit():
+        parts[2] = "*"
+    return ":".join(parts)
+
+
+def grouped_summary(episodes: dict[str, dict[str, Any]], horizons: list[int]) -> dict[str, Any]:
+    """:func:`leverage_summary` of every episode, with the same per scene group
+    (:func:`scene_group`) under ``"groups"``."""
+    groups: dict[str, dict[str, dict[str, Any]]] = {}
+    for key, episode in episodes.items():
+        groups.setdefault(scene_group(key), {})[key] = episode
+    return {
+        **leverage_summary(episodes, horizons),
+        "groups": {name: leverage_summary(own, horizons) for name, own in groups.items()},
+    }
+
+
 def leverage_summary(episodes: dict[str, dict[str, Any]], horizons: list[int]) -> dict[str, Any]:
     """Per horizon, the distributions over decisions with two or more candidates (module
     docstring), in coverage points, and the counts of decisions by candidates."""
@@ -243,6 +266,36 @@ def leverage_summary(episodes: dict[str, dict[str, Any]], horizons: list[int]) -
                 rows.setdefault(key, []).append(value)
         summary["horizons"][str(horizon)] = {key: _stats(v) for key, v in rows.items()}
     return summary
+
+
+#: The rows of the Markdown table, in order, with their titles.
+TABLE_ROWS = {
+    "nearest_gain": "gain of candidate 0 (nearest)",
+    "best_minus_worst": "best - worst",
+    "best_minus_nearest": "best - nearest",
+    **{f"best_minus_{rule}": f"best - {rule}" for rule in CHOICE_RULES if rule != "nearest"},
+    "best_minus_chosen": "best - the model's choice",
+    "chosen_minus_nearest": "the model's choice - nearest",
+}
+
+
+def leverage_table(summary: dict[str, Any]) -> str:
+    """The summary as a Markdown table: a row per quantity, mean / median / 90th percentile
+    in coverage points per horizon."""
+    horizons = list(summary["horizons"])
+    header = ["coverage points", *(f"{h} steps: mean / median / p90" for h in horizons)]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for key, title in TABLE_ROWS.items():
+        cells = []
+        for horizon in horizons:
+            stat = summary["horizons"][horizon].get(key)
+            cells.append(
+                "-"
+                if not stat or stat["mean"] is None
+                else f"{stat['mean']:.2f} / {stat['median']:.2f} / {stat['p90']:.2f}"
+            )
+        lines.append(f"| {title} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def main(args: Args) -> dict[str, Any]:
@@ -285,7 +338,7 @@ def main(args: Args) -> dict[str, Any]:
                 args, model, settings, scene, steps, seed, stored_decisions, save
             )
             episode["done"] = True
-            result["summary"] = leverage_summary(result["episodes"], horizons)
+            result["summary"] = grouped_summary(result["episodes"], horizons)
             write_json_atomic(path, result)
             first = result["summary"]["horizons"][str(horizons[0])]
             spread = first.get("best_minus_worst", {}).get("mean")
@@ -295,9 +348,14 @@ def main(args: Args) -> dict[str, Any]:
                 f"{horizons[0]} steps {spread} points",
                 flush=True,
             )
-    result["summary"] = leverage_summary(result["episodes"], horizons)
+    result["summary"] = grouped_summary(result["episodes"], horizons)
     write_json_atomic(path, result)
-    print(json.dumps(result["summary"], indent=1))
+    summary = result["summary"]
+    print(
+        f"{summary['decisions']} decisions, {summary['mean_candidates']} candidates on average; "
+        f"{summary['no_candidate']} with none, {summary['one_candidate']} with one"
+    )
+    print(leverage_table(summary))
     return result
 
 

@@ -42,6 +42,11 @@ def test_every_candidate_is_walked_on_a_copy_and_a_rerun_resumes(leverage, tmp_p
     spread = result["summary"]["horizons"]["20"]["best_minus_worst"]
     assert spread["n"] == 2 and spread["mean"] >= 0.0
     assert spread["p90"] >= spread["median"] >= 0.0
+    assert (
+        result["summary"]["groups"]["procedural:small:*"]["horizons"]
+        == result["summary"]["horizons"]
+    )
+    assert "| best - worst | " in leverage.leverage_table(result["summary"])
 
     before = output.read_text()
     again = leverage.main(parse_dataclass_args(leverage.Args, argv))
