@@ -12,6 +12,16 @@ Each id also has a vector entry point: ``gymnasium.make_vec(id, num_envs=64,
 vectorization_mode="vector_entry_point")`` gives the batched env of
 :func:`naruto_gym.vector.make_vector_env` (``NarutoReconVectorEnv`` in this process, or
 ``ShardedVectorEnv`` over ``workers`` processes).
+
+Its parts: :mod:`~naruto_gym.envs` (the single env) and :mod:`~naruto_gym.vector` (the batched
+envs); :mod:`~naruto_gym.sensors` (pinhole and panorama frames), :mod:`~naruto_gym.motion`
+(actions, collisions, the scanned space), :mod:`~naruto_gym.coverage` (the reward) and
+:mod:`~naruto_gym.observability` (the surface an agent can ever see, compiled in
+``observability_kernels``); :mod:`~naruto_gym.scenes` (meshes, the generator, the catalogue,
+the suite); :mod:`~naruto_gym.evaluation` (scoring); :mod:`~naruto_gym.wrappers` (learning
+observations, final metrics) and :mod:`~naruto_gym.rl` (the explorer's map and goal actions,
+SB3 and RLlib adapters); :mod:`~naruto_gym.geometry`, :mod:`~naruto_gym.rendering` (the
+top-down picture) and :mod:`~naruto_gym.utils`.
 """
 
 from gymnasium.envs.registration import register

@@ -7,6 +7,7 @@ every module, including imports made inside functions.
 from __future__ import annotations
 
 import ast
+import re
 from collections import defaultdict
 from pathlib import Path
 
@@ -231,3 +232,21 @@ def test_the_wrappers_package_imports_its_modules_at_the_top() -> None:
                     ):
                         hidden.append(f"{name}:{inner.lineno} imports {inner.module}")
     assert not hidden, "imports inside functions:\n" + "\n".join(hidden)
+
+
+PACKAGE_INITS = sorted(path for name, path in MODULES.items() if path.name == "__init__.py")
+
+
+@pytest.mark.parametrize("init", PACKAGE_INITS, ids=lambda path: path.parent.name)
+def test_every_package_says_what_it_holds(init: Path) -> None:
+    """Each package opens with a docstring; a top-level package's names every one of its
+    subpackages and modules, so that a part added is a part described."""
+    doc = ast.get_docstring(ast.parse(init.read_text())) or ""
+    where = init.relative_to(ROOT)
+    assert doc.strip(), f"{where} has no docstring: say in one line what the package holds"
+    if init.parent.name not in PACKAGES:
+        return
+    parts = [path.stem for path in init.parent.glob("*.py") if path.name != "__init__.py"]
+    parts += [path.name for path in init.parent.iterdir() if (path / "__init__.py").is_file()]
+    unnamed = sorted(part for part in parts if not re.search(rf"\b{part}\b", doc))
+    assert not unnamed, f"{where}'s docstring does not name {unnamed}: say what they hold"

@@ -2,8 +2,13 @@
 
 * :mod:`~naruto_agent.benchmark.spec`: :class:`EpisodeSpec` and :func:`build_specs`.
 * :mod:`~naruto_agent.benchmark.runner`: :func:`run_episode` (one episode -> a record).
+* :mod:`~naruto_agent.benchmark.reference_frames`: the frames the reference map is fused from
+  (the leaderboard's camera at the poses the policy reached).
 * :mod:`~naruto_agent.benchmark.executors`: :func:`run_local` (spawned processes) and
-  :func:`run_ray` (Ray tasks), both resumable, writing records atomically.
+  :func:`run_ray` (Ray tasks), both resumable, writing records atomically, with a progress bar
+  of the steps taken (:mod:`~naruto_agent.benchmark.step_progress`).
+* :mod:`~naruto_agent.benchmark.checks`: a run's checks before it starts (scene names, the
+  settings that differ from the leaderboard's).
 * :mod:`~naruto_agent.benchmark.tables` and :mod:`~naruto_agent.benchmark.plots`: reports.
 * :mod:`~naruto_agent.benchmark.suite`: the scene suite as episodes (``--suite``).
 * :mod:`~naruto_agent.benchmark.efficiency`: area under the completion-ratio curve, steps and

@@ -5,7 +5,8 @@
 * :func:`free_steps_along_segment`: NARUTO's segment collision check (2 cm samples, 5 cm
   agent radius), counted from the start side.
 * :func:`plan_path` with :class:`PlannerConfig`: RRT and E-RRT ("direct line" and "fast tree"
-  switchable), and :func:`reachable_voxels`; :func:`shortcut_path` shortens a planned path.
+  switchable), and :func:`reachable_voxels`; :func:`shortcut_path` shortens a planned path;
+  :class:`FreeSpaceComponents`: which parts of the free space are connected.
 * :func:`plan_rotations`, :func:`slerp_rotations`, :func:`order_views_greedily`: in-place
   turns towards target views in steps of at most ``max_rotation_deg``.
 """

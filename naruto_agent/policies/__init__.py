@@ -1,4 +1,5 @@
-"""Exploration policies: the interface, three baselines, adapters and a registry by name.
+"""Exploration policies: the interface, three baselines, adapters, a registry by name and a
+stall watchdog.
 
 * :class:`Policy` / :class:`EnvContext`: the interface (bind to an env, reset with the first
   observation and info, act on each observation).
@@ -12,8 +13,9 @@
 * :class:`PointsLayer`, :class:`LinesLayer`, :class:`BoxesLayer`, :class:`ScalarLayer`:
   what a policy shows of its thinking (:meth:`Policy.view_layers`) in a recording.
 * :func:`register_policy`, :func:`make_policy`, :func:`policy_class`, :func:`policy_names`:
-  the registry (``"passive"``, ``"random"``, ``"frontier"``, ``"naruto"``, and any
-  ``"package.module:ClassName"``).
+  the registry (every registered name, and any ``"package.module:ClassName"``).
+* :mod:`~naruto_agent.policies.watchdog`: the stall watchdog, which notices a policy that
+  stops getting anywhere.
 
 See docs/policies.md for the interface and how to add a policy.
 """

@@ -1,4 +1,6 @@
-"""Reconstruction scoring: metrics, mesh culling, a reference TSDF mapper, one-call scoring."""
+"""Reconstruction scoring: metrics (and the release's reading of them), mesh culling, the ground
+truth a scene is scored against, a reference TSDF mapper (fusing on a background thread),
+one-call scoring."""
 
 from naruto_gym.evaluation.culling import (
     CullingCache,

@@ -1,5 +1,13 @@
-"""Scenes: loading meshes, the procedural generator, the shipped catalogue and the benchmark
-suite."""
+"""Scenes: meshes loaded into a z-up metric world (:mod:`~naruto_gym.scenes.mesh_scene`,
+lengths in :mod:`~naruto_gym.scenes.units`, checks of a scan in
+:mod:`~naruto_gym.scenes.scan_checks`), the procedural generator
+(:mod:`~naruto_gym.scenes.procedural`), the shipped catalogue
+(:mod:`~naruto_gym.scenes.catalogue`), open scans cut from closed scenes
+(:mod:`~naruto_gym.scenes.open_scans`), per-episode scene streams
+(:mod:`~naruto_gym.scenes.stream`), the cache of generated meshes
+(:mod:`~naruto_gym.scenes.scene_cache`), and the benchmark suite
+(:mod:`~naruto_gym.scenes.suite`) with its external track
+(:mod:`~naruto_gym.scenes.external`)."""
 
 from naruto_gym.scenes.catalogue import (
     DEFAULT_SCENE,
