@@ -178,3 +178,29 @@ def test_the_mappers_page_example_is_the_one_in_examples():
         "docs/mappers.md's my_mapper.py block and examples/my_mapper.py differ: copy the file "
         "into the page's block"
     )
+
+
+def test_the_benchmark_says_why_a_bad_mapper_fails_its_episodes(user_folder, capsys):
+    code = benchmark_main(
+        [
+            "--scenes",
+            SCENE,
+            "--seeds",
+            "0",
+            "--policies",
+            "naruto",
+            "--workers",
+            "0",
+            "--no-plots",
+            "--output-dir",
+            "runs",
+            "--policy-kwargs",
+            '{"mapper_kind": "octomap"}',
+            *TINY_RUN,
+        ]
+    )
+    assert code == 1
+    assert (
+        "replica_like_room/naruto/seed0: ValueError: mapper_kind: unknown mapper 'octomap'"
+        in capsys.readouterr().out
+    )
