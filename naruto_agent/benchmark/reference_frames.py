@@ -2,9 +2,9 @@
 pose of the episode, whatever camera the policy sees.
 
 The reference TSDF map (:class:`naruto_gym.evaluation.EpisodeReconstruction`) scores every
-policy the same way, but a map fused from coarser frames misses surface: on one scene and
-seed the observable completion ratio of the same kind of walk read 92.3 % from 170 x 300
-frames and 69.7 % from 68 x 120 ones. A leaderboard row must not move with the camera a policy
+policy the same way, but a map fused from coarser frames misses surface (at 68 x 120 a 2 cm
+voxel a few metres away is hit by no ray), so its completion ratio would fall with the
+policy's camera for the same walk. A leaderboard row must not move with the camera a policy
 is run at, so :class:`ReferenceFusion` fuses, at each pose the policy reached, a frame of the
 *reference camera* (the leaderboard's 680 x 1200 camera at ``reference_image_scale``, 0.25:
 170 x 300) with the leaderboard's sensor range: the observation itself when the env's camera
