@@ -62,6 +62,9 @@ IDLE_SEARCH_EVERY = 4
 IDLE_LOWEST_M = 0.6
 #: Each turn in place and the turn the other way.
 OPPOSITE_TURN = {TURN_LEFT: TURN_RIGHT, TURN_RIGHT: TURN_LEFT}
+#: A move that took the agent less than this share of a step was refused or cut short by
+#: the env (a climb clipped at the scan's top ends part of the way up).
+STOPPED_SHORT = 0.75
 #: Each step's direction, as an angle from the camera's heading.
 STEP_TURNS = {
     MOVE_FORWARD: 0.0,
@@ -395,15 +398,16 @@ class GoalWalker:
         return move
 
     def _note_refusal(self, i: int) -> bool:
-        """Remember a move the env refused (the agent did not move), so that it is not sent
-        again from where it was refused: a refused step marks the cell it led into blocked
-        on the map (the planner, the safety check of primitive moves and the way out of a
-        stay then go around it), a refused climb or descent bounds the height for the
-        episode. The env's checks see what the map cannot (a hole in the floor, the top of
-        a partial scan, a thin or fragmented surface), so its refusal is the evidence.
-        Returns whether a step was refused."""
+        """Remember a move the env refused or cut short (the agent moved less than
+        :data:`STOPPED_SHORT` of a step), so that it is not sent again from where it stopped:
+        a refused step marks the cell it led into blocked on the map (the planner, the safety
+        check of primitive moves and the way out of a stay then go around it), a refused
+        climb or descent bounds the height for the episode. The env's checks see what the map
+        cannot (a hole in the floor, the top of a partial scan, a thin or fragmented
+        surface), so its refusal is the evidence. Returns whether a step was refused."""
         move = int(self.last_moves[i])
-        if move not in (*TRANSLATIONS, MOVE_UP, MOVE_DOWN) or not self._stood_still(i):
+        moved = np.linalg.norm(self.map.poses[i][:3, 3] - self.last_positions[i])
+        if move not in (*TRANSLATIONS, MOVE_UP, MOVE_DOWN) or moved >= STOPPED_SHORT * self.step_m:
             return False
         pose = self.map.poses[i]
         z = float(pose[2, 3])
