@@ -160,11 +160,10 @@ class NarutoReconEnv(gym.Env):
       100 %. Scoring reports completion over it beside the standard metrics.
     * ``start_clearance_m``: free space around a random start (0.3 m).
     * ``raycaster_backend``: ``"open3d"`` (default) or ``"embreex"``.
-    * ``pinhole_backend``: how the pinhole frame is made: ``"auto"`` (default: the
-      rasterizer unless the mesh has more than 4 triangles per pixel, where the ray cast is
-      the faster), ``"raster"`` (the rasterizer, several times faster than the ray cast on
-      full frames: the same triangles and colours up to exact edge ties, depths up to float
-      rounding) or ``"raycast"`` (Embree ray casting, the reference). The panorama,
+    * ``pinhole_backend``: how the pinhole frame is made: ``"raycast"`` (default, Embree ray
+      casting, the reference), ``"raster"`` (the rasterizer, several times faster: the same
+      triangles and colours up to exact edge ties, depths up to float rounding) or ``"auto"``
+      (the rasterizer unless the mesh has more than 4 triangles per pixel). The panorama,
       collisions and coverage always ray-cast. ``renderer.frame_backend`` says which method
       the frames use.
     * ``threads``: threads of the rasterizer and the colour lookup (None: the

@@ -3,8 +3,9 @@
 The renderer finds the first hit of every pixel ray either by Embree ray casting (the
 reference, and this class's default) or by rasterizing (:mod:`naruto_gym.sensors.raster`),
 which yields the same per-pixel hits several times faster on full frames; both feed the same
-colour lookup. The envs default to ``"auto"``, the rasterizer wherever it is the faster
-(:data:`naruto_gym.envs.settings.PINHOLE_BACKEND`).
+colour lookup. The envs default to the ray cast
+(:data:`naruto_gym.envs.settings.PINHOLE_BACKEND`); ``"auto"`` picks the rasterizer wherever
+it is the faster.
 """
 
 from __future__ import annotations

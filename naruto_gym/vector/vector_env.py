@@ -49,8 +49,8 @@ class NarutoReconVectorEnv(BatchedEnvBase):
     autoreset semantics as ``NarutoReconEnv`` instances in a ``SyncVectorEnv`` on the same
     seeds, with each step's ray casts, collision queries and coverage updates batched per
     scene. The frames are equal where both draw them the same way: ``pinhole_backend="auto"``
-    (the default) rasterizes denser meshes in a batched env than in one env, and the two
-    methods' depths differ by float rounding; ``"raycast"`` or ``"raster"`` fixes the method.
+    rasterizes denser meshes in a batched env than in one env, and the two methods' depths
+    differ by float rounding; ``"raycast"`` (the default) or ``"raster"`` fixes the method.
 
     ## Action Space
     ``single_action_space`` is ``NarutoReconEnv``'s for ``action_mode``; ``action_space``
@@ -93,12 +93,14 @@ class NarutoReconVectorEnv(BatchedEnvBase):
       / ``info["final_info"]``, as Stable-Baselines3 expects).
     * ``scene_cache_size``: generated scenes kept in memory for reuse (stream scenes only;
       a ``SharedSceneStreams`` group holds its current scene besides).
-    * ``pinhole_backend``: as for ``NarutoReconEnv``. The default ``"auto"`` rasterizes up
-      to ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED`` triangles per pixel (a higher limit
+    * ``pinhole_backend``: as for ``NarutoReconEnv`` (default ``"raycast"``, the reference
+      frames). ``"auto"`` is the setting for throughput (the learning entry points of
+      ``naruto_gym.rl`` pass it): it rasterizes up to
+      ``AUTO_RASTER_MAX_TRIANGLES_PER_PIXEL_BATCHED`` triangles per pixel (a higher limit
       than for one frame, as drawing many frames at once pays off on denser meshes), else
       ray-casts; its depths are the reference's up to float rounding and exact edge ties.
-      ``"raycast"`` gives the reference frames. ``scene_runtimes[i].renderer.frame_backend``
-      says which method agent ``i``'s frames use.
+      ``scene_runtimes[i].renderer.frame_backend`` says which method agent ``i``'s frames
+      use.
     * ``threads``: CPUs the env's compiled loops use (None: the ``NARUTO_GYM_THREADS``
       environment variable, else every CPU the process may run on; see
       :func:`~naruto_gym.utils.threads.default_thread_count`).

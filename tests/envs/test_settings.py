@@ -1,7 +1,7 @@
 """Settings stored once: the env's keywords live in one ``EnvSettings`` (its defaults the
 signature's), read through ``env.settings``; the batched envs take the same defaults. Every
-env, one or batched, draws its frames with the rasterizer where it is the faster by default,
-and the reference ray cast is one keyword away."""
+env, one or batched, draws the reference ray cast's frames by default, and the rasterizer
+where it is the faster is one keyword away (``pinhole_backend="auto"``)."""
 
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ def test_the_env_keeps_no_copy_of_a_setting():
 def test_the_batched_env_reads_the_same_settings_with_the_same_defaults():
     vector = NarutoReconVectorEnv(2, scene=small_room(), **CHEAP)
     single = NarutoReconEnv(small_room(), **CHEAP)
-    assert PINHOLE_BACKEND == "auto"
+    assert PINHOLE_BACKEND == "raycast"
     assert single.settings.pinhole_backend == vector.settings.pinhole_backend == PINHOLE_BACKEND
     assert dataclasses.replace(vector.settings, threads=None) == dataclasses.replace(
         single.settings, threads=None
@@ -52,17 +52,27 @@ def test_the_batched_env_reads_the_same_settings_with_the_same_defaults():
     vector.close()
 
 
-def test_gymnasium_made_envs_draw_rasterized_frames_by_default():
-    single = gym.make("NarutoRecon-v0")  # the published 680 x 1200 camera, the default room
+def test_gymnasium_made_envs_draw_rasterized_frames_with_auto():
+    # the published 680 x 1200 camera, the default room
+    single = gym.make("NarutoRecon-v0", pinhole_backend="auto")
     assert single.unwrapped.settings.pinhole_backend == "auto"
     assert single.unwrapped.renderer.frame_backend == "raster"
     single.close()
-    # Gymnasium's documented call: the batched env of any worker count takes the default.
-    batched = gym.make_vec("NarutoRecon-v0", num_envs=2, vectorization_mode="vector_entry_point")
+    # Gymnasium's documented call: the batched env of any worker count takes the keyword.
+    batched = gym.make_vec(
+        "NarutoRecon-v0",
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        pinhole_backend="auto",
+    )
     assert batched.settings.pinhole_backend == "auto"
     batched.close()
     in_process = gym.make_vec(
-        "NarutoRecon-v0", num_envs=2, vectorization_mode="vector_entry_point", workers=1
+        "NarutoRecon-v0",
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        workers=1,
+        pinhole_backend="auto",
     )
     assert isinstance(in_process, NarutoReconVectorEnv)
     assert [runtime.renderer.frame_backend for runtime in in_process.scene_runtimes] == [
@@ -72,16 +82,12 @@ def test_gymnasium_made_envs_draw_rasterized_frames_by_default():
     in_process.close()
 
 
-def test_the_reference_ray_cast_is_one_keyword_away():
-    single = gym.make("NarutoRecon-v0", pinhole_backend="raycast")
+def test_the_reference_ray_cast_is_the_default():
+    single = gym.make("NarutoRecon-v0")
     assert single.unwrapped.renderer.frame_backend == "raycast"
     single.close()
     batched = gym.make_vec(
-        "NarutoRecon-v0",
-        num_envs=2,
-        vectorization_mode="vector_entry_point",
-        workers=1,
-        pinhole_backend="raycast",
+        "NarutoRecon-v0", num_envs=2, vectorization_mode="vector_entry_point", workers=1
     )
     assert [runtime.renderer.frame_backend for runtime in batched.scene_runtimes] == [
         "raycast",
