@@ -234,7 +234,7 @@ FIGURES: tuple[Figure, ...] = (
         "rows[policy=naruto].metrics.completion_ratio_pct",
         _MEAN_STD,
     ),
-    _readme_board(r"small: explorer \(learned\)", "small", "explorer"),
+    _readme_board(r"small: explorer \(map-and-goal\)", "small", "explorer"),
     _readme_board(r"small: [^;]*?NARUTO", "small", "naruto"),
     _readme_board(r"small: [^;]*?frontier", "small", "frontier", interval=False),
     _readme_board(r"apartments: explorer", "apartment", "explorer"),
