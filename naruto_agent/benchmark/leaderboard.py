@@ -26,7 +26,13 @@ from typing import Any
 
 from naruto_agent.benchmark.episode_archive import load_episodes
 from naruto_agent.benchmark.records import STATUS_OK
-from naruto_agent.benchmark.suite import entry_group, ordered_groups, read_manifest, suite_module
+from naruto_agent.benchmark.suite import (
+    EXTERNAL_CLASS,
+    entry_group,
+    ordered_groups,
+    read_manifest,
+    suite_module,
+)
 from naruto_agent.benchmark.suite_report import (
     EFFICIENCY_KEYS,
     QUALITY_KEYS,
@@ -98,6 +104,13 @@ def _add_your_policy() -> list[str]:
         "page then puts your policy on it.",
         "",
     ]
+
+
+EXTERNAL_INTRO = (
+    "Scenes the generator did not make, each with the budget of its footprint: a policy "
+    "ahead on the generated classes and behind here fits the generator. A folder of your "
+    "own scans runs the same way ([your own scans](../scans.md))."
+)
 
 
 def _runs_section(manifest: dict[str, Any]) -> list[str]:
@@ -229,6 +242,7 @@ def leaderboard_markdown(
         lines += [
             f"## {size_class}",
             "",
+            *([EXTERNAL_INTRO, ""] if size_class == EXTERNAL_CLASS else []),
             class_table(summary[size_class], EFFICIENCY_KEYS),
             "Map quality and the walk (refusals: moves the env refused; stalled steps: steps "
             "the policy's stall watchdog counted as stalled):",
