@@ -464,8 +464,10 @@ def main(args: Args) -> dict:
             base.camera, fuse_in_background=args.reference_fusion == "background"
         )
     policy = NarutoPolicy(mapper_kind=args.mapper_kind, device=args.device, **settings)
+    # a mapper given by import path ("pkg.mod:Class", "file.py:Class") is named by its class
+    mapper_name = args.mapper_kind.rsplit(":", 1)[-1]
     tag = args.tag or (
-        f"{SceneSpec(args.scene).label}_{args.mapper_kind}_{args.max_episode_steps}steps"
+        f"{SceneSpec(args.scene).label}_{mapper_name}_{args.max_episode_steps}steps"
     )
     output_dir = Path(args.output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
