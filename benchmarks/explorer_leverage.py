@@ -23,12 +23,12 @@ percentile) over decisions of
 and the share of decisions with no or one candidate (no leverage by construction); the same
 per scene group (a size class and variant of the train split) under ``"groups"``. It prints the
 whole run's as a Markdown table (:func:`leverage_table`). The JSON
-(``--output``) is written after every decision; a rerun with the same settings resumes (an
+(``--output-file``) is written after every decision; a rerun with the same settings resumes (an
 episode is played again from its seed, its measured decisions skipped).
 
     nice -n 10 python benchmarks/explorer_leverage.py  # 8 episodes, about 10 min of CPU
     nice -n 10 python benchmarks/explorer_leverage.py --scenes-per-group 8 --seeds 0 1 2 \\
-        --output benchmarks/results/explorer_leverage/leverage_full.json
+        --output-file benchmarks/results/explorer_leverage/leverage_full.json
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ class Args:
     """the explorer checkpoint (default: the packaged one)"""
     deterministic: bool = False
     """the model acts with its distribution's mode (default: it samples, as in the harness)"""
-    output: str = "benchmarks/results/explorer_leverage/leverage.json"
+    output_file: str = "benchmarks/results/explorer_leverage/leverage.json"
     """the JSON file (resumed when its settings match)"""
 
 
@@ -310,14 +310,14 @@ def main(args: Args) -> dict[str, Any]:
     if min(horizons) < 1:
         raise ValueError(f"--horizons must be positive step counts, got {horizons}")
     model = PPO.load(model_path, device="cpu")
-    path = Path(args.output)
+    path = Path(args.output_file)
     run_settings = {**asdict(args), "horizons": horizons, "walker": settings}
     result: dict[str, Any] = {"settings": run_settings, "episodes": {}}
     if path.exists():
         stored = json.loads(path.read_text())
         if stored.get("settings") != json.loads(json.dumps(run_settings)):
             raise ValueError(
-                f"{path} holds a run with other settings; give another --output (or delete "
+                f"{path} holds a run with other settings; give another --output-file (or delete "
                 f"it to start again)"
             )
         result = stored

@@ -26,7 +26,7 @@ def leverage():
 def test_every_candidate_is_walked_on_a_copy_and_a_rerun_resumes(leverage, tmp_path):
     output = tmp_path / "leverage.json"
     argv = ["--scenes", "procedural:small:0", "--max-episode-steps", "40",
-            "--horizons", "5", "20", "--output", str(output)]  # fmt: skip
+            "--horizons", "5", "20", "--output-file", str(output)]  # fmt: skip
     result = leverage.main(parse_dataclass_args(leverage.Args, argv))
     episode = result["episodes"]["procedural:small:0/seed0"]
     assert episode["done"] and [d["decision"] for d in episode["decisions"]] == [0, 1]
@@ -64,6 +64,6 @@ def test_every_candidate_is_walked_on_a_copy_and_a_rerun_resumes(leverage, tmp_p
     with pytest.raises(ValueError, match="other settings"):
         leverage.main(
             parse_dataclass_args(
-                leverage.Args, [*argv[:-2], "--decision-every", "2", "--output", str(output)]
+                leverage.Args, [*argv[:-2], "--decision-every", "2", "--output-file", str(output)]
             )
         )

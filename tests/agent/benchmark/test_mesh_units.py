@@ -34,12 +34,18 @@ def test_a_mesh_file_takes_the_unit_and_a_catalogue_name_stays_in_metres():
 
 
 def test_the_hash_of_a_spec_in_metres_is_the_one_stored_before_the_unit_existed():
-    """Records stored before ``mesh_units`` was a setting stay current (their hash is the one
-    of the settings without it); another unit is another hash."""
+    """Records stored before ``mesh_units`` (and the later settings left out of the hash at
+    their defaults) existed stay current (their hash is the one of the settings without
+    them); another unit is another hash."""
     import hashlib
 
+    from naruto_agent.benchmark.spec import HASH_OMITS_AT_DEFAULT
+
     spec = EpisodeSpec("room.ply", "random", 0, 5)
-    settings = {key: value for key, value in spec.as_dict().items() if key != "mesh_units"}
+    assert "mesh_units" in HASH_OMITS_AT_DEFAULT
+    settings = {
+        key: value for key, value in spec.as_dict().items() if key not in HASH_OMITS_AT_DEFAULT
+    }
     stored = hashlib.sha1(json.dumps(settings, sort_keys=True, default=str).encode())
     assert spec.config_hash == stored.hexdigest()[:12]
     assert EpisodeSpec("room.ply", "random", 0, 5, mesh_units="mm").config_hash != spec.config_hash
