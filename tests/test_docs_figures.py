@@ -242,6 +242,8 @@ FIGURES: tuple[Figure, ...] = (
     _readme_board(r"apartments: [^;]*?frontier", "apartment", "frontier", interval=False),
     _readme_board(r"houses: [^;]*?NARUTO", "house", "naruto"),
     _readme_board(r"houses: [^;]*?explorer", "house", "explorer"),
+    _readme_board(r"external [^:]*: NARUTO", "external", "naruto"),
+    _readme_board(r"external [^;]*?explorer", "external", "explorer", interval=False),
     Figure(
         _README,
         r"first in small \(([\d.]+)\)",
