@@ -65,6 +65,8 @@ OPPOSITE_TURN = {TURN_LEFT: TURN_RIGHT, TURN_RIGHT: TURN_LEFT}
 #: A move that took the agent less than this share of a step was refused or cut short by
 #: the env (a climb clipped at the scan's top ends part of the way up).
 STOPPED_SHORT = 0.75
+#: The moves the env may refuse or cut short: the steps, the climb and the descent.
+REFUSABLE_MOVES = frozenset({*TRANSLATIONS.tolist(), MOVE_UP, MOVE_DOWN})
 #: Each step's direction, as an angle from the camera's heading.
 STEP_TURNS = {
     MOVE_FORWARD: 0.0,
@@ -406,8 +408,7 @@ class GoalWalker:
         cannot (a hole in the floor, the top of a partial scan, a thin or fragmented
         surface), so its refusal is the evidence. Returns whether a step was refused."""
         move = int(self.last_moves[i])
-        moved = np.linalg.norm(self.map.poses[i][:3, 3] - self.last_positions[i])
-        if move not in (*TRANSLATIONS, MOVE_UP, MOVE_DOWN) or moved >= STOPPED_SHORT * self.step_m:
+        if move not in REFUSABLE_MOVES or self._moved(i) >= STOPPED_SHORT * self.step_m:
             return False
         pose = self.map.poses[i]
         z = float(pose[2, 3])
@@ -574,11 +575,14 @@ class GoalWalker:
         )
         return nothing_in_reach and self.moves_without_candidate[i] > full_turn
 
+    def _moved(self, i: int) -> float:
+        """How far agent ``i`` moved since the move sent last (metres)."""
+        return float(np.linalg.norm(self.map.poses[i][:3, 3] - self.last_positions[i]))
+
     def _stood_still(self, i: int) -> bool:
         """Whether the move sent last (a step or a climb) left agent ``i`` where it was (the
         env refused it)."""
-        moved = np.linalg.norm(self.map.poses[i][:3, 3] - self.last_positions[i])
-        return bool(moved <= 0.25 * self.step_m)
+        return self._moved(i) <= 0.25 * self.step_m
 
     def _inside_stay_left(self, i: int) -> bool:
         """Whether agent ``i`` is walking out of a stay (:meth:`leave`) and still inside it."""
