@@ -59,7 +59,7 @@ PERCENTILES = {"median": 50.0, "p90": 90.0}
 
 @dataclass
 class Args:
-    size_classes: list[str] = field(default_factory=lambda: ["small", "apartment"])
+    size_classes: list[str] = field(default_factory=lambda: ["small", "flat"])
     """size classes of the train split"""
     variants: list[str] = field(default_factory=lambda: ["closed", "open"])
     """variants of the train split"""

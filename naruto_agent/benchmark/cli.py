@@ -100,7 +100,7 @@ class Args:
     """run the scene suite's split (test or train) instead of --scenes, every scene with its
     size class's budget"""
     size_class: list[str] = field(default_factory=list)
-    """size classes of --suite (small, apartment, house; default all three), or external:
+    """size classes of --suite (small, flat, house; default all three), or external:
     the scans of --scenes-dir, scenes the generator did not make"""
     scenes_dir: str | None = None
     """folder of meshes the external class runs, every mesh file under it a scene (default
@@ -146,7 +146,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def parse_args(argv: list[str] | None = None) -> Args:
-    namespace = build_parser().parse_args(argv)
+    """The command line's :class:`Args`; a size class of an earlier name stops the command
+    with the name to use (exit status 2, as any bad flag)."""
+    parser = build_parser()
+    namespace = parser.parse_args(argv)
+    for name in namespace.size_class:
+        message = suite.suite_module().renamed_size_class_message(name)
+        if message:
+            parser.error(message)
     return Args(**vars(namespace))
 
 

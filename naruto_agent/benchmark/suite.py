@@ -88,6 +88,9 @@ def select_scenes(
     classes = tuple(size_classes) if size_classes else tuple(suite.SIZE_CLASSES)
     known = (*suite.SIZE_CLASSES, EXTERNAL_CLASS)
     unknown = [name for name in classes if name not in known]
+    renamed = [suite.renamed_size_class_message(name) for name in unknown]
+    if any(renamed):
+        raise ValueError("; ".join(message for message in renamed if message))
     if unknown:
         raise ValueError(f"unknown size class(es) {unknown}; use some of {', '.join(known)}")
     if variant not in suite.VARIANTS:
@@ -255,11 +258,47 @@ def write_manifest(
 
 
 def read_manifest(output_dir: str | Path) -> dict[str, Any] | None:
-    """``output_dir/suite.json``, or None when the folder holds no suite run."""
-    return read_record(Path(output_dir) / MANIFEST_FILE)
+    """``output_dir/suite.json``, or None when the folder holds no suite run.
+
+    A scene recorded under a size class's earlier name is read under its current one
+    (:func:`current_manifest`), so archived runs group with new ones."""
+    manifest = read_record(Path(output_dir) / MANIFEST_FILE)
+    return None if manifest is None else current_manifest(manifest)
 
 
-GROUP_ORDER = ("small", "apartment", "house", EXTERNAL_CLASS, "all", "other")
+def current_manifest(manifest: dict[str, Any]) -> dict[str, Any]:
+    """``manifest`` with every size class under its current name
+    (``naruto_gym.scenes.suite.RENAMED_SIZE_CLASSES``), in its scenes and in the
+    ``--size-class`` words of its run commands (the commands a reader copies from a report)."""
+    current = suite_module().current_size_class
+    scenes = {
+        label: {**entry, "size_class": current(entry["size_class"])}
+        if "size_class" in entry
+        else entry
+        for label, entry in manifest.get("scenes", {}).items()
+    }
+    runs = [
+        {**run, "command": current_command(run["command"])} if "command" in run else run
+        for run in manifest.get("runs", [])
+    ]
+    return {**manifest, "scenes": scenes, "runs": runs}
+
+
+def current_command(command: str) -> str:
+    """A recorded ``naruto-benchmark`` command with its ``--size-class`` values under their
+    current names (the rest of the command as recorded)."""
+    current = suite_module().current_size_class
+    words = shlex.split(command)
+    in_classes = False
+    for index, word in enumerate(words):
+        if word.startswith("--"):
+            in_classes = word == "--size-class"
+        elif in_classes:
+            words[index] = current(word)
+    return shlex.join(words)
+
+
+GROUP_ORDER = ("small", "flat", "house", EXTERNAL_CLASS, "all", "other")
 """How tables and plots order the groups: the size classes from small to house, then the
 external track."""
 

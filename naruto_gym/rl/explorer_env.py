@@ -35,10 +35,10 @@ __all__ = [
 ]
 
 #: The suite's train split the explorer learns on: closed and open variants of the small
-#: and apartment classes (scene streams: a new generated scene every episode).
+#: and flat classes (scene streams: a new generated scene every episode).
 TRAIN_MIX = tuple(
     scene_name(size_class, variant=variant, split="train")
-    for size_class in ("small", "apartment")
+    for size_class in ("small", "flat")
     for variant in ("closed", "open")
 )
 

@@ -58,7 +58,7 @@ _NOT_SCENES = (".labels.ply", "_culled.ply")
 culled ground truth of Replica)."""
 BUDGET_BY_AREA = ((0.0, 200), (50.0, 400), (110.0, 800), (275.0, 1500))
 """(Footprint in m², steps): the generated classes' areas and budgets (small 40-60 m², 400
-steps; apartment 100-120 m², 800; house 200-350 m², 1500), and 200 steps for the smallest
+steps; flat 100-120 m², 800; house 200-350 m², 1500), and 200 steps for the smallest
 room; budgets between are interpolated, larger scans get the house budget."""
 
 

@@ -9,13 +9,13 @@ test seeds, and a step budget at which no policy has covered the scene yet:
 size class     scene kind              floor area   rooms    plan
 =============  ======================  ===========  =======  ============================
 ``small``      ``procedural:small``    40-60 m²     2-3      rooms opening into each other
-``apartment``  ``procedural:flat``     100-120 m²   6-8      open plan or a hallway
+``flat``       ``procedural:flat``     100-120 m²   6-8      open plan or a hallway
 ``house``      ``procedural:house``    200-350 m²   12-20    corridors, clutter
 =============  ======================  ===========  =======  ============================
 
-The test seeds are 1000000-1000007 in every class, the budgets :data:`BUDGETS`.
-(The apartment class is the scene kind ``flat``: ``procedural:apartment`` already names the
-older 4-9 room scenes, whose seeds keep their scenes.) The training seeds are those of the
+The test seeds are 1000000-1000007 in every class, the budgets :data:`BUDGETS`. A class is
+named as its scene kind: ``flat``, an apartment, is not ``procedural:apartment``, the older
+4-9 room scenes, whose seeds keep their scenes. The training seeds are those of the
 ``"procedural:<kind>"`` scene streams' train split, ``[0, 1000000)``; the test seeds lie in
 their test split, so a policy trained on a stream has never seen a test scene.
 
@@ -42,8 +42,14 @@ SUITE_VERSION = f"{_SEEDS_AND_BUDGETS_VERSION}.{SIZE_CLASSES_VERSION}"
 """Version of the suite, ``"<seeds and budgets>.<scenes>"``: either part is bumped whenever
 the seeds or budgets, or the scenes of a name change."""
 
-SIZE_CLASSES = ("small", "apartment", "house")
-"""The size classes, smallest first."""
+SIZE_CLASSES = ("small", "flat", "house")
+"""The size classes, smallest first, each named as its ``procedural:<kind>`` scene kind."""
+
+RENAMED_SIZE_CLASSES = {"apartment": "flat"}
+"""Earlier names of size classes -> their names now. Results recorded under an earlier name
+are read under the current one (:func:`current_size_class`); a command given an earlier name
+is refused with the name to use, because ``apartment`` also names the
+``procedural:apartment`` scenes."""
 
 VARIANTS = ("closed", "open")
 """``closed``: the generated building; ``open``: no ceiling, holes in floor and walls."""
@@ -54,10 +60,10 @@ SPLITS = ("train", "test")
 OPEN_OPENINGS = "no_ceiling+holes"
 """The scan openings of the ``open`` variant (see :mod:`naruto_gym.scenes.open_scans`)."""
 
-SCENE_KINDS = {"small": "small", "apartment": "flat", "house": "house"}
+SCENE_KINDS = {"small": "small", "flat": "flat", "house": "house"}
 """The ``procedural:<kind>`` scene kind of each size class."""
 
-BUDGETS = {"small": 400, "apartment": 800, "house": 1500}
+BUDGETS = {"small": 400, "flat": 800, "house": 1500}
 """Step budget per size class: long enough to explore, short enough that no policy has
 covered every surface at the end (see the scenes page for the coverage curves it rests on)."""
 
@@ -100,10 +106,24 @@ class SuiteScene:
         return f"{self.size_class}-{self.seed}{suffix}"
 
 
+def current_size_class(name: str) -> str:
+    """The size class ``name`` stands for now: a name of :data:`RENAMED_SIZE_CLASSES` gives the
+    class that replaced it, any other name itself (for reading recorded results)."""
+    return RENAMED_SIZE_CLASSES.get(name, name)
+
+
+def renamed_size_class_message(name: str) -> str | None:
+    """The error for a size class given under an earlier name, or None for any other name."""
+    if name not in RENAMED_SIZE_CLASSES:
+        return None
+    return f"size class {name!r} was renamed: use --size-class {RENAMED_SIZE_CLASSES[name]}"
+
+
 def _check_size_class(size_class: str) -> None:
     if size_class not in SIZE_CLASSES:
+        renamed = renamed_size_class_message(size_class)
         raise ValueError(
-            f"unknown size class {size_class!r}; use one of {', '.join(SIZE_CLASSES)}"
+            renamed or f"unknown size class {size_class!r}; use one of {', '.join(SIZE_CLASSES)}"
         )
 
 
@@ -150,8 +170,9 @@ def budget(size_class: str) -> int:
     return BUDGETS[size_class]
 
 
-def scene_name(size_class: str, seed: int | None = None, variant: str = "closed",
-               split: str = "train") -> str:
+def scene_name(
+    size_class: str, seed: int | None = None, variant: str = "closed", split: str = "train"
+) -> str:
     """The scene name of one suite scene, or with ``seed=None`` of the class's scene stream
     (a new scene of ``split`` at every reset of the batched env, e.g. for training).
 
@@ -196,16 +217,21 @@ def suite_scenes(
         raise ValueError(f"train_count must be >= 0, got {train_count}")
     out = []
     for size_class in classes:
-        seeds = (test_seeds(size_class) if split == "test"
-                 else tuple(train_seeds(size_class)[:train_count]))
+        seeds = (
+            test_seeds(size_class)
+            if split == "test"
+            else tuple(train_seeds(size_class)[:train_count])
+        )
         for variant in kinds:
             for seed in seeds:
-                out.append(SuiteScene(
-                    scene=scene_name(size_class, seed, variant),
-                    size_class=size_class,
-                    split=split,
-                    seed=seed,
-                    variant=variant,
-                    budget=BUDGETS[size_class],
-                ))
+                out.append(
+                    SuiteScene(
+                        scene=scene_name(size_class, seed, variant),
+                        size_class=size_class,
+                        split=split,
+                        seed=seed,
+                        variant=variant,
+                        budget=BUDGETS[size_class],
+                    )
+                )
     return out

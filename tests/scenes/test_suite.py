@@ -31,8 +31,11 @@ from tests.scenes.layout_checks import (
 )
 
 # (rooms without corridors, floor area in m²) per size class, as the suite promises them.
-CLASS_LIMITS = {"small": ((2, 3), (40.0, 60.0)), "apartment": ((6, 8), (100.0, 120.0)),
-                "house": ((12, 20), (200.0, 350.0))}
+CLASS_LIMITS = {
+    "small": ((2, 3), (40.0, 60.0)),
+    "flat": ((6, 8), (100.0, 120.0)),
+    "house": ((12, 20), (200.0, 350.0)),
+}
 
 
 # ---------------------------------------------------------------------------------------
@@ -40,15 +43,16 @@ CLASS_LIMITS = {"small": ((2, 3), (40.0, 60.0)), "apartment": ((6, 8), (100.0, 1
 # ---------------------------------------------------------------------------------------
 def test_constants():
     assert isinstance(SUITE_VERSION, str) and SUITE_VERSION
-    assert SIZE_CLASSES == ("small", "apartment", "house")
+    assert SIZE_CLASSES == ("small", "flat", "house")
     assert VARIANTS == ("closed", "open")
 
 
 def test_default_suite_is_the_closed_test_split_of_every_class():
     scenes = suite_scenes()
     assert all(isinstance(scene, SuiteScene) for scene in scenes)
-    assert [s.size_class for s in scenes] == [c for c in SIZE_CLASSES
-                                              for _ in suite_module.test_seeds(c)]
+    assert [s.size_class for s in scenes] == [
+        c for c in SIZE_CLASSES for _ in suite_module.test_seeds(c)
+    ]
     assert {s.split for s in scenes} == {"test"} and {s.variant for s in scenes} == {"closed"}
     assert len({s.scene for s in scenes}) == len(scenes)
     assert len({s.label for s in scenes}) == len(scenes)
@@ -80,18 +84,17 @@ def test_test_seeds_are_fixed_many_and_outside_the_train_range(size_class):
 
 def test_open_variant_and_train_split():
     open_scenes = suite_scenes("test", "small", "open")
-    assert all(s.scene.endswith(":no_ceiling+holes") and s.variant == "open"
-               for s in open_scenes)
-    assert all(parse_procedural_name(s.scene).openings == "no_ceiling+holes"
-               for s in open_scenes)
+    assert all(s.scene.endswith(":no_ceiling+holes") and s.variant == "open" for s in open_scenes)
+    assert all(parse_procedural_name(s.scene).openings == "no_ceiling+holes" for s in open_scenes)
     both = suite_scenes("test", ["house"], VARIANTS)
     assert len(both) == 2 * len(suite_module.test_seeds("house"))
     train = suite_scenes("train", train_count=3)
     assert len(train) == 3 * len(SIZE_CLASSES)
     assert all(s.seed in suite_module.train_seeds(s.size_class) for s in train)
-    assert suite_module.scene_name("apartment") == "procedural:flat:train"
+    assert suite_module.scene_name("flat") == "procedural:flat:train"
     assert suite_module.scene_name("small", variant="open", split="test") == (
-        "procedural:small:test:no_ceiling+holes")
+        "procedural:small:test:no_ceiling+holes"
+    )
     assert parse_procedural_name("procedural:small:test:no_ceiling+holes").is_stream
 
 
@@ -104,7 +107,11 @@ def test_open_variant_and_train_split():
         (lambda: suite_scenes(size_classes=[]), "no size class"),
         (lambda: suite_scenes("train", train_count=-1), "train_count"),
         (lambda: suite_module.test_seeds("castle"), "unknown size class 'castle'"),
-        (lambda: suite_module.train_seeds("castle"), "small, apartment, house"),
+        (lambda: suite_module.train_seeds("castle"), "small, flat, house"),
+        (
+            lambda: suite_module.budget("apartment"),
+            "size class 'apartment' was renamed: use --size-class flat",
+        ),
         (lambda: suite_module.budget("castle"), "unknown size class"),
         (lambda: suite_module.scene_name("small", -3), "non-negative"),
         (lambda: parse_procedural_name("procedural:house:5:no_roof"), "unknown scan opening"),
@@ -122,8 +129,14 @@ def test_bad_input_raises_a_clear_error(call, message):
 # The size classes
 # ---------------------------------------------------------------------------------------
 def _suite_layouts():
-    return [(scene.label, scene.size_class, size_class_layout(
-        suite_module.SCENE_KINDS[scene.size_class], scene.seed)) for scene in suite_scenes()]
+    return [
+        (
+            scene.label,
+            scene.size_class,
+            size_class_layout(suite_module.SCENE_KINDS[scene.size_class], scene.seed),
+        )
+        for scene in suite_scenes()
+    ]
 
 
 SUITE_LAYOUTS = _suite_layouts()
@@ -140,8 +153,11 @@ def test_test_scenes_keep_the_class_limits(case):
     assert low - 1.0 <= width * depth <= high + 1.0
     if size_class == "house":
         assert corridors, "a house has corridors"
-        assert sum(o.kind in ("moving_boxes", "stray_chair", "stool", "laundry_basket",
-                              "side_table", "shoe_rack") for o in layout.objects) >= len(rooms)
+        assert sum(
+            o.kind
+            in ("moving_boxes", "stray_chair", "stool", "laundry_basket", "side_table", "shoe_rack")
+            for o in layout.objects
+        ) >= len(rooms)
     if size_class == "small":
         assert not corridors
     # The cells tile the footprint, and the rooms are joined through doorways.
@@ -170,7 +186,7 @@ def test_size_classes_are_deterministic_and_differ_by_seed():
 
 
 def test_older_kinds_keep_their_scenes():
-    # "apartment" keeps naming the 4-9 room scenes; the suite's apartment class is "flat".
+    # "apartment" keeps naming the 4-9 room scenes; the suite's class of that size is "flat".
     layout = make_random_scene(0, "apartment")
     assert parse_procedural_name("procedural:apartment:0").kind == "apartment"
     assert resolve_scene("procedural:apartment:0").faces.shape == layout.faces.shape
@@ -193,8 +209,7 @@ def test_scenes_are_generated_once_into_the_cache(tmp_path, monkeypatch):
     opened = resolve_scene(f"{name}:no_ceiling+holes")
     assert opened.name.endswith(":no_ceiling+floor_hole+wall_holes")
     # The open variant has no ceiling: a ray straight up from the start escapes.
-    start = np.array(size_class_layout("small", suite_module.test_seeds("small")[0])
-                     .start_position)
+    start = np.array(size_class_layout("small", suite_module.test_seeds("small")[0]).start_position)
     closed_up = RayCaster(scene.vertices, scene.faces).cast(start, np.array([[0.0, 0, 1]]))
     open_up = RayCaster(opened.vertices, opened.faces).cast(start, np.array([[0.0, 0, 1]]))
     assert closed_up.hit_mask.all() and not open_up.hit_mask.any()

@@ -7,15 +7,16 @@ Each class draws its footprint area, aspect, height and room count from the seed
 kind       suite class      floor area   rooms    plan
 =========  ===============  ===========  =======  ==========================================
 ``small``  small            40-60 m²     2-3      rooms opening into each other
-``flat``   apartment        100-120 m²   6-8      rooms opening into each other, or onto a
+``flat``   flat             100-120 m²   6-8      rooms opening into each other, or onto a
                                                   hallway (every other seed)
 ``house``  house            200-350 m²   12-20    hallway spine, a branch corridor from 15
                                                   rooms on, clutter in every room
 =========  ===============  ===========  =======  ==========================================
 
-The apartment class is the kind ``flat`` because ``"apartment"`` already names the older
-4-9 room scenes of :func:`~naruto_gym.scenes.procedural.generators.make_random_scene`, whose
-seeds must keep giving the same scenes. Floor area is the free footprint (width x depth);
+Each suite class is named as its kind. The apartment-sized kind is ``flat`` because
+``"apartment"`` already names the older 4-9 room scenes of
+:func:`~naruto_gym.scenes.procedural.generators.make_random_scene`, whose seeds must keep
+giving the same scenes. Floor area is the free footprint (width x depth);
 corridors are not counted as rooms.
 """
 
@@ -63,8 +64,9 @@ def size_class_layout(kind: str, seed: int) -> SceneLayout:
         ValueError: an unknown kind or a negative seed.
     """
     if kind not in SIZE_CLASS_KINDS:
-        raise ValueError(f"size-class kind must be one of {', '.join(SIZE_CLASS_KINDS)}, "
-                         f"got {kind!r}")
+        raise ValueError(
+            f"size-class kind must be one of {', '.join(SIZE_CLASS_KINDS)}, got {kind!r}"
+        )
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     rng = np.random.default_rng([int(seed), _SIZE_SALT[kind]])
@@ -87,8 +89,12 @@ def size_class_layout(kind: str, seed: int) -> SceneLayout:
         most = int(np.clip(area / 16.0, 12, 20))
         num_rooms = int(rng.integers(12, most + 1))
         corridor = round(float(rng.uniform(1.3, 1.6)), 2)
-        house = {"corridor_width": corridor, "corridor_branch": num_rooms >= 15, "clutter": 1.0,
-                 "furniture_density": 1.2}
+        house = {
+            "corridor_width": corridor,
+            "corridor_branch": num_rooms >= 15,
+            "clutter": 1.0,
+            "furniture_density": 1.2,
+        }
         options = [house, {**house, "corridor_branch": not house["corridor_branch"]}]
     least = {"small": 2, "flat": 6, "house": 12}[kind]
     error: ValueError | None = None

@@ -15,39 +15,72 @@ import pytest
 
 from naruto_agent.benchmark.cli import episode_specs, main, parse_args
 from naruto_agent.benchmark.leaderboard import leaderboard_markdown
-from naruto_agent.benchmark.records import load_records
-from naruto_agent.benchmark.suite import read_manifest, select_scenes
+from naruto_agent.benchmark.records import load_records, read_record
+from naruto_agent.benchmark.suite import group_of, read_manifest, select_scenes
 
 suite = pytest.importorskip("naruto_gym.scenes.suite")
 ROOT = Path(__file__).resolve().parents[3]
 
 TINY = [
-    "--seeds", "0", "--max-episode-steps", "4", "--image-scale", "0.1", "--eval-points", "1",
-    "--eval-samples", "2000", "--checkpoint-samples", "2000", "--eval-samples-per-m2", "0",
-    "--env-kwargs", '{"panorama_shape": [16, 32], "coverage_samples": 2000}',
-    "--no-plots", "--no-progress",
+    "--seeds",
+    "0",
+    "--max-episode-steps",
+    "4",
+    "--image-scale",
+    "0.1",
+    "--eval-points",
+    "1",
+    "--eval-samples",
+    "2000",
+    "--checkpoint-samples",
+    "2000",
+    "--eval-samples-per-m2",
+    "0",
+    "--env-kwargs",
+    '{"panorama_shape": [16, 32], "coverage_samples": 2000}',
+    "--no-plots",
+    "--no-progress",
 ]
 
 
 def test_suite_flags_parse_and_default_to_the_class_budgets(tmp_path):
-    args = parse_args(["--suite", "test", "--size-class", "small", "apartment",
-                       "--variant", "closed", "--suite-limit", "2", "--policies", "random",
-                       "--seeds", "0", "--output-dir", str(tmp_path)])
-    assert args.suite == "test" and args.size_class == ["small", "apartment"]
+    args = parse_args(
+        [
+            "--suite",
+            "test",
+            "--size-class",
+            "small",
+            "flat",
+            "--variant",
+            "closed",
+            "--suite-limit",
+            "2",
+            "--policies",
+            "random",
+            "--seeds",
+            "0",
+            "--output-dir",
+            str(tmp_path),
+        ]
+    )
+    assert args.suite == "test" and args.size_class == ["small", "flat"]
     assert args.suite_limit == 2 and args.max_episode_steps is None and args.eval_points is None
     specs = episode_specs(args, [])
-    chosen = select_scenes("test", ["small", "apartment"], "closed", 2)
+    chosen = select_scenes("test", ["small", "flat"], "closed", 2)
     assert [spec.scene for spec in specs] == [entry.scene for entry in chosen]
     assert [spec.steps for spec in specs] == [entry.budget for entry in chosen]
     assert all(spec.eval_points == 9 for spec in specs)
     manifest = read_manifest(tmp_path)
     assert manifest["suite_version"] == suite.SUITE_VERSION
-    assert {entry["size_class"] for entry in manifest["scenes"].values()} == {
-        "small", "apartment"}
+    assert {entry["size_class"] for entry in manifest["scenes"].values()} == {"small", "flat"}
     # a folder of another split or suite version is not mixed into
     with pytest.raises(ValueError, match="split"):
-        episode_specs(parse_args(["--suite", "train", "--size-class", "small",
-                                  "--output-dir", str(tmp_path)]), [])
+        episode_specs(
+            parse_args(
+                ["--suite", "train", "--size-class", "small", "--output-dir", str(tmp_path)]
+            ),
+            [],
+        )
     manifest["suite_version"] = "0"
     (tmp_path / "suite.json").write_text(json.dumps(manifest))
     with pytest.raises(ValueError, match="suite version 0"):
@@ -78,18 +111,96 @@ def test_bad_suite_flags_say_what_is_wrong(argv, message, tmp_path, capsys):
     assert message in capsys.readouterr().err
 
 
+def test_the_earlier_class_name_is_refused_with_the_name_to_use(tmp_path, capsys):
+    # "apartment" also names the procedural:apartment scenes: never taken as the flat class.
+    with pytest.raises(SystemExit) as stopped:
+        main(
+            [
+                "--suite",
+                "test",
+                "--size-class",
+                "small",
+                "apartment",
+                "--policies",
+                "random",
+                "--output-dir",
+                str(tmp_path),
+            ]
+        )
+    assert stopped.value.code == 2
+    assert "size class 'apartment' was renamed: use --size-class flat" in capsys.readouterr().err
+    assert not (tmp_path / "suite.json").exists()
+    with pytest.raises(ValueError, match="renamed: use --size-class flat"):
+        select_scenes("test", ["apartment"])
+
+
+def test_archived_runs_under_the_earlier_class_name_read_as_flat(tmp_path):
+    archived = read_record(ROOT / "benchmarks/results/leaderboard/suite.json")
+    assert "apartment" in {entry["size_class"] for entry in archived["scenes"].values()}
+    manifest = read_manifest(ROOT / "benchmarks/results/leaderboard")
+    assert {entry["size_class"] for entry in manifest["scenes"].values()} == {
+        "small",
+        "flat",
+        "house",
+        "external",
+    }
+    flat = {label for label, entry in manifest["scenes"].items() if entry["size_class"] == "flat"}
+    assert flat == {
+        label for label, entry in archived["scenes"].items() if entry["size_class"] == "apartment"
+    }
+    assert not any("apartment" in run["command"] for run in manifest["runs"])
+    assert group_of({"scene": sorted(flat)[0]}, manifest) in {"flat", "flat (open)"}
+    # a run into a folder of an archived run joins its class
+    (tmp_path / "suite.json").write_text(json.dumps(archived))
+    args = parse_args(
+        [
+            "--suite",
+            "test",
+            "--size-class",
+            "flat",
+            "--suite-limit",
+            "1",
+            "--policies",
+            "random",
+            "--seeds",
+            "0",
+            "--output-dir",
+            str(tmp_path),
+        ]
+    )
+    episode_specs(args, [])
+    merged = read_record(tmp_path / "suite.json")
+    assert "apartment" not in {entry["size_class"] for entry in merged["scenes"].values()}
+    assert len(merged["scenes"]) == len(archived["scenes"])
+
+
 def _command(out_dir: Path) -> list[str]:
-    return ["--suite", "test", "--size-class", "small", "--suite-limit", "2",
-            "--policies", "random", "frontier", "--workers", "0", *TINY,
-            "--output-dir", str(out_dir)]
+    return [
+        "--suite",
+        "test",
+        "--size-class",
+        "small",
+        "--suite-limit",
+        "2",
+        "--policies",
+        "random",
+        "frontier",
+        "--workers",
+        "0",
+        *TINY,
+        "--output-dir",
+        str(out_dir),
+    ]
 
 
 def test_a_tiny_suite_run_resumes_after_a_kill_and_makes_the_leaderboard(tmp_path):
     out_dir = tmp_path / "suite"
     process = subprocess.Popen(
         [sys.executable, "-m", "naruto_agent.benchmark.cli", *_command(out_dir)],
-        cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)},
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
     )
     deadline = time.monotonic() + 600
     try:
@@ -112,14 +223,25 @@ def test_a_tiny_suite_run_resumes_after_a_kill_and_makes_the_leaderboard(tmp_pat
     assert statistics["classes"]["small"]["random"]["episodes"] == 2
     page = leaderboard_markdown(out_dir, tmp_path / "img")
     assert "## small" in page and "--suite test" in page
-    assert "**Not in this run**: apartment (8 test scenes of 800 steps), house" in page
+    assert "**Not in this run**: flat (8 test scenes of 800 steps), house" in page
     assert (tmp_path / "img" / "leaderboard_curves.png").is_file()
 
 
 def test_a_suite_runs_on_ray_unchanged(tmp_path):
     ray = pytest.importorskip("ray")
-    argv = ["--suite", "test", "--size-class", "small", "--suite-limit", "1",
-            "--policies", "random", *TINY, "--output-dir", str(tmp_path / "ray")]
+    argv = [
+        "--suite",
+        "test",
+        "--size-class",
+        "small",
+        "--suite-limit",
+        "1",
+        "--policies",
+        "random",
+        *TINY,
+        "--output-dir",
+        str(tmp_path / "ray"),
+    ]
     ray.init(num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
         assert main([*argv, "--ray-address", "auto"]) == 0
