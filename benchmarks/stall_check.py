@@ -65,7 +65,7 @@ class Args:
         ]
     )
     """open scenes, in the order run: the catalogue's two rooms and apartment, and the
-    suite's eight small and eight apartment (``flat``) test scenes"""
+    suite's eight small and eight flat test scenes"""
     policies: list[str] = field(
         default_factory=lambda: ["passive", "random", "frontier", "naruto", "explorer"]
     )

@@ -1,7 +1,7 @@
 """PPO over the egocentric map with goal actions. Results: docs/benchmarks/explorer.md
 
 Stable-Baselines3 PPO on the batched env, on generated scenes of the closed and open variants
-of the suite's small and apartment classes (:data:`naruto_gym.rl.explorer_env.TRAIN_MIX`):
+of the suite's small and flat classes (:data:`naruto_gym.rl.explorer_env.TRAIN_MIX`):
 the agents in groups of ``agents_per_scene`` that share a scene for ``episodes_per_scene``
 episodes, then the next of their stream (:func:`naruto_gym.rl.explorer_env.shared_train_mix`;
 ``--no-shared-scenes``: every agent draws and builds a scene of its own every episode, the
@@ -563,8 +563,10 @@ def main(args: Args) -> dict[str, Any]:
     venv, bare, chain = make_env(args)
     missing = sorted(set(TRAIN_MIX) - set(agent_streams(args)))
     if missing:
-        print(f"note: {args.num_envs} agents do not reach every train stream; not trained on: "
-              f"{', '.join(missing)} (give each stream a group: --num-envs 4 * agents-per-scene)")
+        print(
+            f"note: {args.num_envs} agents do not reach every train stream; not trained on: "
+            f"{', '.join(missing)} (give each stream a group: --num-envs 4 * agents-per-scene)"
+        )
     venv.seed(args.seed)
     checkpoint = latest_checkpoint(output_dir) if args.resume else None
     if args.resume and checkpoint is None:
