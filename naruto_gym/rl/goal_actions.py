@@ -1,5 +1,7 @@
 """Goal actions: the policy picks one of ``N`` candidate goals found on its egocentric map every
-``K`` steps, and a planner over the agent's own map walks there with the env's discrete moves.
+``K`` steps, and a planner over the agent's own map walks there with the env's discrete moves;
+or, with ``decision="goal"`` (:class:`GoalActions` only), at every goal: each action's goal is
+walked alone, and the macro-step ends once it is viewed or given up (at most ``K`` steps).
 
 An action is one of
 
@@ -13,10 +15,13 @@ An action is one of
   moves (levelling the camera first, and keeping ``WALK_HEIGHT_M`` above the floor: below
   doorways' lintels); at the viewpoint it turns towards the cluster, only as far as needed
   (half a turn at most). The cluster is then done for the episode, and the walker goes on to
-  the nearest candidate for the rest of the ``K`` steps. An empty slot means candidate 0;
-  with no candidate at all the agent walks to the reachable place farthest from where it has
-  been (looking for candidates every few steps on the way), or turns in place where there is
-  none.
+  the nearest candidate for the rest of the ``K`` steps (``decision="interval"``, the
+  default), or the macro-step ends there, the next goal the agent's (``decision="goal"``:
+  the observation's table then has the ``out_of_sight`` column too; a goal lost when the
+  map's slice restarts, or a candidate found while wandering with none, ends it too). An
+  empty slot means candidate 0; with no candidate at all the agent walks to the reachable
+  place farthest from where it has been (looking for candidates every few steps on the way),
+  or turns in place where there is none.
 * with ``primitive_actions``, the 10 discrete moves after them (index ``N + m``), each
   repeated for the ``K`` steps; a horizontal move the map does not know to be safe, or a
   vertical one without a panorama hit at least ``step + VERTICAL_MARGIN_M`` above (below) the
@@ -46,7 +51,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
-from naruto_gym.rl.goal_walker import GoalWalker
+from naruto_gym.rl.goal_walker import AWAIT_DECISION, GoalWalker
 
 __all__ = ["GoalActions", "VectorGoalActions"]
 
@@ -96,13 +101,14 @@ def _check_steps(steps_per_goal: int) -> int:
 class GoalActions(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Goal actions (module docstring) on a single env wrapped in
     :class:`~naruto_gym.rl.egocentric_map.EgocentricMapObservation`; a macro-step ends early
-    when the episode does.
+    when the episode does (and with ``decision="goal"`` when its goal is done).
 
     Args:
         env: the wrapped env (``action_mode="discrete"``).
-        steps_per_goal: ``K``, primitive steps per action.
+        steps_per_goal: ``K``, primitive steps per action (the most, with
+            ``decision="goal"``).
         **options: :class:`GoalWalker` keywords (``num_candidates``, ``primitive_actions``,
-            ...).
+            ``decision``, ...).
     """
 
     def __init__(self, env: gym.Env, steps_per_goal: int = 20, **options: Any) -> None:
@@ -123,6 +129,8 @@ class GoalActions(gym.Wrapper, gym.utils.RecordConstructorArgs):
         total, refusals, steps = 0.0, 0, 0
         while steps < self.steps_per_goal:
             move = int(self.walker.next_moves()[0])
+            if move == AWAIT_DECISION:  # the goal is done: the agent chooses the next
+                break
             observation, reward, terminated, truncated, info = self.env.step(move)
             total += float(reward)
             refusals += int(bool(info.get("collided", False)))
@@ -156,6 +164,12 @@ class VectorGoalActions(gym.vector.VectorWrapper):
     def __init__(self, env: gym.vector.VectorEnv, steps_per_goal: int = 20, **options: Any) -> None:
         super().__init__(env)
         self.steps_per_goal = _check_steps(steps_per_goal)
+        if options.get("decision", "interval") != "interval":
+            raise ValueError(
+                "VectorGoalActions decides every steps_per_goal steps for all agents at once "
+                "(decision='interval'); a decision at every goal steps each agent on its own: "
+                "wrap single envs in GoalActions (GoalDecisionVecEnv for Stable-Baselines3)"
+            )
         if env.metadata.get("autoreset_mode") != AutoresetMode.SAME_STEP:
             raise ValueError(
                 "VectorGoalActions needs the batched env with "

@@ -28,7 +28,14 @@ slot, zeros in invalid slots):
   (positive sine: to the left);
 * ``size``: share of the cluster's cells that are targets;
 * ``unseen_share``: share of its targets that are unseen obstacles (the rest: free-space
-  edges).
+  edges);
+* ``out_of_sight``: 1 when an obstacle of the map's slice lies on the straight line from the
+  agent to the viewpoint. At walking height the slice's obstacles are mostly walls, so such
+  a goal is reached round a wall: through a doorway, out of the room or the part of it the
+  agent sees (a choice to leave), 0 for a goal in the open space around the agent.
+
+:data:`INTERVAL_FEATURES`, the table without ``out_of_sight``, is the observation of the
+decision every ``K`` steps (the models trained on it).
 
 The map is one slice at the agent's height, so a candidate has no height band of its own.
 """
@@ -41,7 +48,13 @@ import numpy as np
 from naruto_gym.rl.egocentric_map_kernels import FREE, OCCUPIED, SEEN, TRAIL, is_unknown
 from naruto_gym.rl.goal_planner import traversable
 
-__all__ = ["CANDIDATE_FEATURES", "find_candidates", "path_lengths", "wander_goal"]
+__all__ = [
+    "CANDIDATE_FEATURES",
+    "INTERVAL_FEATURES",
+    "find_candidates",
+    "path_lengths",
+    "wander_goal",
+]
 
 #: Columns of the candidate feature table.
 CANDIDATE_FEATURES = (
@@ -52,7 +65,10 @@ CANDIDATE_FEATURES = (
     "bearing_cos",
     "size",
     "unseen_share",
+    "out_of_sight",
 )
+#: The columns of the decision every ``K`` steps' table (module docstring).
+INTERVAL_FEATURES = CANDIDATE_FEATURES[:-1]
 _JIT = {"cache": True, "nogil": True}
 _NEIGHBOURS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]])
 _DIAGONAL = np.sqrt(2.0)
@@ -184,7 +200,8 @@ def find_candidates(
         frontier_m: the same for a cluster of free-space edges only (when it has one).
         done: (clusters a side, clusters a side) bool: clusters already viewed.
         lengths: (2 radius + 1)^2 float scratch (path lengths).
-        table: (N, len(CANDIDATE_FEATURES)) float32 output.
+        table: (N, len(CANDIDATE_FEATURES)) float32 output (or fewer columns: the first
+            ones).
         viewpoints: (N, 2) world (x, y) output: each candidate's viewpoint.
         centres: (N, 2) world (x, y) output: each candidate's cluster centre.
         clusters: (N, 2) int64 output: each candidate's cluster index.
@@ -287,6 +304,10 @@ def find_candidates(
             table[row, 4] = np.cos(bearing)
             table[row, 5] = counts[ci, cj] / (cluster_cells * cluster_cells)
             table[row, 6] = unseen[ci, cj] / counts[ci, cj]
+            if table.shape[1] > 7:
+                agent_i, agent_j = (px - origin[0]) / cell_m, (py - origin[1]) / cell_m
+                seen = _clear_line(grid, agent_i, agent_j, best_i + 0.5, best_j + 0.5, 0.0)
+                table[row, 7] = 0.0 if seen else 1.0
             viewpoints[row, 0] = origin[0] + (best_i + 0.5) * cell_m
             viewpoints[row, 1] = origin[1] + (best_j + 0.5) * cell_m
             centres[row, 0] = cx

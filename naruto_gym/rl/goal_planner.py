@@ -33,6 +33,19 @@ TRANSLATIONS = np.array([MOVE_FORWARD, MOVE_BACKWARD, MOVE_LEFT, MOVE_RIGHT])
 WALK_ON_TURNS = 0.75
 #: Path cells ahead of the nearest one the walker may aim at (when it sees them straight).
 LOOKAHEAD = 6
+#: Each step's direction, as an angle from the camera's heading.
+STEP_TURNS = {
+    MOVE_FORWARD: 0.0,
+    MOVE_BACKWARD: np.pi,
+    MOVE_LEFT: 0.5 * np.pi,
+    MOVE_RIGHT: -0.5 * np.pi,
+}
+
+
+def step_direction(pose: np.ndarray, move: int) -> np.ndarray:
+    """The unit x-y direction of a step (forward, backward, left or right) from ``pose``."""
+    heading = float(np.arctan2(pose[1, 2], pose[0, 2])) + STEP_TURNS[move]
+    return np.array([np.cos(heading), np.sin(heading)])
 
 
 @numba.njit(**_JIT)

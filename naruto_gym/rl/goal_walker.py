@@ -3,7 +3,8 @@ candidate or primitive action into one primitive move per step, walking a path p
 agent's own egocentric map (:mod:`naruto_gym.rl.goal_planner`) to the candidate's viewpoint,
 keeping the camera level and at the walking height, turning to face the cluster and glancing
 down there; with no candidate it wanders to the place farthest from its trail. A stall
-watchdog's recovery walks it out of a stay (:meth:`GoalWalker.leave`).
+watchdog's recovery walks it out of a stay (:meth:`GoalWalker.leave`). Its ``decision``: who
+picks the goal after one is done, the walker (the nearest, "interval") or the agent ("goal").
 
 :class:`GoalWalker` serves every agent of an :class:`EgocentricMapBuilder`; the wrappers of
 :mod:`naruto_gym.rl.goal_actions` drive it, and a policy may use it without them.
@@ -16,7 +17,12 @@ from gymnasium import spaces
 
 from naruto_gym.motion.actions import DISCRETE_ACTIONS
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
-from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES, find_candidates, wander_goal
+from naruto_gym.rl.goal_candidates import (
+    CANDIDATE_FEATURES,
+    INTERVAL_FEATURES,
+    find_candidates,
+    wander_goal,
+)
 from naruto_gym.rl.goal_planner import (
     MOVE_BACKWARD,
     MOVE_FORWARD,
@@ -33,11 +39,12 @@ from naruto_gym.rl.goal_planner import (
     move_is_safe,
     path_carrot,
     plan_path,
+    step_direction,
     step_towards,
 )
 from naruto_gym.utils.checks import check_integer, check_number
 
-__all__ = ["GoalWalker"]
+__all__ = ["AWAIT_DECISION", "DECISIONS", "GoalWalker"]
 
 MOVE_UP = DISCRETE_ACTIONS.index("move_up")
 LOOK_UP = DISCRETE_ACTIONS.index("look_up")
@@ -46,8 +53,13 @@ MOVE_DOWN = DISCRETE_ACTIONS.index("move_down")
 #: Free space kept above or below the agent after a vertical move (radius and margin).
 VERTICAL_MARGIN_M = 0.2
 #: Walker phases: no goal (turning in place), walking to a viewpoint, turning to face the
-#: cluster, given up on a goal the map no longer lets it reach.
-IDLE, WALK, FACE, GIVEN_UP = 0, 1, 2, 3
+#: cluster, given up on a goal the map no longer lets it reach, waiting for the agent's choice.
+IDLE, WALK, FACE, GIVEN_UP, AWAIT = 0, 1, 2, 3, 4
+#: Who picks the next goal once one is done: ``"interval"``, the walker (the nearest
+#: candidate; the agent chooses every ``K`` steps); ``"goal"``, the agent, at every goal.
+DECISIONS = ("interval", "goal")
+#: The move :meth:`GoalWalker.next_moves` gives an agent waiting for its next goal.
+AWAIT_DECISION = -1
 #: Goals the walker may finish within one step (it then turns in place).
 MAX_GOALS_PER_STEP = 3
 #: Height above the floor the walker walks at, and the tolerance around it: below doorways'
@@ -67,13 +79,6 @@ OPPOSITE_TURN = {TURN_LEFT: TURN_RIGHT, TURN_RIGHT: TURN_LEFT}
 STOPPED_SHORT = 0.75
 #: The moves the env may refuse or cut short: the steps, the climb and the descent.
 REFUSABLE_MOVES = frozenset({*TRANSLATIONS.tolist(), MOVE_UP, MOVE_DOWN})
-#: Each step's direction, as an angle from the camera's heading.
-STEP_TURNS = {
-    MOVE_FORWARD: 0.0,
-    MOVE_BACKWARD: np.pi,
-    MOVE_LEFT: 0.5 * np.pi,
-    MOVE_RIGHT: -0.5 * np.pi,
-}
 #: Each step and the step that undoes it.
 OPPOSITE_STEP = {
     MOVE_FORWARD: MOVE_BACKWARD,
@@ -90,12 +95,6 @@ def _wrap(angle: float) -> float:
 def _heading(pose: np.ndarray) -> float:
     """The camera's optical axis' direction in the x-y plane (radians)."""
     return float(np.arctan2(pose[1, 2], pose[0, 2]))
-
-
-def _step_direction(pose: np.ndarray, move: int) -> np.ndarray:
-    """The unit x-y direction of a step (forward, backward, left or right) from ``pose``."""
-    heading = _heading(pose) + STEP_TURNS[move]
-    return np.array([np.cos(heading), np.sin(heading)])
 
 
 class GoalWalker:
@@ -122,6 +121,10 @@ class GoalWalker:
             (then as many back up to level). A level camera at walking height sees no floor
             nearer than about 2.6 m (the default camera's half vertical field of view is 29.5
             degrees).
+        decision: one of :data:`DECISIONS`. With ``"goal"``, once the agent's goal is viewed,
+            given up or lost (the map's slice restarted) after a move, or a wander finds a
+            candidate, :meth:`next_moves` gives :data:`AWAIT_DECISION` until :meth:`set_actions`
+            (with no candidate it wanders on; a goal done before a move: the nearest next).
 
     Raises:
         ValueError: a count that is not a positive integer, a distance that is not positive,
@@ -142,6 +145,7 @@ class GoalWalker:
         frontier_m: float = 0.6,
         max_path: int = 512,
         glance_steps: int = 1,
+        decision: str = "interval",
     ) -> None:
         for name, count in (
             ("num_candidates", num_candidates),
@@ -152,6 +156,10 @@ class GoalWalker:
         check_number("view_m", view_m, low=0.0)
         check_number("frontier_m", frontier_m, low=0.0)
         check_integer("glance_steps", glance_steps, low=0)
+        if decision not in DECISIONS:
+            raise ValueError(f"decision must be one of {DECISIONS}, got {decision!r}")
+        self.decision = decision
+        self.features = CANDIDATE_FEATURES if decision == "goal" else INTERVAL_FEATURES
         self.map = map_builder
         self.num_candidates = int(num_candidates)
         self.primitive_actions = bool(primitive_actions)
@@ -183,12 +191,13 @@ class GoalWalker:
         self.stays = np.zeros((n, 3))  # a stay left without turning: centre (x, y), radius
         self.last_moves = np.full(n, -1, np.int64)  # the walking move sent last, and from where
         self.last_positions = np.zeros((n, 3))
+        self.decision_moves = np.zeros(n, np.int64)  # moves since the last set_actions
         self.slice_restarts = np.zeros(n, np.int64)  # the map's count when the goal was set
         self.targets = np.zeros((n, 2))  # world (x, y) of the cluster to face
         self.target_clusters = np.full((n, 2), -1, np.int64)
         #: Per agent: the feature table of :mod:`naruto_gym.rl.goal_candidates`, the
         #: viewpoints and cluster centres (world x, y), cluster indices, and the count.
-        self.tables = np.zeros((n, count, len(CANDIDATE_FEATURES)), np.float32)
+        self.tables = np.zeros((n, count, len(self.features)), np.float32)
         self.viewpoints = np.zeros((n, count, 2))
         self.centres = np.zeros((n, count, 2))
         self.clusters = np.full((n, count, 2), -1, np.int64)
@@ -206,8 +215,10 @@ class GoalWalker:
 
     @property
     def candidate_space(self) -> spaces.Box:
-        """One agent's candidate feature table (``N`` rows of :data:`CANDIDATE_FEATURES`)."""
-        return spaces.Box(-1.0, np.inf, (self.num_candidates, len(CANDIDATE_FEATURES)), np.float32)
+        """One agent's candidate feature table (``N`` rows of :attr:`features`: every
+        column of :data:`CANDIDATE_FEATURES` for the ``"goal"`` decision, the
+        :data:`INTERVAL_FEATURES` for the ``"interval"`` one)."""
+        return spaces.Box(-1.0, np.inf, (self.num_candidates, len(self.features)), np.float32)
 
     def reset(self, envs: np.ndarray | None = None) -> None:
         """New episodes for ``envs`` (default all): no goal, no cluster viewed."""
@@ -220,6 +231,7 @@ class GoalWalker:
         self.last_moves[envs] = -1
         self.primitives[envs] = -1
         self.lengths[envs] = 0
+        self.decision_moves[envs] = 0
         self.tables[envs] = 0.0
         self.counts[envs] = 0
         self.moves_without_candidate[envs] = 0
@@ -277,6 +289,8 @@ class GoalWalker:
                 f"got {actions[bad].tolist()}"
             )
         for i, action in zip(envs, actions, strict=True):
+            self.decision_moves[i] = 0
+            self.phases[i] = IDLE if self.phases[i] == AWAIT else self.phases[i]
             if action < self.num_candidates:
                 self.primitives[i] = -1
                 self._go_to(int(i), int(action))
@@ -361,15 +375,10 @@ class GoalWalker:
 
     def _plan(self, i: int, goal: np.ndarray) -> None:
         self.lengths[i] = plan_path(
-            self.map.grids[i],
-            self.map.origins[i],
-            self.map.cell_m,
-            self.map.poses[i][:2, 3].copy(),
-            np.asarray(goal, np.float64),
-            self.radius,
-            self.inflate,
-            self.paths[i],
-        )
+            self.map.grids[i], self.map.origins[i], self.map.cell_m,
+            self.map.poses[i][:2, 3].copy(), np.asarray(goal, np.float64), self.radius,
+            self.inflate, self.paths[i],
+        )  # fmt: skip
         self.cursors[i, 0] = 0
 
     def next_moves(self, envs: np.ndarray | None = None) -> np.ndarray:
@@ -395,6 +404,7 @@ class GoalWalker:
 
     def _move(self, i: int) -> int:
         move = self._choose(i)
+        self.decision_moves[i] += move != AWAIT_DECISION
         self.last_moves[i] = move
         self.last_positions[i] = self.map.poses[i][:3, 3]
         return move
@@ -418,7 +428,7 @@ class GoalWalker:
         if move == MOVE_DOWN:
             self.descent_floors[i] = max(self.descent_floors[i], z)
             return False
-        direction = _step_direction(pose, move)
+        direction = step_direction(pose, move)
         standing = self.map.cell_of(i, pose[:2, 3])
         reach = self.step_m
         ahead = pose[:2, 3] + reach * direction
@@ -438,6 +448,8 @@ class GoalWalker:
 
     def _choose(self, i: int) -> int:
         refused_step = self._note_refusal(i)
+        if self.phases[i] == AWAIT:
+            return AWAIT_DECISION
         if self.primitives[i] >= 0:
             return self._primitive(i)
         if self.glance_left[i] > 0:
@@ -463,10 +475,12 @@ class GoalWalker:
                 self._wander_away(i)
             else:
                 self._refresh(i)
-                self._go_to(i, 0)
+                self._next_goal(i)
         if refused_step and self.phases[i] == WALK:
             self.phases[i] = GIVEN_UP
         for _ in range(MAX_GOALS_PER_STEP):
+            if self.phases[i] == AWAIT:
+                return AWAIT_DECISION
             if self.phases[i] == IDLE:
                 self.idle_steps[i] += 1
                 if self.idle_steps[i] % IDLE_SEARCH_EVERY:
@@ -477,9 +491,9 @@ class GoalWalker:
                     self.leave(i, self.stays[i, None, :2].copy(), self.stays[i, 2])
                 else:
                     self._refresh(i)
-                    self._go_to(i, 0)
-                if self.phases[i] == IDLE:
-                    return self._idle_move(i)
+                    self._next_goal(i)
+                if self.phases[i] in (IDLE, AWAIT):
+                    return self._idle_move(i) if self.phases[i] == IDLE else AWAIT_DECISION
             if self.phases[i] == GIVEN_UP:
                 self._finish(i)
                 continue
@@ -489,7 +503,9 @@ class GoalWalker:
                     # A candidate found on the way ends the wander (not one out of a stay).
                     self._refresh(i)
                     if self.counts[i] > 0 and not self.leaving[i]:
-                        self._go_to(i, 0)
+                        self._next_goal(i)
+                    if self.phases[i] == AWAIT:
+                        return AWAIT_DECISION
                 if self.wandering[i]:
                     self.moves_without_candidate[i] += 1
                     if self._descends(i):
@@ -634,17 +650,9 @@ class GoalWalker:
 
         def follow() -> tuple[int, int]:
             return follow_path(
-                grid,
-                origin,
-                cell_m,
-                pose,
-                self.paths[i],
-                self.lengths[i],
-                self.cursors[i],
-                self.step_m,
-                self.turn_rad,
-                self.inflate,
-            )
+                grid, origin, cell_m, pose, self.paths[i], self.lengths[i], self.cursors[i],
+                self.step_m, self.turn_rad, self.inflate,
+            )  # fmt: skip
 
         move, status = follow()
         if status == REPLAN:
@@ -679,4 +687,13 @@ class GoalWalker:
     def _finish(self, i: int) -> None:
         self._mark_done(i)
         self._refresh(i)
+        self._next_goal(i)
+
+    def _next_goal(self, i: int) -> None:
+        """After a refresh, the goal after one done, given up or lost: the agent's choice
+        (``decision="goal"``, after a move, a candidate in reach), else the nearest one."""
+        if self.decision == "goal" and self.decision_moves[i] > 0 and self.counts[i] > 0:
+            self.phases[i] = AWAIT
+            self.wandering[i] = False
+            return
         self._go_to(i, 0)
