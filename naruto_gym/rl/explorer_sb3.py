@@ -27,7 +27,14 @@ from naruto_gym.rl.goal_actions import VectorGoalActions
 from naruto_gym.rl.sb3 import Sb3VecEnv
 from naruto_gym.vector.vector_env import NarutoReconVectorEnv
 
-__all__ = ["ExplorerFeaturesExtractor", "make_explorer_vec_env"]
+__all__ = [
+    "ExplorerFeaturesExtractor",
+    "channels_first",
+    "channels_last",
+    "make_explorer_vec_env",
+    "map_encoder",
+    "panorama_encoder",
+]
 
 
 def make_explorer_vec_env(
@@ -62,7 +69,9 @@ def make_explorer_vec_env(
     return Sb3VecEnv(env)
 
 
-def _channels_first(space: spaces.Box) -> tuple[int, int, int]:
+def channels_first(space: spaces.Box) -> tuple[int, int, int]:
+    """(channels, height, width) of an image box stored either way (the channels the
+    smallest axis)."""
     shape = space.shape
     return (
         (shape[0], shape[1], shape[2])
@@ -71,8 +80,35 @@ def _channels_first(space: spaces.Box) -> tuple[int, int, int]:
     )
 
 
-def _channels_last(images: torch.Tensor) -> torch.Tensor:
+def channels_last(images: torch.Tensor) -> torch.Tensor:
+    """The images laid out channels-last in memory (the shape unchanged): oneDNN's CPU
+    convolutions run about twice as fast on that layout."""
     return images.contiguous(memory_format=torch.channels_last)
+
+
+# Small on purpose: a trained model ships inside the package (at most 5 MB).
+def map_encoder(channels: int) -> torch.nn.Sequential:
+    """The CNN over the egocentric ``map`` channels (flattened output)."""
+    return torch.nn.Sequential(
+        torch.nn.Conv2d(channels, 32, 3, 1, 1),
+        torch.nn.ReLU(),
+        torch.nn.Conv2d(32, 32, 4, 2, 1),
+        torch.nn.ReLU(),
+        torch.nn.Conv2d(32, 32, 4, 2, 1),
+        torch.nn.ReLU(),
+        torch.nn.Flatten(),
+    )
+
+
+def panorama_encoder(channels: int) -> torch.nn.Sequential:
+    """The CNN over the depth ``panorama`` (flattened output)."""
+    return torch.nn.Sequential(
+        torch.nn.Conv2d(channels, 16, 4, 2, 1),
+        torch.nn.ReLU(),
+        torch.nn.Conv2d(16, 16, 4, 2, 1),
+        torch.nn.ReLU(),
+        torch.nn.Flatten(),
+    )
 
 
 class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
@@ -106,25 +142,10 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
                 f"goal actions' candidates (map, panorama, pose, candidates); {sorted(missing)} "
                 f"missing from {observation_space}"
             )
-        channels, height, width = _channels_first(observation_space["map"])
-        # Small on purpose: a trained model ships inside the package (at most 5 MB).
-        self.map = torch.nn.Sequential(
-            torch.nn.Conv2d(channels, 32, 3, 1, 1),
-            torch.nn.ReLU(),
-            torch.nn.Conv2d(32, 32, 4, 2, 1),
-            torch.nn.ReLU(),
-            torch.nn.Conv2d(32, 32, 4, 2, 1),
-            torch.nn.ReLU(),
-            torch.nn.Flatten(),
-        )
-        pano_channels, pano_height, pano_width = _channels_first(observation_space["panorama"])
-        self.panorama = torch.nn.Sequential(
-            torch.nn.Conv2d(pano_channels, 16, 4, 2, 1),
-            torch.nn.ReLU(),
-            torch.nn.Conv2d(16, 16, 4, 2, 1),
-            torch.nn.ReLU(),
-            torch.nn.Flatten(),
-        )
+        channels, height, width = channels_first(observation_space["map"])
+        self.map = map_encoder(channels)
+        pano_channels, pano_height, pano_width = channels_first(observation_space["panorama"])
+        self.panorama = panorama_encoder(pano_channels)
         pose_size = int(np.prod(observation_space["pose"].shape))
         self.pose = torch.nn.Sequential(torch.nn.Linear(pose_size, 32), torch.nn.ReLU())
         table_size = int(np.prod(observation_space["candidates"].shape))
@@ -151,8 +172,8 @@ class ExplorerFeaturesExtractor(BaseFeaturesExtractor):
             features = self.head(
                 torch.cat(
                     [
-                        self.map(_channels_last(observations["map"])),
-                        self.panorama(_channels_last(observations["panorama"])),
+                        self.map(channels_last(observations["map"])),
+                        self.panorama(channels_last(observations["panorama"])),
                         self.pose(observations["pose"].flatten(1)),
                         self.candidates(observations["candidates"].flatten(1)),
                     ],

@@ -23,6 +23,7 @@ from naruto_gym.rl.explorer_env import (
 from naruto_gym.rl.goal_actions import GoalActions, VectorGoalActions
 from naruto_gym.rl.goal_candidates import (
     CANDIDATE_FEATURES,
+    INTERVAL_FEATURES,
     find_candidates,
     path_lengths,
     wander_goal,
@@ -296,7 +297,7 @@ def test_single_env_goal_actions_take_k_steps_and_sum_the_rewards():
         observation, _ = env.reset(seed=0)
         assert env.action_space.n == 8 + 10
         assert env.observation_space.contains(observation)
-        assert observation["candidates"].shape == (8, len(CANDIDATE_FEATURES))
+        assert observation["candidates"].shape == (8, len(INTERVAL_FEATURES))
         assert observation["candidates"][0, 0] == 1  # a room has something to look at
         observation, reward, _, truncated, info = env.step(7)  # an empty slot: candidate 0
         assert info["primitive_steps"] == 10 and info["refusals"] == 0 and not truncated
