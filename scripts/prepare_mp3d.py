@@ -34,10 +34,7 @@ Usage::
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
-import shutil
 import sys
 import warnings
 from dataclasses import dataclass, field
@@ -213,24 +210,15 @@ def _area(vertices: np.ndarray, faces: np.ndarray) -> float:
     return mesh_area(vertices, faces)
 
 
-def _place(target: Path, link: Path, copy: bool) -> None:
-    """``link`` made a symbolic link to ``target``, or a copy of it (``copy``, or where the
-    file system has no links), replacing what was there."""
-    link.unlink(missing_ok=True)
-    if not copy:
-        with contextlib.suppress(OSError):  # no symbolic links here: copy instead
-            return os.symlink(target.resolve(), link)
-    shutil.copyfile(target, link)
-
-
 def write_scene(files: SceneFiles, out: Path, obj_up_axis: str, copy: bool) -> Path:
     """Lay out one checked scene under ``out/mp3d_<scene>/``; returns that folder."""
     from naruto_gym.evaluation.ground_truth import GROUND_TRUTH_FILE
+    from naruto_gym.scenes.scene_folders import link_or_copy
 
     folder = out / f"mp3d_{files.name}"
     folder.mkdir(parents=True, exist_ok=True)
-    _place(files.glb, folder / "mesh.glb", copy)
-    _place(files.obj, folder / "house.obj", copy)
+    link_or_copy(files.glb, folder / "mesh.glb", copy)
+    link_or_copy(files.obj, folder / "house.obj", copy)
     truth = {"mesh": "house.obj", "up_axis": obj_up_axis}
     (folder / GROUND_TRUTH_FILE).write_text(json.dumps(truth, indent=1) + "\n")
     return folder

@@ -36,7 +36,6 @@ Usage::
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import sys
 from dataclasses import dataclass, field
@@ -110,10 +109,11 @@ def read_camera(path: Path) -> dict[str, float]:
         camera = json.loads(path.read_text())["camera"]
     except (ValueError, KeyError, TypeError) as error:
         raise ReplicaLayoutError(
-            f"{path} is not a cam_params.json: expected {{\"camera\": {{...}}}} ({error!r})"
+            f'{path} is not a cam_params.json: expected {{"camera": {{...}}}} ({error!r})'
         ) from error
     bad = [
-        key for key in CAMERA_KEYS
+        key
+        for key in CAMERA_KEYS
         if not isinstance(camera.get(key), (int, float)) or not camera[key] > 0
     ]
     if bad:
@@ -171,8 +171,9 @@ def check_mesh(path: Path, positions: np.ndarray) -> dict[str, Any]:
     import trimesh
 
     if not path.is_file():
-        raise ReplicaLayoutError(f"{path} is missing: the release keeps <scene>_mesh.ply "
-                                 "beside the scene folders")
+        raise ReplicaLayoutError(
+            f"{path} is missing: the release keeps <scene>_mesh.ply beside the scene folders"
+        )
     try:
         mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as error:  # trimesh raises many types for broken files
@@ -241,7 +242,10 @@ def find_culled(name: str, folders: list[Path]) -> Path | None:
 
 
 def check_scene(
-    source: Path, name: str, camera: dict[str, float], culled_folders: list[Path],
+    source: Path,
+    name: str,
+    camera: dict[str, float],
+    culled_folders: list[Path],
     frames: bool = True,
 ) -> SceneCheck:
     """Check one scene of the release.
@@ -262,8 +266,9 @@ def check_scene(
     mesh = source / f"{name}_mesh.ply"
     summary: dict[str, Any] = {
         "poses": len(poses),
-        "trajectory_length_m": round(float(np.linalg.norm(np.diff(positions, axis=0),
-                                                          axis=1).sum()), 2),
+        "trajectory_length_m": round(
+            float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum()), 2
+        ),
         **check_mesh(mesh, positions),
     }
     results = folder / "results"
@@ -271,40 +276,24 @@ def check_scene(
         summary["frames"] = check_frames(results, len(poses), camera) if frames else None
     culled = find_culled(name, culled_folders)
     summary["culled_mesh"] = culled is not None
-    return SceneCheck(name, mesh, trajectory, results if results.is_dir() else None, culled,
-                      summary)
-
-
-def _place(target: Path, link: Path, copy: bool) -> None:
-    """``link`` made a symbolic link to ``target`` (or a copy of it), replacing what was
-    there."""
-    if link.is_symlink() or link.is_file():
-        link.unlink()
-    elif link.is_dir():
-        shutil.rmtree(link)
-    if copy and target.is_file():
-        shutil.copyfile(target, link)
-        return
-    try:
-        os.symlink(target.resolve(), link, target_is_directory=target.is_dir())
-    except OSError:  # no symbolic links here (some Windows set-ups): copy instead
-        if target.is_dir():
-            shutil.copytree(target, link)
-        else:
-            shutil.copyfile(target, link)
+    return SceneCheck(
+        name, mesh, trajectory, results if results.is_dir() else None, culled, summary
+    )
 
 
 def write_scene(check: SceneCheck, camera_file: Path, out: Path, copy: bool) -> Path:
     """Lay out one checked scene under ``out/replica_<scene>/``; returns that folder."""
+    from naruto_gym.scenes.scene_folders import link_or_copy
+
     folder = out / f"replica_{check.name}"
     folder.mkdir(parents=True, exist_ok=True)
-    _place(check.mesh, folder / "mesh.ply", copy)
-    _place(check.trajectory, folder / "traj.txt", copy)
+    link_or_copy(check.mesh, folder / "mesh.ply", copy)
+    link_or_copy(check.trajectory, folder / "traj.txt", copy)
     shutil.copyfile(camera_file, folder / "cam_params.json")
     if check.frames is not None:
-        _place(check.frames, folder / "frames", False)
+        link_or_copy(check.frames, folder / "frames", False)
     if check.culled is not None:
-        _place(check.culled, folder / "mesh_culled.ply", copy)
+        link_or_copy(check.culled, folder / "mesh_culled.ply", copy)
     return folder
 
 
@@ -360,22 +349,31 @@ def _camera_note(camera: dict[str, float]) -> str:
     default = PinholeCamera()
     same = all(
         abs(camera[key] - value) < 1e-6
-        for key, value in (("w", default.width), ("h", default.height), ("fx", default.fx),
-                           ("fy", default.fy), ("cx", default.cx), ("cy", default.cy))
+        for key, value in (
+            ("w", default.width),
+            ("h", default.height),
+            ("fx", default.fx),
+            ("fy", default.fy),
+            ("cx", default.cx),
+            ("cy", default.cy),
+        )
     )
     size = f"{camera['h']:.0f} x {camera['w']:.0f} (H x W)"
     if same:
         return f"camera: {size}, fx = fy = {camera['fx']:g}: the env's default camera"
-    return (f"camera: {size}, fx {camera['fx']:g}, fy {camera['fy']:g}: NOT the env's default; "
-            "replica_passive.py reads it from cam_params.json, other tools need camera=...")
+    return (
+        f"camera: {size}, fx {camera['fx']:g}, fy {camera['fy']:g}: NOT the env's default; "
+        "replica_passive.py reads it from cam_params.json, other tools need camera=..."
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status (2 when a check fails)."""
     from naruto_agent.cli_args import dataclass_parser
 
-    parser = dataclass_parser(Args, description=__doc__.split("\n\n")[1].replace("\n", " "),
-                              prog="prepare_replica.py")
+    parser = dataclass_parser(
+        Args, description=__doc__.split("\n\n")[1].replace("\n", " "), prog="prepare_replica.py"
+    )
     args = Args(**vars(parser.parse_args(argv)))
     try:
         report = prepare(args)
@@ -386,9 +384,11 @@ def main(argv: list[str] | None = None) -> int:
     print("| scene | folder | poses | trajectory (m) | triangles | frames | culled mesh |")
     print("|---|---|---|---|---|---|---|")
     for name, scene in report["scenes"].items():
-        print(f"| {name} | {scene['folder']} | {scene['poses']} | "
-              f"{scene['trajectory_length_m']:.2f} | {scene['triangles']:,} | "
-              f"{scene.get('frames', '-')} | {'yes' if scene['culled_mesh'] else 'no'} |")
+        print(
+            f"| {name} | {scene['folder']} | {scene['poses']} | "
+            f"{scene['trajectory_length_m']:.2f} | {scene['triangles']:,} | "
+            f"{scene.get('frames', '-')} | {'yes' if scene['culled_mesh'] else 'no'} |"
+        )
     print(f"\nwrote {Path(args.output_dir) / 'replica_scenes.json'}; next: docs/replica.md")
     return 0
 

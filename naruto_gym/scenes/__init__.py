@@ -7,7 +7,8 @@ lengths in :mod:`~naruto_gym.scenes.units`, checks of a scan in
 (:mod:`~naruto_gym.scenes.stream`), the cache of generated meshes
 (:mod:`~naruto_gym.scenes.scene_cache`), and the benchmark suite
 (:mod:`~naruto_gym.scenes.suite`) with its external track
-(:mod:`~naruto_gym.scenes.external`)."""
+(:mod:`~naruto_gym.scenes.external`), and the folders a dataset's scenes are laid out in
+(:mod:`~naruto_gym.scenes.scene_folders`)."""
 
 from naruto_gym.scenes.catalogue import (
     DEFAULT_SCENE,
