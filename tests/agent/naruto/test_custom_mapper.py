@@ -37,6 +37,29 @@ TINY_RUN = [
 ]
 
 
+def run_benchmark(policy_kwargs: dict) -> int:
+    """``naruto-benchmark``'s exit code for one tiny NARUTO episode on :data:`SCENE` with
+    these constructor arguments, recorded under ``runs/`` of the working directory."""
+    return benchmark_main(
+        [
+            "--scenes",
+            SCENE,
+            "--seeds",
+            "0",
+            "--policies",
+            "naruto",
+            "--workers",
+            "0",
+            "--no-plots",
+            "--output-dir",
+            "runs",
+            "--policy-kwargs",
+            json.dumps(policy_kwargs),
+            *TINY_RUN,
+        ]
+    )
+
+
 @pytest.fixture
 def user_folder(tmp_path, monkeypatch):
     """A working directory holding ``examples/my_mapper.py``, as a user's checkout does, and
@@ -125,24 +148,7 @@ def test_the_demo_runs_the_agent_on_the_example_mapper(user_folder, capsys):
 
 
 def test_the_benchmark_runs_the_agent_on_the_example_mapper(user_folder, capsys):
-    code = benchmark_main(
-        [
-            "--scenes",
-            SCENE,
-            "--seeds",
-            "0",
-            "--policies",
-            "naruto",
-            "--workers",
-            "0",
-            "--no-plots",
-            "--output-dir",
-            "runs",
-            "--policy-kwargs",
-            json.dumps(AGENT),
-            *TINY_RUN,
-        ]
-    )
+    code = run_benchmark(AGENT)
     assert code == 0, capsys.readouterr()
     record = json.loads(
         (user_folder / "runs/records/replica_like_room/naruto/seed0.json").read_text()
@@ -181,24 +187,7 @@ def test_the_mappers_page_example_is_the_one_in_examples():
 
 
 def test_the_benchmark_says_why_a_bad_mapper_fails_its_episodes(user_folder, capsys):
-    code = benchmark_main(
-        [
-            "--scenes",
-            SCENE,
-            "--seeds",
-            "0",
-            "--policies",
-            "naruto",
-            "--workers",
-            "0",
-            "--no-plots",
-            "--output-dir",
-            "runs",
-            "--policy-kwargs",
-            '{"mapper_kind": "octomap"}',
-            *TINY_RUN,
-        ]
-    )
+    code = run_benchmark({"mapper_kind": "octomap"})
     assert code == 1
     assert (
         "replica_like_room/naruto/seed0: ValueError: mapper_kind: unknown mapper 'octomap'"
