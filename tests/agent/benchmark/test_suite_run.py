@@ -43,25 +43,19 @@ TINY = [
 ]
 
 
+def _suite_flags(selection: str, output_dir: Path) -> list[str]:
+    """The flags of a test-split run of random, seed 0, on ``selection`` (flags as one
+    string) into ``output_dir``."""
+    return [
+        *f"--suite test {selection} --policies random --seeds 0".split(),
+        "--output-dir",
+        str(output_dir),
+    ]
+
+
 def test_suite_flags_parse_and_default_to_the_class_budgets(tmp_path):
     args = parse_args(
-        [
-            "--suite",
-            "test",
-            "--size-class",
-            "small",
-            "flat",
-            "--variant",
-            "closed",
-            "--suite-limit",
-            "2",
-            "--policies",
-            "random",
-            "--seeds",
-            "0",
-            "--output-dir",
-            str(tmp_path),
-        ]
+        _suite_flags("--size-class small flat --variant closed --suite-limit 2", tmp_path)
     )
     assert args.suite == "test" and args.size_class == ["small", "flat"]
     assert args.suite_limit == 2 and args.max_episode_steps is None and args.eval_points is None
@@ -114,19 +108,7 @@ def test_bad_suite_flags_say_what_is_wrong(argv, message, tmp_path, capsys):
 def test_the_earlier_class_name_is_refused_with_the_name_to_use(tmp_path, capsys):
     # "apartment" also names the procedural:apartment scenes: never taken as the flat class.
     with pytest.raises(SystemExit) as stopped:
-        main(
-            [
-                "--suite",
-                "test",
-                "--size-class",
-                "small",
-                "apartment",
-                "--policies",
-                "random",
-                "--output-dir",
-                str(tmp_path),
-            ]
-        )
+        main(_suite_flags("--size-class small apartment", tmp_path))
     assert stopped.value.code == 2
     assert "size class 'apartment' was renamed: use --size-class flat" in capsys.readouterr().err
     assert not (tmp_path / "suite.json").exists()
@@ -152,22 +134,7 @@ def test_archived_runs_under_the_earlier_class_name_read_as_flat(tmp_path):
     assert group_of({"scene": sorted(flat)[0]}, manifest) in {"flat", "flat (open)"}
     # a run into a folder of an archived run joins its class
     (tmp_path / "suite.json").write_text(json.dumps(archived))
-    args = parse_args(
-        [
-            "--suite",
-            "test",
-            "--size-class",
-            "flat",
-            "--suite-limit",
-            "1",
-            "--policies",
-            "random",
-            "--seeds",
-            "0",
-            "--output-dir",
-            str(tmp_path),
-        ]
-    )
+    args = parse_args(_suite_flags("--size-class flat --suite-limit 1", tmp_path))
     episode_specs(args, [])
     merged = read_record(tmp_path / "suite.json")
     assert "apartment" not in {entry["size_class"] for entry in merged["scenes"].values()}
