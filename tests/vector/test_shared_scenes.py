@@ -102,7 +102,7 @@ def test_the_reset_seed_gives_the_same_scenes_and_episodes():
     assert runs[0][0][0] != runs[2][0][0]
 
 
-def test_the_train_mix_puts_closed_and_open_small_and_apartment_scenes_in_the_pool():
+def test_the_train_mix_puts_closed_and_open_small_and_flat_scenes_in_the_pool():
     shared = SharedSceneStreams(TRAIN_MIX, agents_per_scene=1, episodes_per_scene=3)
     assert shared.agent_streams(4) == list(TRAIN_MIX)
     env = NarutoReconVectorEnv(4, scene=shared, **TINY)
