@@ -21,7 +21,17 @@ percentile) over decisions of
   (:data:`~naruto_agent.rl.scripted_explorer.CHOICE_RULES`),
 
 and the share of decisions with no or one candidate (no leverage by construction); the same
-per scene group (a size class and variant of the train split) under ``"groups"``. It prints the
+per scene group (a size class and variant of the train split) under ``"groups"``.
+
+``--decision goal`` measures the decision at every goal (``decision="goal"`` of the goal
+actions: the walker walks the chosen goal alone, and the next decision comes once it is
+viewed or given up, at most ``steps_per_goal`` = 100 steps later). Each candidate's copy
+walks its goal to the end, then takes the nearest candidate at every further decision (the
+same continuation for every candidate, so the gains differ by the first choice alone), for
+at least the longest horizon (default 20 and 40 env steps); the summary's ``"goal"``
+horizon is the gain until the copy's next decision (``goal_steps``: its env steps). The
+episode itself goes on with ``--advance``: the model's choice (``model``, a checkpoint
+trained on this decision) or a scripted rule's (e.g. ``random``). It prints the
 whole run's as a Markdown table (:func:`leverage_table`). The JSON
 (``--output-file``) is written after every decision; a rerun with the same settings resumes (an
 episode is played again from its seed, its measured decisions skipped).
@@ -29,6 +39,8 @@ episode is played again from its seed, its measured decisions skipped).
     nice -n 10 python benchmarks/explorer_leverage.py  # 8 episodes, about 10 min of CPU
     nice -n 10 python benchmarks/explorer_leverage.py --scenes-per-group 8 --seeds 0 1 2 \\
         --output-file benchmarks/results/explorer_leverage/leverage_full.json
+    nice -n 10 python benchmarks/explorer_leverage.py --decision goal --advance random \\
+        --output-file benchmarks/results/explorer_leverage/leverage_goal.json
 """
 
 from __future__ import annotations
@@ -46,11 +58,12 @@ import numpy as np
 import naruto_gym  # noqa: F401  (registers NarutoRecon-v0)
 from naruto_agent.benchmark.records import write_json_atomic
 from naruto_agent.cli_args import parse_dataclass_args
-from naruto_agent.rl.explorer_policy import PACKAGED_MODEL, read_settings
+from naruto_agent.rl.explorer_policy import DEFAULT_SETTINGS, PACKAGED_MODEL, read_settings
 from naruto_agent.rl.scripted_explorer import CHOICE_RULES, choose_candidate
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation
 from naruto_gym.rl.explorer_env import EXPLORER_ENV
-from naruto_gym.rl.goal_actions import GoalActions
+from naruto_gym.rl.goal_actions import GOAL_STEPS, GoalActions
+from naruto_gym.rl.goal_walker import AWAIT_DECISION, DECISIONS
 from naruto_gym.scenes import suite
 
 #: The summary's distributions, per horizon.
@@ -72,11 +85,18 @@ class Args:
     max_episode_steps: int | None = None
     """episode length (default: each class's budget, 400 for --scenes)"""
     horizons: list[int] = field(default_factory=list)
-    """env steps each candidate is walked after the decision (default: K and 2 K)"""
+    """env steps each candidate is walked after the decision (default: K and 2 K; 20 and
+    40 for --decision goal)"""
+    decision: str | None = None
+    """the decision measured: "interval" (every K steps) or "goal" (at every goal); default:
+    the model's settings"""
+    advance: str = "model"
+    """what chooses the episode's own decisions: "model" or a goal-walker rule (random...)"""
     decision_every: int = 1
     """measure every n-th decision"""
     model_path: str | None = None
-    """the explorer checkpoint (default: the packaged one)"""
+    """the explorer checkpoint (default: the packaged one; with --decision goal and a
+    scripted --advance, none is needed)"""
     deterministic: bool = False
     """the model acts with its distribution's mode (default: it samples, as in the harness)"""
     output_file: str = "benchmarks/results/explorer_leverage/leverage.json"
@@ -107,6 +127,7 @@ def make_stack(scene: str, steps: int, settings: dict[str, Any]) -> GoalActions:
         int(settings["steps_per_goal"]),
         num_candidates=int(settings["num_candidates"]),
         primitive_actions=bool(settings["primitive_actions"]),
+        decision=settings.get("decision", "interval"),
     )
 
 
@@ -133,6 +154,46 @@ def candidate_gains(
     return gains
 
 
+def goal_gains(
+    stack: GoalActions, count: int, coverage: float, horizons: list[int]
+) -> tuple[dict[str, list[float]], list[int]]:
+    """Coverage gained by each of the ``count`` candidates of a decision at every goal,
+    walked on a copy of the stack: until the copy's next decision (``"goal"``, and its env
+    steps) and for each horizon, the nearest candidate taken at every later decision."""
+    gains: dict[str, list[float]] = {str(h): [] for h in horizons}
+    gains["goal"] = []
+    steps_to_decision: list[int] = []
+    cap = int(stack.steps_per_goal)
+    for slot in range(count):
+        trial = copy.deepcopy(stack)
+        trial.walker.set_actions(np.array([slot]))
+        reached, step, own = coverage, 0, True
+        while own or step < max(horizons):
+            move = int(trial.walker.next_moves()[0])
+            if move == AWAIT_DECISION or (own and step == cap):
+                if own:
+                    gains["goal"].append(reached - coverage)
+                    steps_to_decision.append(step)
+                    own = False
+                trial.walker.refresh_candidates()
+                trial.walker.set_actions(np.array([0]))
+                continue
+            _, _, terminated, truncated, info = trial.env.step(move)
+            step += 1
+            reached = float(info["coverage"])
+            if str(step) in gains:
+                gains[str(step)].append(reached - coverage)
+            if terminated or truncated:
+                break
+        if own:
+            gains["goal"].append(reached - coverage)
+            steps_to_decision.append(step)
+        for h in horizons:
+            if len(gains[str(h)]) <= slot:
+                gains[str(h)].append(reached - coverage)
+    return gains, steps_to_decision
+
+
 def rule_slots(candidates: np.ndarray, seed: int, decision: int) -> dict[str, int]:
     """The slot each scripted rule picks (``random`` drawn from the seed and decision)."""
     rng = np.random.default_rng([seed, decision])
@@ -151,20 +212,23 @@ def play_episode(
 ) -> list[dict[str, Any]]:
     """One explorer episode, measuring its decisions (those in ``stored`` are kept as they
     are); ``save(decisions)`` is called after each measured one."""
-    period = int(settings["steps_per_goal"])
-    horizons = args.horizons or [period, 2 * period]
+    horizons = horizons_of(args, settings)
+    at_goal = settings.get("decision") == "goal"
     stack = make_stack(scene, steps, settings)
-    model.set_random_seed(seed)
+    if model is not None:
+        model.set_random_seed(seed)
     observation, info = stack.reset(seed=seed)
     coverage = float(info["coverage"])
     decisions: list[dict[str, Any]] = []
-    for decision in range(steps // period):
+    step = 0
+    for decision in range(steps):
         candidates = observation["candidates"]
-        action, _ = model.predict(observation, deterministic=args.deterministic)
-        action = int(action)
-        measured = (
-            decision % args.decision_every == 0 and decision * period + max(horizons) <= steps
-        )
+        if model is None:
+            action = rule_slots(candidates, seed, decision)[args.advance]
+        else:
+            action, _ = model.predict(observation, deterministic=args.deterministic)
+            action = int(action)
+        measured = decision % args.decision_every == 0 and step + max(horizons) <= steps
         if decision in stored:
             entry = stored[decision]
         elif measured:
@@ -174,24 +238,26 @@ def play_episode(
             slot = action if action < count else 0
             entry = {
                 "decision": decision,
-                "step": decision * period,
+                "step": step,
                 "coverage": round(coverage, 5),
                 "candidates": count,
                 "chosen": action,
                 "chosen_slot": slot if action < int(settings["num_candidates"]) else None,
                 "rules": rule_slots(candidates, seed, decision),
-                "gains": {
-                    h: np.round(g, 5).tolist()
-                    for h, g in candidate_gains(stack, count, coverage, horizons).items()
-                }
-                if count
-                else {},
+                "gains": {},
             }
+            if count and at_goal:
+                gains, entry["goal_steps"] = goal_gains(stack, count, coverage, horizons)
+            else:
+                gains = candidate_gains(stack, count, coverage, horizons) if count else {}
+            entry["gains"] = {h: np.round(g, 5).tolist() for h, g in gains.items()}
         else:
             entry = None
         observation, _, terminated, truncated, info = stack.step(action)
+        step += int(info["primitive_steps"])
         if entry is not None:
             entry["realised"] = round(float(info["coverage"]) - coverage, 5)
+            entry["realised_steps"] = int(info["primitive_steps"])
             decisions.append(entry)
             if decision not in stored:
                 save(decisions)
@@ -200,6 +266,46 @@ def play_episode(
             break
     stack.close()
     return decisions
+
+
+def horizons_of(args: Args, settings: dict[str, Any]) -> list[int]:
+    """The horizons measured: ``--horizons``, else K and 2 K (20 and 40 steps for the
+    decision at every goal, the interval decision's)."""
+    if args.horizons:
+        return list(args.horizons)
+    if settings.get("decision") == "goal":
+        return [20, 40]
+    period = int(settings["steps_per_goal"])
+    return [period, 2 * period]
+
+
+def measured_settings(args: Args) -> tuple[Any, dict[str, Any]]:
+    """The model (None where a scripted rule advances the episode) and the walker's
+    settings of the run.
+
+    Raises:
+        ValueError: an unknown ``--advance`` or ``--decision``, or a model whose decision
+            is not the one asked for.
+    """
+    from stable_baselines3 import PPO
+
+    if args.advance != "model" and args.advance not in CHOICE_RULES:
+        raise ValueError(f"--advance must be 'model' or one of {CHOICE_RULES}, got {args.advance}")
+    if args.decision not in (None, *DECISIONS):
+        raise ValueError(f"--decision must be one of {DECISIONS}, got {args.decision!r}")
+    model_path = Path(args.model_path) if args.model_path else PACKAGED_MODEL
+    if args.advance != "model" and args.decision == "goal" and not args.model_path:
+        goal = {"decision": "goal", "steps_per_goal": GOAL_STEPS, "primitive_actions": False}
+        return None, {**DEFAULT_SETTINGS, **goal}
+    settings = read_settings(model_path)
+    own = settings.get("decision", "interval")
+    if args.decision not in (None, own):
+        raise ValueError(
+            f"{model_path} was trained on the {own!r} decision, not {args.decision!r}: give "
+            f"a model of that decision (--model-path) or a scripted --advance"
+        )
+    model = PPO.load(model_path, device="cpu") if args.advance == "model" else None
+    return model, settings
 
 
 def _stats(values: list[float]) -> dict[str, float | int | None]:
@@ -222,7 +328,7 @@ def scene_group(episode: str) -> str:
     return ":".join(parts)
 
 
-def grouped_summary(episodes: dict[str, dict[str, Any]], horizons: list[int]) -> dict[str, Any]:
+def grouped_summary(episodes: dict[str, dict[str, Any]], horizons: list[Any]) -> dict[str, Any]:
     """:func:`leverage_summary` of every episode, with the same per scene group
     (:func:`scene_group`) under ``"groups"``."""
     groups: dict[str, dict[str, dict[str, Any]]] = {}
@@ -234,7 +340,7 @@ def grouped_summary(episodes: dict[str, dict[str, Any]], horizons: list[int]) ->
     }
 
 
-def leverage_summary(episodes: dict[str, dict[str, Any]], horizons: list[int]) -> dict[str, Any]:
+def leverage_summary(episodes: dict[str, dict[str, Any]], horizons: list[Any]) -> dict[str, Any]:
     """Per horizon, the distributions over decisions with two or more candidates (module
     docstring), in coverage points, and the counts of decisions by candidates."""
     decisions = [d for episode in episodes.values() for d in episode["decisions"]]
@@ -246,6 +352,13 @@ def leverage_summary(episodes: dict[str, dict[str, Any]], horizons: list[int]) -
         "mean_candidates": round(float(np.mean(counts)), 2) if counts else None,
         "horizons": {},
     }
+    lengths = [s for d in decisions for s in d.get("goal_steps", [])]
+    if lengths:
+        summary["goal_steps"] = {
+            "mean": round(float(np.mean(lengths)), 1),
+            **{name: float(np.percentile(lengths, q)) for name, q in PERCENTILES.items()},
+        }
+        horizons = [*horizons, "goal"]
     for horizon in horizons:
         rows: dict[str, list[float]] = {}
         for d in decisions:
@@ -283,7 +396,15 @@ def leverage_table(summary: dict[str, Any]) -> str:
     """The summary as a Markdown table: a row per quantity, mean / median / 90th percentile
     in coverage points per horizon."""
     horizons = list(summary["horizons"])
-    header = ["coverage points", *(f"{h} steps: mean / median / p90" for h in horizons)]
+    header = [
+        "coverage points",
+        *(
+            "until the next decision: mean / median / p90"
+            if h == "goal"
+            else f"{h} steps: mean / median / p90"
+            for h in horizons
+        ),
+    ]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for key, title in TABLE_ROWS.items():
         cells = []
@@ -299,17 +420,12 @@ def leverage_table(summary: dict[str, Any]) -> str:
 
 
 def main(args: Args) -> dict[str, Any]:
-    from stable_baselines3 import PPO
-
     if args.decision_every < 1:
         raise ValueError(f"--decision-every must be at least 1, got {args.decision_every}")
-    model_path = Path(args.model_path) if args.model_path else PACKAGED_MODEL
-    settings = read_settings(model_path)
-    period = int(settings["steps_per_goal"])
-    horizons = args.horizons or [period, 2 * period]
+    model, settings = measured_settings(args)
+    horizons = horizons_of(args, settings)
     if min(horizons) < 1:
         raise ValueError(f"--horizons must be positive step counts, got {horizons}")
-    model = PPO.load(model_path, device="cpu")
     path = Path(args.output_file)
     run_settings = {**asdict(args), "horizons": horizons, "walker": settings}
     result: dict[str, Any] = {"settings": run_settings, "episodes": {}}

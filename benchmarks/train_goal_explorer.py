@@ -42,7 +42,8 @@ from stable_baselines3.common.vec_env import VecNormalize
 from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.rl.explorer_policy import export_checkpoint, save_settings
 from naruto_gym.rl.explorer_env import EXPLORER_ENV
-from naruto_gym.rl.goal_choice_sb3 import GOAL_STEPS, CandidateScorerPolicy, GoalDecisionVecEnv
+from naruto_gym.rl.goal_actions import GOAL_STEPS
+from naruto_gym.rl.goal_choice_sb3 import CandidateScorerPolicy, GoalDecisionVecEnv
 
 
 @dataclass

@@ -11,7 +11,10 @@ It builds the egocentric map from the observations it is handed
 it, asks the PPO model for one (or a repeated discrete move) every ``steps_per_goal`` steps,
 and walks it with the planner over its own map
 (:class:`~naruto_gym.rl.goal_walker.GoalWalker`): the same observations and actions as in
-training, step for step. The training settings (``steps_per_goal``, the number of
+training, step for step. A model trained on the decision at every goal (``"decision":
+"goal"`` in its settings, ``benchmarks/train_goal_explorer.py``) is asked each time its goal
+is viewed, given up or lost instead, and at the latest every ``steps_per_goal`` steps. The
+training settings (``decision``, ``steps_per_goal``, the number of
 candidates, the map's options, the panorama size) are read from the JSON file saved beside the
 model (``<model>.json``, written by the training script), so a model and its settings cannot
 disagree. Without ``model_path`` it loads the checkpoint shipped in the package
@@ -40,7 +43,7 @@ from naruto_agent.policies.registry import register_policy
 from naruto_agent.policies.watchdog import StallEvent
 from naruto_gym.motion.actions import DISCRETE_ACTIONS
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
-from naruto_gym.rl.goal_walker import GoalWalker
+from naruto_gym.rl.goal_walker import AWAIT_DECISION, GoalWalker
 from naruto_gym.sensors.panorama import EquirectangularCamera
 
 PACKAGED_MODEL = Path(__file__).with_name("checkpoints") / "explorer.zip"
@@ -48,6 +51,7 @@ PACKAGED_MODEL = Path(__file__).with_name("checkpoints") / "explorer.zip"
 
 #: Settings of a model saved without its JSON file (the training script's defaults).
 DEFAULT_SETTINGS: dict[str, Any] = {
+    "decision": "interval",
     "steps_per_goal": 20,
     "num_candidates": 8,
     "primitive_actions": True,
@@ -144,7 +148,9 @@ def reinitialise_weights(model: Any, seed: int) -> None:
 class CandidateGoalPolicy(Policy):
     """The explorer's agent without its choice: the egocentric map built from the observations
     (:class:`~naruto_gym.rl.egocentric_map.EgocentricMapBuilder`), the candidate goals found on
-    it, one action chosen every ``steps_per_goal`` steps by :meth:`choose`, walked by the
+    it, one action chosen every ``steps_per_goal`` steps by :meth:`choose` (with the settings'
+    ``decision`` ``"goal"``: also each time the walker has done the goal, step for step as
+    the goal actions' ``decision="goal"``), walked by the
     planner (:class:`~naruto_gym.rl.goal_walker.GoalWalker`), and a stall watchdog whose
     recovery walks out of the stay.
 
@@ -215,6 +221,7 @@ class CandidateGoalPolicy(Policy):
             primitive_actions=bool(self.settings["primitive_actions"]),
             step_m=context.max_translation_m,
             turn_rad=context.max_rotation_rad,
+            decision=str(self.settings["decision"]),
         )
         self.map.reset(np.zeros(1, np.int64), np.asarray(observation["pose"])[None])
         self.walker.reset()
@@ -239,12 +246,21 @@ class CandidateGoalPolicy(Policy):
         if self.check_stall(observation, info) is not None:
             self._until_decision = self.steps_per_goal  # the recovery's walk gets a macro-step
         elif self._until_decision == 0:
-            choice = {key: value[0] for key, value in self.map.observe(batch).items()}
-            choice["candidates"] = self.walker.refresh_candidates()[0]
-            self.walker.set_actions(np.array([int(self.choose(choice))]))
-            self._until_decision = self.steps_per_goal
+            self._decide(batch)
+        move = int(self.walker.next_moves()[0])
+        if move == AWAIT_DECISION:  # the goal is done (decision "goal"): the next one
+            self._decide(batch)
+            move = int(self.walker.next_moves()[0])
         self._until_decision -= 1
-        return int(self.walker.next_moves()[0])
+        return move
+
+    def _decide(self, batch: dict[str, np.ndarray]) -> None:
+        """A decision of :meth:`choose` on the map and candidates as they are now."""
+        assert self.map is not None and self.walker is not None
+        choice = {key: value[0] for key, value in self.map.observe(batch).items()}
+        choice["candidates"] = self.walker.refresh_candidates()[0]
+        self.walker.set_actions(np.array([int(self.choose(choice))]))
+        self._until_decision = self.steps_per_goal
 
     def recover_from_stall(self, event: StallEvent) -> str:
         """Walk out of the stay: the goal in hand (or a repeated move) is given up for the

@@ -3,12 +3,15 @@
     naruto-benchmark --policies goal-walker explorer explorer-untrained
     naruto-demo --policy goal-walker
     naruto-benchmark --policies goal-walker --policy-kwargs '{"rule": "nearest"}'
+    naruto-benchmark --policies goal-walker --policy-kwargs '{"decision": "goal"}'
 
 :class:`GoalWalkerPolicy` is the explorer
 (:class:`~naruto_agent.rl.explorer_policy.MapGoalExplorer`) with its network replaced by a
 fixed rule over the same candidate goals: the same map, candidates, walker, watchdog and
 settings (read from the explorer checkpoint's JSON file), one candidate chosen every
-``steps_per_goal`` steps by :func:`choose_candidate`.
+``steps_per_goal`` steps by :func:`choose_candidate` (``decision="goal"``: the rule chooses
+each goal the walker walks, at every goal, as the decision at every goal of
+:mod:`naruto_gym.rl.goal_actions`).
 Paired with the explorer on the same scenes and seeds, it says what the learned choice adds
 over the best simple rule of its own action space.
 
@@ -44,7 +47,9 @@ from naruto_agent.rl.explorer_policy import (
     read_settings,
     settings_path,
 )
+from naruto_gym.rl.goal_actions import GOAL_STEPS
 from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES
+from naruto_gym.rl.goal_walker import DECISIONS
 
 __all__ = ["CHOICE_RULES", "DEFAULT_RULE", "GoalWalkerPolicy", "choose_candidate"]
 
@@ -118,9 +123,12 @@ class GoalWalkerPolicy(CandidateGoalPolicy):
             of candidates, the map's options, the panorama size) the walker takes; None: the
             packaged checkpoint's (the training script's defaults where none is shipped).
         stall_watchdog: watch the walk for stalls and walk out of one, as the explorer does.
+        decision: None, the settings' decision; ``"interval"``, every ``steps_per_goal``
+            steps; ``"goal"``, at every goal (at most :data:`GOAL_STEPS
+            <naruto_gym.rl.goal_actions.GOAL_STEPS>` steps apart, candidates only).
 
     Raises:
-        ValueError: an unknown rule.
+        ValueError: an unknown rule or decision.
         FileNotFoundError: a ``settings_from`` checkpoint without its JSON settings file.
     """
 
@@ -129,8 +137,18 @@ class GoalWalkerPolicy(CandidateGoalPolicy):
         rule: str = DEFAULT_RULE,
         settings_from: str | None = None,
         stall_watchdog: bool = True,
+        decision: str | None = None,
     ) -> None:
-        super().__init__(_walker_settings(settings_from), stall_watchdog)
+        settings = _walker_settings(settings_from)
+        if decision is not None and decision not in DECISIONS:
+            raise ValueError(f"decision must be one of {DECISIONS} or None, got {decision!r}")
+        if decision == "goal" and settings.get("decision") != "goal":
+            settings = {**settings, "steps_per_goal": GOAL_STEPS, "primitive_actions": False}
+        if decision == "interval" and settings.get("decision") == "goal":
+            settings = {**settings, "steps_per_goal": DEFAULT_SETTINGS["steps_per_goal"]}
+        if decision is not None:
+            settings["decision"] = decision
+        super().__init__(settings, stall_watchdog)
         self.rule = check_rule(rule)
         self.rng = np.random.default_rng()
 

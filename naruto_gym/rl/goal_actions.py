@@ -53,7 +53,11 @@ from gymnasium.vector.utils import batch_space
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
 from naruto_gym.rl.goal_walker import AWAIT_DECISION, GoalWalker
 
-__all__ = ["GoalActions", "VectorGoalActions"]
+__all__ = ["GOAL_STEPS", "GoalActions", "VectorGoalActions"]
+
+#: The most env steps of one decision at every goal (``steps_per_goal`` with
+#: ``decision="goal"``): a goal about 8 m of path away with its turns (a step is 0.1 m).
+GOAL_STEPS = 100
 
 
 def _find_map(env: Any) -> EgocentricMapBuilder:
@@ -162,14 +166,14 @@ class VectorGoalActions(gym.vector.VectorWrapper):
     """
 
     def __init__(self, env: gym.vector.VectorEnv, steps_per_goal: int = 20, **options: Any) -> None:
-        super().__init__(env)
-        self.steps_per_goal = _check_steps(steps_per_goal)
         if options.get("decision", "interval") != "interval":
             raise ValueError(
                 "VectorGoalActions decides every steps_per_goal steps for all agents at once "
                 "(decision='interval'); a decision at every goal steps each agent on its own: "
                 "wrap single envs in GoalActions (GoalDecisionVecEnv for Stable-Baselines3)"
             )
+        super().__init__(env)
+        self.steps_per_goal = _check_steps(steps_per_goal)
         if env.metadata.get("autoreset_mode") != AutoresetMode.SAME_STEP:
             raise ValueError(
                 "VectorGoalActions needs the batched env with "

@@ -33,12 +33,11 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation
 from naruto_gym.rl.explorer_env import EXPLORER_ENV, TRAIN_MIX
 from naruto_gym.rl.explorer_sb3 import channels_first, channels_last, map_encoder, panorama_encoder
-from naruto_gym.rl.goal_actions import GoalActions
+from naruto_gym.rl.goal_actions import GOAL_STEPS, GoalActions
 from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES
 from naruto_gym.scenes.stream import parse_procedural_name
 
 __all__ = [
-    "GOAL_STEPS",
     "CandidateScorer",
     "CandidateScorerPolicy",
     "GoalContextExtractor",
@@ -46,9 +45,6 @@ __all__ = [
     "make_goal_stack",
 ]
 
-#: The most env steps of one decision at every goal (``steps_per_goal``): a goal about 8 m
-#: of path away with its turns (a step is 0.1 m).
-GOAL_STEPS = 100
 #: The score of an empty candidate slot: its probability is 0 to float precision.
 MASKED_SCORE = -1e8
 _VALID = CANDIDATE_FEATURES.index("valid")

@@ -213,6 +213,8 @@ def test_candidate_0_is_the_nearest_by_path_not_by_straight_distance():
     assert table[0, 1] < table[1, 1]  # path lengths (tens of metres), nearest first
     assert table[1, 2] < table[0, 2]  # though the second is nearer in a straight line
     assert table[0, 6] == 1.0  # unseen obstacles, no free-space edge
+    out_of_sight = CANDIDATE_FEATURES.index("out_of_sight")
+    assert table[:2, out_of_sight].tolist() == [0.0, 1.0]  # in the open; round the wall
     # Every viewpoint is reachable and within 2 m of its cluster, on the path's side.
     for k in range(2):
         assert np.hypot(*(viewpoints[k] - centres[k])) <= 2.0 + 1e-9
