@@ -133,14 +133,18 @@ class GoalDecisionVecEnv(VecEnv):
         self.rngs = [np.random.default_rng([seed, i]) for i in range(num_envs)]
         self.episodes = np.zeros(num_envs, np.int64)
         self.stacks: list[GoalActions | None] = [None] * num_envs
+        for i in range(num_envs):
+            self._stack(i)
         first = self._stack(0)
         super().__init__(num_envs, first.observation_space, first.action_space)
         self._actions: np.ndarray | None = None
 
     def _stack(self, i: int) -> GoalActions:
-        """Agent ``i``'s stack, on a new scene of its stream when its scene is done."""
+        """Agent ``i``'s stack, on a new scene of its stream when its scene is done (called
+        between episodes)."""
         stack = self.stacks[i]
-        if stack is None or self.episodes[i] % self.episodes_per_scene == 0:
+        due = self.episodes[i] > 0 and self.episodes[i] % self.episodes_per_scene == 0
+        if stack is None or due:
             if stack is not None:
                 stack.close()
             spec = self.specs[i]
