@@ -62,12 +62,12 @@ class Args:
     """candidate slots"""
     episodes_per_scene: int = 4
     """episodes an agent plays on a generated scene before it draws the next"""
-    n_steps: int = 16
-    """decisions per agent per rollout"""
-    batch_size: int = 64
+    n_steps: int = 8
+    """decisions per agent per rollout (a decision is about 29 env steps)"""
+    batch_size: int = 32
     """minibatch size (decisions)"""
-    n_epochs: int = 4
-    """optimisation epochs per rollout"""
+    n_epochs: int = 10
+    """optimisation epochs per rollout (decisions are dear, updates cheap: many passes)"""
     learning_rate: float = 3e-4
     """Adam learning rate"""
     gamma: float = 0.95
