@@ -7,7 +7,10 @@ step) and their area (the mean coverage over the episode's steps) to ``output_di
 The scripted choices are the rules of the ``goal-walker`` policy
 (:data:`naruto_agent.rl.scripted_explorer.CHOICE_RULES`: ``nearest`` is always candidate 0,
 ``random`` a candidate drawn uniformly among the valid slots at every decision); on the train
-split this run picks the policy's default rule.
+split this run picks the policy's default rule. ``--decision goal`` runs the rules on the
+decision at every goal (``decision="goal"`` of the goal actions: the rule picks every goal
+the walker walks), so that the spread between the rules over whole episodes says how much
+either decision lets a choice decide.
 
 Coverage only (no reconstruction), the harness's env settings at ``--image-scale``; the
 wrappers' env has the explorer's (32, 64) panorama (the panorama does not count towards
@@ -39,7 +42,8 @@ from naruto_agent.cli_args import parse_dataclass_args
 from naruto_agent.rl.scripted_explorer import CHOICE_RULES, choose_candidate
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation
 from naruto_gym.rl.explorer_env import EXPLORER_ENV
-from naruto_gym.rl.goal_actions import GoalActions
+from naruto_gym.rl.goal_actions import GOAL_STEPS, GoalActions
+from naruto_gym.rl.goal_walker import DECISIONS
 
 BASELINES = ("frontier", "random")
 
@@ -58,8 +62,11 @@ class Args:
     """run the harness's frontier and random too (--no-baselines: the rules alone)"""
     max_episode_steps: int = 400
     """episode length in env steps"""
-    steps_per_goal: int = 20
-    """env steps per goal action (K)"""
+    steps_per_goal: int | None = None
+    """env steps per goal action (K; the most with --decision goal); default 20, and
+    GOAL_STEPS (100) with --decision goal"""
+    decision: str = "interval"
+    """when a rule chooses: "interval" (every K steps) or "goal" (at every goal)"""
     image_scale: float = 0.1
     """camera resolution factor of every run"""
     rerun_baselines: bool = False
@@ -94,7 +101,14 @@ def scripted(args: Args, scene: str, rule: str) -> dict[str, Any]:
         panorama_shape=EXPLORER_ENV["panorama_shape"],
     )
     recorder = CoverageCurve(env)
-    wrapped = GoalActions(EgocentricMapObservation(recorder), args.steps_per_goal)
+    at_goal = args.decision == "goal"
+    steps = args.steps_per_goal or (GOAL_STEPS if at_goal else 20)
+    wrapped = GoalActions(
+        EgocentricMapObservation(recorder),
+        steps,
+        primitive_actions=not at_goal,
+        decision=args.decision,
+    )
     rng = np.random.default_rng(args.seed)
     observation, _ = wrapped.reset(seed=args.seed)
     decisions, valid = 0, 0
@@ -136,10 +150,11 @@ def rule_label(rule: str) -> str:
 
 def _reusable(stored: dict[str, Any], settings: dict[str, Any], policy: str) -> bool:
     """Whether a stored run of ``policy`` was made with these settings: the episode's (a
-    baseline does not walk the candidates, so it ignores ``steps_per_goal``)."""
-    ignored = {"rules", "baselines", "steps_per_goal"}
+    baseline does not walk the candidates, so it ignores ``steps_per_goal`` and
+    ``decision``)."""
+    ignored = {"rules", "baselines", "steps_per_goal", "decision"}
     if policy not in BASELINES:
-        ignored -= {"steps_per_goal"}
+        ignored -= {"steps_per_goal", "decision"}
     before = stored.get("settings", {})
     return {k: v for k, v in before.items() if k not in ignored} == {
         k: v for k, v in settings.items() if k not in ignored
@@ -147,6 +162,8 @@ def _reusable(stored: dict[str, Any], settings: dict[str, Any], policy: str) -> 
 
 
 def main(args: Args) -> dict[str, Any]:
+    if args.decision not in DECISIONS:
+        raise ValueError(f"--decision must be one of {DECISIONS}, got {args.decision!r}")
     for rule in args.rules:
         if rule not in CHOICE_RULES:
             raise ValueError(f"unknown rule {rule!r}; use some of {', '.join(CHOICE_RULES)}")

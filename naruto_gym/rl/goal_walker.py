@@ -3,7 +3,7 @@ candidate or primitive action into one primitive move per step, walking a path p
 agent's own egocentric map (:mod:`naruto_gym.rl.goal_planner`) to the candidate's viewpoint,
 keeping the camera level and at the walking height, turning to face the cluster and glancing
 down there; with no candidate it wanders to the place farthest from its trail. A stall
-watchdog's recovery walks it out of a stay (:meth:`GoalWalker.leave`). Its ``decision``: who
+watchdog's recovery walks it out of a stay (:meth:`GoalWalker.walk_out`). Its ``decision``: who
 picks the goal after one is done, the walker (the nearest, "interval") or the agent ("goal").
 
 :class:`GoalWalker` serves every agent of an :class:`EgocentricMapBuilder`; the wrappers of
@@ -21,6 +21,7 @@ from naruto_gym.rl.goal_candidates import (
     CANDIDATE_FEATURES,
     INTERVAL_FEATURES,
     find_candidates,
+    reachable_cells,
     wander_goal,
 )
 from naruto_gym.rl.goal_planner import (
@@ -223,23 +224,15 @@ class GoalWalker:
     def reset(self, envs: np.ndarray | None = None) -> None:
         """New episodes for ``envs`` (default all): no goal, no cluster viewed."""
         envs = np.arange(self.map.num_envs) if envs is None else np.asarray(envs, np.int64)
-        self.done[envs] = False
         self.phases[envs] = IDLE
-        self.wandering[envs] = False
-        self.leaving[envs] = False
-        self.stays[envs] = 0.0
-        self.last_moves[envs] = -1
-        self.primitives[envs] = -1
-        self.lengths[envs] = 0
-        self.decision_moves[envs] = 0
-        self.tables[envs] = 0.0
-        self.counts[envs] = 0
-        self.moves_without_candidate[envs] = 0
-        self.floor_heights[envs] = np.inf
-        self.climb_ceilings[envs] = np.inf
+        for flags in (self.done, self.wandering, self.leaving, self.glanced):
+            flags[envs] = False
+        for zeros in (self.stays, self.lengths, self.decision_moves, self.tables, self.counts,
+                      self.moves_without_candidate, self.glance_left):
+            zeros[envs] = 0
+        self.last_moves[envs] = self.primitives[envs] = -1
+        self.floor_heights[envs] = self.climb_ceilings[envs] = np.inf
         self.descent_floors[envs] = -np.inf
-        self.glance_left[envs] = 0
-        self.glanced[envs] = False
 
     def refresh_candidates(self, envs: np.ndarray | None = None) -> np.ndarray:
         """Find the candidates of ``envs`` (default all) on their maps as they are now;
@@ -314,34 +307,41 @@ class GoalWalker:
         self.moves_without_candidate[i] = 0
         self._plan(i, self.viewpoints[i, slot])
 
-    def leave(self, i: int, spots: np.ndarray, radius_m: float) -> str:
-        """Walk agent ``i`` out of a stay (a stall watchdog's recovery): the goal being walked
-        to or faced is given up (its cluster done), a repeated primitive move dropped, and
-        the walker goes to the nearest candidate whose viewpoint lies farther than
-        ``radius_m`` from every one of ``spots`` ((K, 2+) world positions of the stay, the
-        last where it is centred: where the agent stands when the watchdog fires), else to
-        the reachable place farthest from its trail; returns what it chose, in a few words.
+    def reachable_places(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """Agent ``i``'s reachable places on its map's slice (searched anew; see
+        :func:`~naruto_gym.rl.goal_candidates.reachable_cells`): ``(n, 2)`` world x, y and
+        their path lengths (metres), among which a stall recovery chooses its way out."""
+        self._refresh(i)
+        si, sj = self.map.cell_of(i, self.map.poses[i][:2, 3])
+        cells, lengths = reachable_cells(self.path_lengths[i], self.map.coarse[i],
+                                         self.map.far_factor, si, sj, self.radius)
+        return self.map.origins[i] + (cells + 0.5) * self.map.cell_m, lengths * self.map.cell_m
 
-        The walk keeps the goal until it is reached; the next :meth:`set_actions` replaces
-        it as usual.
-        """
-        spots = np.asarray(spots, np.float64).reshape(-1, np.shape(spots)[-1])[:, :2]
+    def walk_out(self, i: int, goal: np.ndarray, centre: np.ndarray, radius_m: float) -> bool:
+        """Walk agent ``i`` to ``goal`` (world x, y), a stall recovery's way out of the stay of
+        ``radius_m`` around ``centre`` (x, y): the goal in hand is given up (its cluster done),
+        the walk steps out of the stay without turning first and keeps the goal until it is
+        reached or :meth:`set_actions` replaces it. False: no path (it turns in place)."""
         self.primitives[i] = -1
         self.glance_left[i] = 0
         if self.phases[i] in (WALK, FACE):
             self._mark_done(i)
+        self.targets[i] = np.asarray(goal, np.float64)[:2]
+        self.stays[i] = (*np.asarray(centre, np.float64)[:2], radius_m)
+        return self._walk_out_again(i)
+
+    def _walk_out_again(self, i: int) -> bool:
+        """(Re)plan the walk out of the stay to the target on the map's current slice; with no
+        path, to the reachable place farthest from the trail; False: none."""
+        self.slice_restarts[i] = self.map.slice_restarts[i]
+        self.glanced[i], self.target_clusters[i], self.idle_steps[i] = False, -1, 0
+        self.wandering[i] = self.leaving[i] = True
+        self._plan(i, self.targets[i])
+        if self.lengths[i] > 0:
+            self.phases[i] = WALK
+            return True
         self._refresh(i)
-        for slot in range(int(self.counts[i])):  # ranked by path length: nearest first
-            away = np.linalg.norm(spots - self.viewpoints[i, slot], axis=1)
-            if np.all(away > radius_m):
-                self._go_to(i, slot)
-                self.stays[i] = (*spots[-1], radius_m)
-                return "walk to the nearest candidate past the stay"
-        self.glanced[i] = False
-        if self._wander_away(i):
-            self.stays[i] = (*spots[-1], radius_m)
-            return "walk to the reachable place farthest from the trail"
-        return "nothing reachable: turn in place"
+        return self._wander_away(i)
 
     def _wander_away(self, i: int) -> bool:
         """Wander out of a stay (on the map's current slice) to the reachable place farthest
@@ -469,7 +469,7 @@ class GoalWalker:
             # The map restarted at a new height: the goal was found on the old slice. A walk
             # out of a stay chooses again, still out of the same stay.
             if self.stays[i, 2] > 0:
-                self.leave(i, self.stays[i, None, :2].copy(), self.stays[i, 2])
+                self._walk_out_again(i)
             elif self.leaving[i]:
                 self._refresh(i)
                 self._wander_away(i)
@@ -488,7 +488,7 @@ class GoalWalker:
                 if self.stays[i, 2] > 0:
                     # A walk out of a stay that found nothing reachable (the map had just
                     # restarted) tries again out of the same stay, not to the nearest goal.
-                    self.leave(i, self.stays[i, None, :2].copy(), self.stays[i, 2])
+                    self._walk_out_again(i)
                 else:
                     self._refresh(i)
                     self._next_goal(i)
@@ -565,7 +565,7 @@ class GoalWalker:
         height = z - self.floor_heights[i]
         least = self.step_m + VERTICAL_MARGIN_M
         too_high = height > WALK_HEIGHT_M + WALK_HEIGHT_TOLERANCE_M
-        if too_high and below > least and self._may_descend(i):
+        if too_high and below - self.step_m > least and self._may_descend(i):
             return MOVE_DOWN
         # Nothing measured above (an open scan's sky) is room to climb, up to where the env
         # refused a climb: without it an agent that starts low on an open scan walks its
@@ -583,7 +583,7 @@ class GoalWalker:
         """Whether the walker has spent a full turn's worth of moves with nothing in reach,
         turning in place or wandering (it then steps down, see :meth:`_descends`, until a
         goal shows): over furniture, the floor it keeps its height above may be the
-        furniture's top, never having seen the floor. A walk out of a stay (:meth:`leave`)
+        furniture's top, never having seen the floor. A walk out of a stay (:meth:`walk_out`)
         has a place to reach and does not count."""
         full_turn = int(np.ceil(2.0 * np.pi / max(self.turn_rad, 1e-6)))
         nothing_in_reach = self.phases[i] == IDLE or (
@@ -601,21 +601,17 @@ class GoalWalker:
         return self._moved(i) <= 0.25 * self.step_m
 
     def _inside_stay_left(self, i: int) -> bool:
-        """Whether agent ``i`` is walking out of a stay (:meth:`leave`) and still inside it."""
+        """Whether agent ``i`` is walking out of a stay (:meth:`walk_out`) and still inside it."""
         if self.phases[i] != WALK or self.stays[i, 2] <= 0:
             return False
         return bool(np.hypot(*(self.map.poses[i][:2, 3] - self.stays[i, :2])) <= self.stays[i, 2])
 
     def _leave_move(self, i: int) -> int:
-        """A step out of the stay along the path without turning first (forward, backward or
-        sideways, whichever brings the agent nearest to the path's carrot, but never the step
-        that undoes the last one); where no step
-        brings the carrot nearer, one turn towards it, while it lies more than the walk-on
-        angle off (after a turn or two a sideways or backward step usually does); or -1:
-        out of the stay, the env refused the last step, or facing the carrot (the path is
-        then followed as usual). Turning to face a path that leads behind would take up to
-        half a turn's steps on the spot.
-        """
+        """A step out of the stay along the path without turning first (whichever step
+        brings the agent nearest to the path's carrot, never the one undoing the last; turning
+        to face a path behind takes up to half a turn's steps); where none does, a turn
+        towards it while it lies more than the walk-on angle off; -1: out of the stay, the
+        last step refused, or facing the carrot (the path is followed as usual)."""
         pose = self.map.poses[i]
         refused = self.last_moves[i] in TRANSLATIONS and self._stood_still(i)
         if not self._inside_stay_left(i) or refused:
