@@ -55,14 +55,17 @@ class PanoramaClearance:
 
 
 def horizontal_profile(
-    panorama: np.ndarray, max_height_offset_m: float = 0.3, max_elevation_deg: float = 20.0
+    panorama: np.ndarray,
+    max_height_offset_m: float = 0.3,
+    max_elevation_deg: float = 20.0,
+    height_m: float = 0.0,
 ) -> np.ndarray:
-    """Horizontal free distance per panorama column (azimuth) around the agent's height.
+    """Horizontal free distance per panorama column (azimuth) around a height.
 
     Pixels within ``max_elevation_deg`` of the horizon whose hit lies within
-    ``max_height_offset_m`` of the agent's height count; the result is, per column, the
-    smallest horizontal distance of those (inf when none). Column ``u`` looks at azimuth
-    ``-pi + 2 pi (u + 0.5) / W``.
+    ``max_height_offset_m`` of ``height_m`` above the agent (0: its own height) count; the
+    result is, per column, the smallest horizontal distance of those (inf when none).
+    Column ``u`` looks at azimuth ``-pi + 2 pi (u + 0.5) / W``.
     """
     panorama = np.asarray(panorama, np.float64)
     height, width = panorama.shape
@@ -70,7 +73,7 @@ def horizontal_profile(
     rows = np.abs(elevation) <= np.deg2rad(max_elevation_deg)
     distance = np.where(panorama[rows] > 0.0, panorama[rows], np.inf)
     horizontal = distance * np.cos(elevation[rows])[:, None]
-    offset = np.abs(distance * np.sin(elevation[rows])[:, None])
+    offset = np.abs(distance * np.sin(elevation[rows])[:, None] - height_m)
     horizontal = np.where(offset <= max_height_offset_m, horizontal, np.inf)
     return horizontal.min(axis=0)
 

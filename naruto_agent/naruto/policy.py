@@ -72,6 +72,7 @@ from naruto_agent.policies.base import (
 )
 from naruto_agent.policies.layers import Layer
 from naruto_agent.policies.registry import register_policy
+from naruto_agent.policies.stall_recovery import ReachablePlaces
 from naruto_agent.policies.watchdog import StallEvent, StallWatchdogConfig
 
 #: The agent's stall watchdog: the default settings, so that no stay lasts over 30 steps. A
@@ -167,8 +168,7 @@ class NarutoPolicy(Policy):
         self._stalled = False
         # The last frame's plan was cut short by a held or refused move: this frame plans again.
         self._replanning = False
-        # The stay the watchdog last cut short (its spots and radius), until a hold outside it.
-        self._cut_stay: tuple[np.ndarray, float] | None = None
+        self._way_out: Plan | None = None  # the stall recovery's plan, until planned
         self.use_stall_watchdog(STALL_WATCHDOG, enabled=self.config.stall_watchdog)
 
     # -- the episode's state, read-only ------------------------------------------------------
@@ -252,30 +252,46 @@ class NarutoPolicy(Policy):
         self._commanded = None
         self._stalled = False
         self._replanning = False
-        self._cut_stay = None
+        self._way_out = None
         self._integrate(observation)
 
-    def recover_from_stall(self, event: StallEvent) -> str:
-        """Cut the plan in progress short and plan again at once: after a stay that kept
-        learning (``"lingering"``, a long look-around) the next goal of a normal plan past
-        the stay (the goal search weighs what the cut look-around left unseen); after any
-        other stall a recovery that moves (a wander to reachable space away from where the
-        agent has been, or a retreat along its trajectory). A recovery that moves and is
-        under way is kept."""
-        plan = self.machine.plan
-        if (plan is not None and plan.info.get("recovery") in ("wander", "retreat")
-                and self.machine.state in (State.ROTATING_AT_START, State.MOVING)):
-            # A recovery that moves is under way: cutting it for the next one would only
-            # start another walk from the same spot.
-            return "a recovery that moves is under way: kept"
+    def reachable_places(self, position: np.ndarray) -> ReachablePlaces | None:
+        """The planner view's voxels the agent can reach (inside the scan), the shared stall
+        recovery's choice; None when the agent is within a clearance."""
+        recovery = self.goal_planner.recovery
+        assert self.stall_recovery is not None
+        points = recovery.reachable_points(position, self.stall_recovery.config.max_path_m)
+        if points is None:
+            return None
+        return ReachablePlaces(points, np.linalg.norm(points - position, axis=1))
+
+    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str:
+        """Cut the plan in progress short for an E-RRT path to ``goal`` (a straight one, as the
+        panorama showed it clear, when the planner finds none), moving at once; arrived, it
+        looks on ahead and plans."""
+        plan = self.goal_planner.recovery.path_to(position, goal, "way_out")
+        how = "along an E-RRT path"
+        if plan is None:
+            distance = float(np.linalg.norm(goal - position))
+            steps = max(1, int(np.ceil(distance / self.config.planner.step_m)))
+            path = position + np.outer(np.arange(steps + 1) / steps, goal - position)
+            # The panorama showed the way clear (with a margin): its moves pass unchecked.
+            plan = Plan(path, goal[None], goal.copy(), {"recovery": "way_out", "trusted": True})
+            how = "straight"
+        plan.info["move_at_once"] = True
+        plan.views = (goal + (goal - position))[None]
+        self.machine.interrupt()
+        self._way_out = plan
+        self._stalled = True
+        return how
+
+    def no_way_out(self, event: StallEvent) -> str:
+        """No reachable place past the stay: cut the plan short for the agent's own recovery
+        that moves (a wander, or a retreat along its trajectory)."""
         self.machine.interrupt()
         self._stalled = True
-        if event.kind == "lingering":
-            self._cut_stay = self.stay_of(event)
-            self.goal_planner.leave(*self._cut_stay)
-            return "look-around cut short: next goal away from the stay"
         self.monitor.request_recovery()
-        return "plan cut short: recovery that moves"
+        return "no way out: recovery that moves"
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         if self.agent_map is None:
@@ -294,37 +310,21 @@ class NarutoPolicy(Policy):
         new_map, self._stalled = new_map or self._stalled, False
         new_map = new_map or self._replanning
         cut_before, plan_before = self.machine.collisions, self.machine.plan
-        # On the way out of a stay the watchdog cut short (the agent has stayed there long
-        # already) a held move is counted at once and planned around in the same frame.
-        leaving = (plan_before is not None and not plan_before.info.get("recovery")
-                   and self._within_cut_stay(position))
-        held_here: list[bool] = []
-
-        def move_check(start: np.ndarray, end: np.ndarray) -> bool:
-            free = self._move_check(start, end)
-            if not free and leaving and not held_here:
-                held_here.append(True)
-                self._note_hold(position, self.machine.plan)
-                self._replanning = True  # the plan around it moves at once
-            return free
-
         pose = self.machine.step(
             np.asarray(observation["pose"], dtype=np.float64),
             new_map=new_map,
             collided=bool((info or {}).get("collided", False)),
             plan=self._plan,
-            move_is_free=move_check,
-            plan_when_held=leaving,
+            move_is_free=self._move_check,
         )
         # A move held by the agent's checks or refused by the env taught the map where not to
         # go: the next frame plans again instead of waiting for the next mapping step.
-        unplanned = self.machine.collisions - cut_before - len(held_here) > 0
-        if unplanned:
+        self._replanning = self.machine.collisions - cut_before > 0
+        if self._replanning:
             # A hold that ended the step standing held the plan in hand; one followed by a
             # new plan in the same step held the one before.
             self._note_hold(position, self.machine.plan if self.machine.state == State.STAYING
                             else plan_before)
-        self._replanning = unplanned or (bool(held_here) and self.machine.state == State.STAYING)
         # Control is the state machine's own work; the phases it called are timed apart.
         called = sum(self.timings[name] for name in inner) - before
         self.timings["control"] += time.perf_counter() - clock - called
@@ -423,39 +423,16 @@ class NarutoPolicy(Policy):
     def _note_hold(self, position: np.ndarray, held: Plan | None) -> None:
         """A move of ``held`` was held or refused at ``position``: the monitor counts the
         holds per place and per goal (a spot whose plans keep being held fails); a held
-        recovery, or a move held on the way out of a stay the watchdog cut short, is
-        followed by a recovery that moves at once."""
+        recovery is followed by a recovery that moves at once (a held way out of a stall
+        is not chosen again)."""
         if held is not None and held.info.get("recovery"):
+            if held.info["recovery"] == "way_out" and self.stall_recovery is not None:
+                self.stall_recovery.fail()
             self.monitor.request_recovery()  # the next step of the escalation, at once
             return
-        if self._in_cut_stay(position) and self._clear_to_wander(position):
-            self.monitor.request_recovery()
-        else:
-            self.monitor.move_held(position)
+        self.monitor.move_held(position)
         if held is not None:
             self.monitor.goal_held(held.goal)
-
-    def _within_cut_stay(self, position: np.ndarray) -> bool:
-        """Whether the agent is within the stay the watchdog last cut short."""
-        if self._cut_stay is None:
-            return False
-        spots, radius = self._cut_stay
-        return bool(np.min(np.linalg.norm(spots - position, axis=1)) < radius)
-
-    def _in_cut_stay(self, position: np.ndarray) -> bool:
-        """:meth:`_within_cut_stay`, asked at a hold: a hold outside the stay forgets it (the
-        next cut replaces it too)."""
-        if self._within_cut_stay(position):
-            return True
-        self._cut_stay = None
-        return False
-
-    def _clear_to_wander(self, position: np.ndarray) -> bool:
-        """Whether the agent keeps the planner's clearance on its map, where a wander (the
-        recovery that moves to space away from where the agent has been) can set off; a
-        recovery from within a clearance retreats along the way the agent came."""
-        self.agent_map.refresh()
-        return self.agent_map.keeps_clearance(position)
 
     def _learn_from_refusal(self, position: np.ndarray, info: Info) -> None:
         """The step info says the env refused the move the agent commanded last: learn it
@@ -480,7 +457,11 @@ class NarutoPolicy(Policy):
     def _plan(self, position: np.ndarray, rotation: np.ndarray) -> Plan | None:
         """The state machine's planning step; a plan made at once after a held or refused
         move sets off without turning first (it turns on the way): each new path would
-        otherwise cost a turn in place towards it."""
+        otherwise cost a turn in place towards it. A way out of a stall
+        (:meth:`walk_out`) comes first."""
+        if self._way_out is not None:
+            plan, self._way_out = self._way_out, None
+            return plan
         plan = self.goal_planner.plan(position, self._frame_index, rotation)
         if plan is not None and self._replanning:
             plan.info["move_at_once"] = True

@@ -22,7 +22,7 @@ from naruto_agent.naruto.config import NarutoConfig
 from naruto_agent.naruto.paths import shorten_path
 from naruto_agent.naruto.recovery import ProgressMonitor, RecoveryKind, look_around_targets
 from naruto_agent.naruto.state_machine import Plan
-from naruto_agent.planning import plan_path, reachable_voxels
+from naruto_agent.planning import PlannerConfig, plan_path, reachable_voxels
 
 #: ``inside_scan(points, position) -> (N,) bool``: which points lie inside the scan.
 InsideScan = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -99,35 +99,55 @@ class RecoveryPlanner:
         """A path to reachable space within ``recovery.wander_max_m``, as far as possible from
         where the agent has been; None when the agent is within a clearance or no such
         point can be reached."""
+        points = self.reachable_points(position, self.config.recovery.wander_max_m)
+        if points is None or len(points) == 0:
+            return None
+        history = np.asarray(self.monitor.trajectory[-_HISTORY_POINTS:])
+        novelty = np.full(len(points), np.inf)
+        for chunk in np.array_split(history, max(1, len(history) // 64)):
+            novelty = np.minimum(novelty, np.min(
+                np.linalg.norm(points[:, None, :] - chunk[None, :, :], axis=2), axis=1))
+        for goal in points[np.argsort(-novelty, kind="stable")[:_WANDER_TRIES]]:
+            plan = self.path_to(position, goal, "wander")
+            if plan is not None:
+                return plan
+        return None
+
+    def reachable_points(self, position: np.ndarray, max_m: float) -> np.ndarray | None:
+        """The planner view's voxels the agent can reach from ``position`` within ``max_m``
+        (inside the scan with ``stay_in_scanned_space``), (n, 3); None when the agent is
+        within a clearance (no way from here is planned)."""
         if not self.agent_map.keeps_clearance(position):
             return None
         sdf = self.agent_map.sdf
-        planner = replace(self.config.planner, seed=int(self.rng.integers(2**31 - 1)),
-                          device=str(self.device))
         clock = time.perf_counter()
         try:
-            reachable = reachable_voxels(sdf, position, planner,
+            reachable = reachable_voxels(sdf, position, self._planner(),
                                          iterations=self.config.reachable_iterations)
-            points = sdf.grid_points()[reachable.reshape(-1)]
-            points = points[np.linalg.norm(points - position, axis=1)
-                            <= self.config.recovery.wander_max_m]
-            if self.config.stay_in_scanned_space:
-                points = points[self.inside_scan(points, position)]
-            if len(points) == 0:
-                return None
-            history = np.asarray(self.monitor.trajectory[-_HISTORY_POINTS:])
-            novelty = np.full(len(points), np.inf)
-            for chunk in np.array_split(history, max(1, len(history) // 64)):
-                novelty = np.minimum(novelty, np.min(
-                    np.linalg.norm(points[:, None, :] - chunk[None, :, :], axis=2), axis=1))
-            order = np.argsort(-novelty, kind="stable")[:_WANDER_TRIES]
-            components = self.agent_map.components
-            for goal in points[order]:
-                result = plan_path(sdf, position, goal, planner, components)
-                if result.success:
-                    path = shorten_path(sdf, result.path, self.config)
-                    return Plan(path, look_around_views(goal, self.config), goal.copy(),
-                                {"recovery": "wander"})
-            return None
         finally:
             self.timings["rrt"] += time.perf_counter() - clock
+        points = sdf.grid_points()[reachable.reshape(-1)]
+        points = points[np.linalg.norm(points - position, axis=1) <= max_m]
+        if self.config.stay_in_scanned_space and len(points):
+            points = points[self.inside_scan(points, position)]
+        return points
+
+    def path_to(self, position: np.ndarray, goal: np.ndarray, kind: str) -> Plan | None:
+        """A recovery plan of ``kind`` along an E-RRT path from ``position`` to ``goal``,
+        looking around there; None when the planner finds no path."""
+        sdf = self.agent_map.sdf
+        clock = time.perf_counter()
+        try:
+            result = plan_path(sdf, position, goal, self._planner(), self.agent_map.components)
+        finally:
+            self.timings["rrt"] += time.perf_counter() - clock
+        if not result.success:
+            return None
+        path = shorten_path(sdf, result.path, self.config)
+        return Plan(path, look_around_views(goal, self.config), np.asarray(goal).copy(),
+                    {"recovery": kind})
+
+    def _planner(self) -> PlannerConfig:
+        """The planner's settings with a fresh E-RRT seed."""
+        return replace(self.config.planner, seed=int(self.rng.integers(2**31 - 1)),
+                       device=str(self.device))

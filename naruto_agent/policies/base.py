@@ -26,6 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from naruto_agent.policies.layers import Layer
+from naruto_agent.policies.stall_recovery import ReachablePlaces, StallRecovery, panorama_places
 from naruto_agent.policies.watchdog import StallEvent, StallWatchdog, StallWatchdogConfig
 from naruto_gym.envs.validation import check_keyword_names
 from naruto_gym.geometry.transforms import quaternion_from_pose
@@ -124,10 +125,14 @@ class Policy(ABC):
 
     A stall watchdog (:mod:`naruto_agent.policies.watchdog`) is opt-in: a policy calls
     :meth:`use_stall_watchdog` (every shipped policy does), calls :meth:`check_stall` at the
-    start of its ``act``, and implements :meth:`recover_from_stall`.
+    start of its ``act``, and implements :meth:`walk_out`. On a stall the one shared recovery
+    (:mod:`naruto_agent.policies.stall_recovery`) chooses a reachable place past the stay,
+    away from the trail, among those :meth:`reachable_places` names (the policy's own map;
+    by default its depth panorama), and :meth:`walk_out` walks there.
 
     Attributes:
         stall_watchdog: the watchdog in use, or None (off, the default).
+        stall_recovery: the shared recovery in use with the watchdog, or None.
     """
 
     #: Action modes this policy can act in; the first is the one a runner builds the env with.
@@ -138,6 +143,8 @@ class Policy(ABC):
     def __init__(self) -> None:
         self._context: EnvContext | None = None
         self.stall_watchdog: StallWatchdog | None = None
+        self.stall_recovery: StallRecovery | None = None
+        self._stall_panorama: np.ndarray | None = None
 
     @property
     def context(self) -> EnvContext:
@@ -187,6 +194,9 @@ class Policy(ABC):
         self.check_observation(observation)
         if self.stall_watchdog is not None:
             self.stall_watchdog.reset()
+        if self.stall_recovery is not None:
+            self.stall_recovery.reset()
+        self._stall_panorama = None
 
     # -- stall watchdog (opt-in) -----------------------------------------------------------
     def use_stall_watchdog(
@@ -198,7 +208,17 @@ class Policy(ABC):
             config: the watchdog's settings (default :class:`StallWatchdogConfig`).
             enabled: False turns the watchdog off.
         """
+        own = type(self)
+        if enabled and (own.walk_out is Policy.walk_out
+                        and own.recover_from_stall is Policy.recover_from_stall):
+            raise NotImplementedError(
+                f"{own.__name__} uses a stall watchdog but does not implement "
+                "walk_out(position, goal) (how it walks to the way out the shared recovery "
+                "chooses) or recover_from_stall(event); implement one, or call "
+                "use_stall_watchdog(enabled=False)"
+            )
         self.stall_watchdog = StallWatchdog(config) if enabled else None
+        self.stall_recovery = StallRecovery() if enabled else None
 
     def check_stall(
         self, observation: Observation, info: Info | None, progress: float | None = None
@@ -211,6 +231,9 @@ class Policy(ABC):
             return None
         position = np.asarray(observation["pose"], np.float64)[:3, 3]
         refused = bool(info.get("collided", False)) if info else False
+        self._stall_panorama = observation.get("panorama")
+        if self.stall_recovery is not None:
+            self.stall_recovery.record(position, refused)
         event = self.stall_watchdog.observe(position, refused, progress)
         if event is not None:
             event.recovery = self.recover_from_stall(event)
@@ -225,14 +248,55 @@ class Policy(ABC):
         radius = self.stall_watchdog.config.radius_m + self.context.max_translation_m
         return spots.reshape(-1, 3), radius
 
+    @property
+    def walking_out(self) -> bool:
+        """Whether a way out of a stall is being walked (until the agent is there, the env
+        refuses a move, or the next stall)."""
+        return self.stall_recovery is not None and self.stall_recovery.goal is not None
+
     def recover_from_stall(self, event: StallEvent) -> str:
-        """Get going again after a stall (a new goal, a new direction, a height change
-        inside the scanned space); returns what it did, in a few words, for the record.
-        Policies that use a watchdog must implement it."""
+        """The shared recovery: the reachable place past the stay farthest from the trail,
+        among :meth:`reachable_places` (then the panorama's, :func:`panorama_places`, when
+        the map has none past the stay), walked to by :meth:`walk_out`; with none,
+        :meth:`no_way_out`. Returns what it did, in a few words, for the record."""
+        assert self.stall_recovery is not None
+        spots, radius = self.stay_of(event)
+        position = np.asarray(event.position, np.float64)
+        for places in (self.reachable_places(position), self.panorama_places(position)):
+            if places is None or self.stall_recovery.way_out(places, spots, radius) is None:
+                continue
+            goal = self.stall_recovery.goal
+            return f"walk out to ({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f}): " + (
+                self.walk_out(position.copy(), goal.copy()))
+        return self.no_way_out(event)
+
+    def reachable_places(self, position: np.ndarray) -> ReachablePlaces | None:
+        """The places the policy's own map says it can reach from ``position`` (a hook of the
+        shared stall recovery); by default None: the depth panorama's
+        (:meth:`panorama_places`) stand in."""
+        return None
+
+    def panorama_places(self, position: np.ndarray) -> ReachablePlaces | None:
+        """The places a straight, level walk reaches as the last panorama shows them
+        (:func:`~naruto_agent.policies.stall_recovery.panorama_places`); None without one."""
+        if self._stall_panorama is None:
+            return None
+        return panorama_places(self._stall_panorama, position, self.context.max_translation_m,
+                               bounds=np.asarray(self.context.bounds, np.float64))
+
+    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str:
+        """Walk from ``position`` to ``goal`` (3,), the way out of a stall the shared recovery
+        chose, with the policy's own motion; returns how, in a few words. Policies that use a
+        watchdog must implement it (:attr:`walking_out` says whether the walk is still on)."""
         raise NotImplementedError(
             f"{type(self).__name__} uses a stall watchdog but does not implement "
-            "recover_from_stall(event); implement it, or call use_stall_watchdog(enabled=False)"
+            "walk_out(position, goal); implement it, or call use_stall_watchdog(enabled=False)"
         )
+
+    def no_way_out(self, event: StallEvent) -> str:
+        """What to do when no reachable place lies past the stay (a hook); by default
+        nothing: the policy's own rules go on, and the next stall tries again."""
+        return "no reachable place past the stay"
 
     @property
     def stall_events(self) -> list[StallEvent]:

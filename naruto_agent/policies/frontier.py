@@ -11,8 +11,8 @@ loop, and why each rule is there, is in docs/policies.md; the settings are
 :class:`~naruto_agent.policies.config.FrontierConfig`. A stall the loop's own rules miss
 (turning on the spot with no frontier it can reach, a goal refused one step at a time) is
 caught by the stall watchdog (:mod:`naruto_agent.policies.watchdog`): the policy gives the
-spot up, walks to a reachable place 1-3 m away (the farthest from where it stalled; with
-none, straight along the clearest heading) and looks around and plans from there.
+spot up and walks to the reachable place past the stay that the shared recovery
+(:mod:`naruto_agent.policies.stall_recovery`) chose from its map, and plans from there.
 """
 
 from __future__ import annotations
@@ -37,16 +37,11 @@ from naruto_agent.policies.base import (
 from naruto_agent.policies.config import FrontierConfig, build_config
 from naruto_agent.policies.layers import Layer, LinesLayer, PointsLayer, subsample
 from naruto_agent.policies.registry import register_policy
+from naruto_agent.policies.stall_recovery import ReachablePlaces
 from naruto_agent.policies.watchdog import StallEvent, StallWatchdogConfig
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose, rotation_angle_between
 
 _ALL_NEIGHBOURS = np.ones((3, 3, 3), bool)
-#: Path lengths (metres) of the places a stall recovery may walk to when no frontier is left.
-WANDER_RANGE_M = (1.0, 3.0)
-#: After a stall recovery's walk the env refused, a plan whose moves are all held (the panorama
-#: shows a surface in the way) leads to a walk elsewhere instead of a look-around on the
-#: refused spot (the stay the walk was to end), up to this many times per stall.
-WANDER_RETRIES = 1
 
 
 #: The frontier policy's stall watchdog: a stay that still learns (a look-around at a goal,
@@ -100,9 +95,7 @@ class FrontierPolicy(Policy):
         self.refused = RefusedMoves()
         self._last_target: np.ndarray | None = None
         self._wandering = False  # on a stall recovery's walk: the env, not the probes, decides
-        self._wander_failed: list[np.ndarray] = []  # where refused walks of this episode led
-        self._wander_retries = 0  # walks elsewhere after refused ones, since the last stall
-        self._walk_refused = False  # the last stall recovery's walk was refused, no move since
+        self._way_out_plan: tuple[Any, np.ndarray] | None = None  # reachable_places' plan
         self.use_stall_watchdog(STALL_WATCHDOG, enabled=self.config.stall_watchdog)
 
     @property
@@ -149,9 +142,7 @@ class FrontierPolicy(Policy):
         self.refused.reset()
         self._last_target = None
         self._wandering = False
-        self._wander_failed = []
-        self._wander_retries = 0
-        self._walk_refused = False
+        self._way_out_plan = None
         self.guard.reset()
         self._closed_scan_held_done = False
         pose = np.asarray(observation["pose"], np.float64)
@@ -394,101 +385,68 @@ class FrontierPolicy(Policy):
         return bool(kept[low[0] : high[0], low[1] : high[1], low[2] : high[2]].any())
 
     # -- stall recovery --------------------------------------------------------------------
-    def recover_from_stall(self, event: StallEvent) -> str:
-        """Give the stalled spot and the goal up and walk to a reachable place
-        :data:`WANDER_RANGE_M` away (the farthest from the stall), to look around and plan
-        there; with none, plan anew."""
+    def reachable_places(self, position: np.ndarray) -> ReachablePlaces | None:
+        """The free voxels the map connects to ``position``, a few voxels away and more, with
+        their path lengths (the shared stall recovery's choice): those the planner's
+        inflation keeps clear of surfaces, or without inflation when none is."""
         assert self.grid is not None
+        self._release_closed_scan()
+        start = np.clip(self.grid.world_to_cell(position[None])[0], 0,
+                        np.array(self.grid.shape) - 1)
+        for inflation in dict.fromkeys((self.config.inflation_voxels, 0)):
+            traversable = self._traversable(position, inflation, self._held_to_scan)
+            traversable[tuple(start)] = True  # the way out starts where the agent stands
+            plan = self.grid.plan_from(start, traversable)
+            cells = np.argwhere(traversable & np.isfinite(plan.costs)
+                                & (plan.costs >= 3.0 * self.config.voxel_size_m))
+            if len(cells):
+                break
+        self._way_out_plan = (plan, traversable)
+        return ReachablePlaces(self.grid.cell_to_world(cells), plan.costs[tuple(cells.T)])
+
+    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str:
+        """Give the stalled spot and the goal up and walk to ``goal``: along the map's path
+        when the map reaches it, else straight; arrived, it looks on ahead and plans."""
+        assert self.grid is not None
+        self._give_up_spot(position)
+        cell = self.grid.world_to_cell(goal[None])[0]
+        plan, traversable = self._way_out_plan or (None, None)
+        if (plan is not None and self.grid.in_grid(cell[None])[0]
+                and np.isfinite(plan.costs[tuple(cell)])):
+            self._path = self.grid.cell_to_world(self.grid.trace_path(plan, cell))
+            self._traversable_cache = traversable
+            how = "along the map's path"
+        else:
+            steps = max(1, int(np.ceil(np.linalg.norm(goal - position) / 0.1)))
+            self._path = position + np.outer(np.arange(steps + 1) / steps, goal - position)
+            self._traversable_cache = ~self.grid.occupied
+            how = "straight"
+        self._path[0] = position
+        self._goal_cell = cell
+        # Arrived, it looks on ahead (a short look, not a full turn: that stalled).
+        self._goal_focus = goal + np.append(goal[:2] - position[:2], 0.0)
+        self._steps_since_plan = 0
+        self.state = "move"
+        self._wandering = True
+        return how
+
+    def no_way_out(self, event: StallEvent) -> str:
+        """No reachable place past the stay: give the spot up and plan anew."""
         position = np.asarray(event.position, np.float64)
+        self._give_up_spot(position)
+        if self._plan(position):
+            return "no way out: new frontier goal"
+        self.state = "done"
+        return "no way out: look around"
+
+    def _give_up_spot(self, position: np.ndarray) -> None:
+        """The stalled spot and the goal count as visited; the look-around is dropped."""
+        assert self.grid is not None
         if self._goal_cell is not None:
             self._mark_visited(self.grid.cell_to_world(self._goal_cell[None])[0])
         self._mark_visited(position)
         self._views.clear()
         self._stuck = 0
-        self._wander_retries = 0
-        self._walk_refused = False
-        self._release_closed_scan()
-        if self._wander(position):
-            return "walk to a reachable place away from the stall"
-        if self._plan(position):
-            return "new frontier goal"
-        self.state = "done"
-        return "nothing reachable: look around"
-
-    def _wander(self, position: np.ndarray) -> bool:
-        """Set a path to the reachable place farthest from ``position`` among those
-        :data:`WANDER_RANGE_M` of path away (without inflation); False when there is none."""
-        assert self.grid is not None
-        traversable = self._traversable(position, 0, self._held_to_scan)
-        start = np.clip(self.grid.world_to_cell(position[None])[0], 0,
-                        np.array(self.grid.shape) - 1)
-        plan = self.grid.plan_from(start, traversable)
-        low, high = WANDER_RANGE_M
-        cells = np.argwhere(traversable & (plan.costs >= low) & (plan.costs <= high))
-        if len(cells) == 0:  # a small space: anywhere reachable a few voxels away
-            cells = np.argwhere(traversable & np.isfinite(plan.costs)
-                                & (plan.costs >= 3.0 * self.config.voxel_size_m))
-        points = self.grid.cell_to_world(cells)
-        for failed in self._wander_failed:  # not towards where a walk was refused
-            keep = np.linalg.norm(points - failed, axis=1) > 0.5
-            cells, points = cells[keep], points[keep]
-        # Farthest across the floor (a walk that only changes height stays on the spot).
-        distance = np.linalg.norm(points[:, :2] - position[:2], axis=1)
-        if len(cells) == 0 or distance.max() < 0.6:
-            return self._walk_straight(position)
-        goal = cells[int(np.argmax(distance))]
-        self._goal_cell = goal
-        # Arrived, it looks on ahead (a short look, not a full turn: that stalled).
-        self._goal_focus = points[int(np.argmax(distance))] + np.append(
-            points[int(np.argmax(distance)), :2] - position[:2], 0.0)
-        self._path = self.grid.cell_to_world(self.grid.trace_path(plan, goal))
-        self._path[0] = position
-        self._traversable_cache = traversable
-        self._steps_since_plan = 0
-        self.state = "move"
-        self._wandering = True
-        return True
-
-    def _retry_walk(self, position: np.ndarray) -> bool:
-        """After a refused walk away from a stall and no plan that moves: walk elsewhere
-        (:data:`WANDER_RETRIES` times per stall); False when that is spent or no walk is
-        found."""
-        if not self._walk_refused or self._wander_retries >= WANDER_RETRIES:
-            return False
-        self._wander_retries += 1
-        return self._wander(position)
-
-    def _walk_straight(self, position: np.ndarray) -> bool:
-        """With no traversable voxel around (the height band the map allows is empty, e.g.
-        low walls in tight bounds): a straight walk of 1 m, level, along the heading whose
-        line the map shows clearest of occupied voxels; False when none is clear."""
-        assert self.grid is not None
-        occupied = self.grid.occupied
-        headings = np.deg2rad(np.arange(0.0, 360.0, 22.5))
-        reach = np.arange(1, 11) * 0.1
-        best, best_free = None, 0
-        for heading in headings:
-            points = position + np.outer(reach, [np.cos(heading), np.sin(heading), 0.0])
-            cells = self.grid.world_to_cell(points)
-            inside = self.grid.in_grid(cells)
-            blocked = ~inside
-            blocked[inside] = occupied[tuple(cells[inside].T)]
-            free = int(np.argmax(blocked)) if blocked.any() else len(reach)
-            if any(np.linalg.norm(points[max(free - 1, 0)] - failed) <= 0.5
-                   for failed in self._wander_failed):
-                continue
-            if free > best_free:
-                best, best_free = points[:free], free
-        if best is None or best_free < 3:
-            return False
-        self._goal_cell = self.grid.world_to_cell(best[-1:])[0]
-        self._goal_focus = best[-1] + (best[-1] - position)
-        self._path = np.concatenate([position[None], best])
-        self._traversable_cache = ~occupied
-        self._steps_since_plan = 0
-        self.state = "move"
-        self._wandering = True
-        return True
 
     # -- acting --------------------------------------------------------------------------
     def _look_action(self, pose: np.ndarray) -> np.ndarray | None:
@@ -641,13 +599,7 @@ class FrontierPolicy(Policy):
                     )
                     self.grid.mark_occupied(bump[None])
             if self._wandering and collided:
-                # A stall recovery's walk refused: plan; a walk elsewhere (away from where
-                # refused ones led) if no plan moves, or at the next recovery.
-                self._wander_failed.append(np.asarray(self._path[-1], np.float64).copy())
-                if self._last_target is not None:
-                    self._wander_failed.append(self._last_target.copy())
-                self._walk_refused = True
-                self.state = "plan"
+                self.state = "plan"  # a stall recovery's walk refused (it is not chosen again)
             elif self._stuck >= 3 or (collided and self._stuck >= 1):
                 self._mark_visited(self.grid.cell_to_world(self._goal_cell[None])[0])
                 self._stuck = 0
@@ -675,17 +627,12 @@ class FrontierPolicy(Policy):
             if self.state == "move":
                 action = self._move_action(pose, observation.get("panorama"))
                 if action is not None:
-                    self._walk_refused = False
                     return clip_pose_action(action, self.context.action_space)
                 if self.state == "plan":
                     continue  # the move would have left the scan
                 # Arrived: look around here, towards the cluster first.
                 self._mark_visited(position)
                 self._start_look_around(pose, self._goal_focus)
-        if not self._views and self._retry_walk(position):
-            action = self._move_action(pose, observation.get("panorama"))
-            if action is not None:
-                return clip_pose_action(action, self.context.action_space)
         # Nothing left to explore (or no decision this step): keep turning on the spot.
         if not self._views:
             self._start_look_around(pose, focus=None)

@@ -19,10 +19,10 @@
   the agent crosses the room towards its most open side until it meets another wall, and
   follows that one. A stall the follower's own rules miss (spinning in a small cluttered
   room, a refused sink repeated) is caught by the stall watchdog
-  (:mod:`naruto_agent.policies.watchdog`): the follower then walks off towards the most open
-  heading for a while, without steering and with a smaller clearance, after a height change
-  inside the scan. Only the bounds, the observations and the step
-  info are used, never the mesh.
+  (:mod:`naruto_agent.policies.watchdog`): the follower then walks, without steering and
+  with a smaller clearance, to the place past the stay that the shared recovery
+  (:mod:`naruto_agent.policies.stall_recovery`) chose. Only the bounds, the observations and
+  the step info are used, never the mesh.
 """
 
 from __future__ import annotations
@@ -48,12 +48,12 @@ from naruto_gym.utils.checks import check_integer
 
 HOLD_HEIGHT_STEPS = 20
 """Steps the wall follower keeps its height after a refused move that changed it."""
-FORCED_STEPS = 12
-"""Steps a stall recovery walks towards the most open heading without steering."""
+FLOOR_CLEARANCE_M = 0.3
+"""Height the follower keeps above the surface straight below it (its wall clearance and a
+step's worth)."""
 FORCED_CLEARANCE_M = 0.0
-"""Clearance ahead a stall recovery's walk needs (the follower's own is 0.25 m + a step)."""
-STALL_HEIGHT_CHANGE_M = 0.25
-"""Height change of every second stall recovery."""
+"""Clearance ahead a stall recovery's walk needs, the agent's radius and a step (the
+follower's own is 0.25 m + a step)."""
 
 
 def load_trajectory(path: str | Path) -> np.ndarray:
@@ -138,8 +138,8 @@ class PassivePolicy(Policy):
         self._profile: np.ndarray | None = None
         self._forced_steps = 0
         self._height_offset = 0.0
-        self._height_first = False
-        self._height_first = False
+        self._refused_spot: np.ndarray | None = None
+        self._refused_headings: list[float] = []
         self.use_stall_watchdog(enabled=self.config.stall_watchdog)
 
     @property
@@ -182,6 +182,8 @@ class PassivePolicy(Policy):
         self._profile = None
         self._forced_steps = 0
         self._height_offset = 0.0
+        self._refused_spot = None
+        self._refused_headings = []
 
     # -- replay ------------------------------------------------------------------------
     def _reached(self, pose: np.ndarray, target: np.ndarray) -> bool:
@@ -265,32 +267,73 @@ class PassivePolicy(Policy):
         self._recent = []
 
     def recover_from_stall(self, event: StallEvent) -> str:
-        """Replaying: skip to the next pose. Scripted: walk towards the most open heading for
-        :data:`FORCED_STEPS` steps, leaving the wall, after moving the scan height by
-        :data:`STALL_HEIGHT_CHANGE_M` towards the middle of the bounds' height (a stall is
-        often a height where every way is blocked)."""
+        """Replaying: skip to the next pose. Scripted: the shared recovery
+        (:meth:`~naruto_agent.policies.Policy.recover_from_stall`)."""
         if self.poses is not None:
             self._index += 1
             self._blocked = 0
             return "skipped to the next pose"
-        if self._profile is not None:
-            headings = self._heading + np.deg2rad(np.arange(0.0, 360.0, 15.0))
-            clearance = [
-                profile_clearance(self._profile, yaw, np.deg2rad(20.0)) for yaw in headings
-            ]
-            self._heading = float(headings[int(np.argmax(clearance))])
+        return super().recover_from_stall(event)
+
+    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str:
+        """Leave the wall and walk straight to the way out of a stall, without steering,
+        after changing height to the way out's (which stays the scan height from then on:
+        every way was blocked at the old one)."""
+        move = goal[:2] - position[:2]
+        self._heading = float(np.arctan2(move[1], move[0]))
         self._found_wall = False
         self._visits = []
         self._recent = []
-        self._forced_steps = FORCED_STEPS
+        step = self.context.max_translation_m
+        climb = float(goal[2] - position[2])
+        self._forced_steps = max(1, int(np.ceil(float(np.linalg.norm(move)) / step)))
+        self._forced_steps += int(np.ceil(abs(climb) / step - 1e-9))
+        self._height_offset = float(goal[2] - self._scan_height(0.0))
         self._hold_height = 0
-        words = f"walk towards heading {np.rad2deg(self._heading) % 360.0:.0f} deg"
+        return (f"walk towards heading {np.rad2deg(self._heading) % 360.0:.0f} deg"
+                + (f" after a height change of {climb:+.2f} m" if abs(climb) > 1e-6 else ""))
+
+    @staticmethod
+    def _lowest_height(panorama: np.ndarray, position: np.ndarray) -> float:
+        """The lowest height the follower scans at here: :data:`FLOOR_CLEARANCE_M` above the
+        surface the panorama shows straight below (a sloped or stepped floor, a cabinet's
+        top), where a horizontal move still clears it; -inf where nothing is below."""
+        rows = max(1, len(panorama) // 16)  # within about 11 degrees of straight down
+        below = np.asarray(panorama[-rows:], np.float64)
+        below = below[below > 0.0]
+        if len(below) == 0:
+            return -np.inf
+        return float(position[2] - below.min() + FLOOR_CLEARANCE_M)
+
+    def _scan_height(self, offset: float | None = None) -> float:
+        """The height the follower scans at: ``scan_height_fraction`` of the bounds' height,
+        moved by ``offset`` (default: the height a stall recovery last chose), within the
+        bounds."""
         bounds = self.context.bounds
-        middle = 0.5 * (bounds[0, 2] + bounds[1, 2])
-        self._height_offset += STALL_HEIGHT_CHANGE_M * (1.0 if event.position[2] < middle else -1.0)
-        words += f", scan height {self._height_offset:+.2f} m first"
-        self._height_first = True
-        return words
+        height = bounds[0, 2] + self.config.scan_height_fraction * (bounds[1, 2] - bounds[0, 2])
+        offset = self._height_offset if offset is None else offset
+        return float(np.clip(height + offset, bounds[0, 2], bounds[1, 2]))
+
+    def _without_refused_headings(self, profile: np.ndarray, position: np.ndarray,
+                                  collided: bool) -> np.ndarray:
+        """``profile`` with no room along a heading the env refused a move on from where the
+        agent stands (a fragment or clutter the panorama's band around its height missed):
+        a refused move is never sent again from the same spot; moving on forgets them."""
+        if self._refused_spot is None or np.linalg.norm(position - self._refused_spot) > 0.02:
+            self._refused_spot, self._refused_headings = position.copy(), []
+        if collided and self._last_target is not None:
+            move = self._last_target[:2] - position[:2]
+            if np.linalg.norm(move) > 1e-6:
+                self._refused_headings.append(float(np.arctan2(move[1], move[0])))
+        if not self._refused_headings:
+            return profile
+        width = len(profile)
+        azimuth = -np.pi + 2.0 * np.pi * (np.arange(width) + 0.5) / width
+        profile = profile.copy()
+        for heading in self._refused_headings:
+            near = np.abs(np.angle(np.exp(1j * (azimuth - heading)))) <= np.deg2rad(20.0)
+            profile[near] = 0.0
+        return profile
 
     def _act_scripted(self, observation: Observation, info: Info | None) -> np.ndarray:
         pose = np.asarray(observation["pose"], np.float64)
@@ -304,6 +347,7 @@ class PassivePolicy(Policy):
         panorama = observation["panorama"]
         profile = np.minimum(horizontal_profile(panorama), floor_edge_profile(panorama))
         profile = self._refused.overlay(profile, position)
+        profile = self._without_refused_headings(profile, position, collided)
         self._profile = profile
         coverage = info.get("coverage") if info else None
         if collided:
@@ -314,9 +358,7 @@ class PassivePolicy(Policy):
             if self._loop_without_news(position, coverage):
                 self._leave_the_wall(profile)
             self._steer(profile, collided)
-        bounds = self.context.bounds
-        height = bounds[0, 2] + self.config.scan_height_fraction * (bounds[1, 2] - bounds[0, 2])
-        height = float(np.clip(height + self._height_offset, bounds[0, 2], bounds[1, 2]))
+        height = max(self._scan_height(), self._lowest_height(panorama, position))
         step = self.context.max_translation_m
         direction = np.array([np.cos(self._heading), np.sin(self._heading)])
         next_position = position.copy()
@@ -324,10 +366,9 @@ class PassivePolicy(Policy):
         # A stall recovery's walk goes on while the panorama shows any room ahead; the env
         # refuses a move that touches a surface, and a refusal ends the walk.
         needed = FORCED_CLEARANCE_M if self._forced_steps > 0 else 0.25 + step
-        if self._height_first and abs(height - position[2]) > 0.02 and not collided:
-            pass  # a stall recovery changes height first, then walks
+        if self._forced_steps > 0 and abs(height - position[2]) > 0.02 and not collided:
+            pass  # a stall recovery's walk changes height first, then walks
         elif profile_clearance(profile, self._heading, np.deg2rad(20.0)) > needed:
-            self._height_first = False
             next_position[:2] += direction * step
         # A refused move that also climbed or sank (onto a tall cabinet's top, under a
         # shelf) is tried again at the height the agent has, until it walks clear.

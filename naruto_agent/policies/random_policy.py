@@ -18,8 +18,9 @@ spot where every redrawn run looks blocked, the walk sweeps the headings all aro
 a clear way; where none is, it turns in place for up to ``max_held_moves`` steps, then sends
 the part of the move the panorama shows clear, or the move itself, and the env decides: it
 never stays put for good. A stall all that misses (runs redrawn in one corner, one refused
-move repeated) is caught by the stall watchdog (:mod:`naruto_agent.policies.watchdog`): a new
-run away from the stall, level or, every second time, climbing or sinking.
+move repeated) is caught by the stall watchdog (:mod:`naruto_agent.policies.watchdog`), and
+the shared recovery (:mod:`naruto_agent.policies.stall_recovery`) sends a straight run to a
+place past the stay that the panorama shows clear.
 """
 
 from __future__ import annotations
@@ -40,12 +41,7 @@ from naruto_agent.policies.base import (
 )
 from naruto_agent.policies.config import RandomConfig, build_config
 from naruto_agent.policies.registry import register_policy
-from naruto_agent.policies.watchdog import StallEvent
 from naruto_gym.geometry.transforms import look_at_rotation, make_pose
-
-#: A stall's recovery looks this many steps ahead along each heading of its sweep for the
-#: one clear the farthest (1.6 m at 0.1 m steps).
-FARTHEST_PROBE_STEPS = (1, 2, 4, 8, 16)
 
 
 @register_policy("random")
@@ -84,7 +80,6 @@ class RandomPolicy(Policy):
         self.turns_after_block = 0
         self.turns_before_block = 0
         self.refused = RefusedMoves()
-        self._stall_panorama: np.ndarray | None = None
         self.use_stall_watchdog(enabled=self.config.stall_watchdog)
 
     @property
@@ -137,36 +132,18 @@ class RandomPolicy(Policy):
         self.pitch = self.rng.uniform(-max_pitch, max_pitch)
         self.steps_left = int(self.rng.integers(config.min_run_steps, config.max_run_steps + 1))
 
-    def recover_from_stall(self, event: StallEvent) -> str:
-        """A long new run along the level heading the panorama shows clear the farthest
-        (from a random one of a sweep; a run that is clear for one step only ends in the next
-        redraw, and a walk in a corner of the scan redraws its runs in that corner), or a
-        random one; every second stall it climbs or sinks along that heading (away from the
-        floor or the top, as every run does)."""
-        pose = np.eye(4)
-        pose[:3, 3] = event.position
+    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str:
+        """A run straight to the way out of a stall, as long as it takes."""
+        move = goal - position
+        distance = float(np.linalg.norm(move))
+        self.direction = move / max(distance, 1e-9)
+        self.steps_left = max(1, int(np.ceil(distance / self.context.max_translation_m)))
         self.guard.holds.reset()
-        climb = len(self.stall_events) % 2 == 0
-        direction = None
-        if self._stall_panorama is not None:
-            direction = self._clear_direction(pose, self._stall_panorama, farthest=True)
-        if direction is None:
-            self._new_run(pose, blocked=self.direction)
-            direction = self.direction
-        if climb:
-            near_floor, near_top = self._near_floor_and_top(pose[2, 3])
-            sign = 1.0 if near_floor or (not near_top and self.rng.random() < 0.5) else -1.0
-            heading = float(np.arctan2(direction[1], direction[0]))
-            direction = run_direction(heading, sign * self.config.max_climb)
-        self.direction = direction
-        self.steps_left = self.config.max_run_steps
-        return "new run" + (" with a climb" if climb and self.direction[2] > 0 else
-                            " with a sink" if climb else "")
+        return "a straight run"
 
     def act(self, observation: Observation, info: Info | None = None) -> np.ndarray:
         pose = np.asarray(observation["pose"], np.float64)
         panorama = self.guard.panorama(observation)
-        self._stall_panorama = panorama
         if self.check_stall(observation, info) is not None:
             info = None  # the recovery chose the run
         if info is not None and info.get("collided", False):
@@ -235,13 +212,10 @@ class RandomPolicy(Policy):
         part = guard.clear_part(panorama, target - position)
         return target if part is None else position + part
 
-    def _clear_direction(self, pose: np.ndarray, panorama: np.ndarray, farthest: bool = False
-                         ) -> np.ndarray | None:
+    def _clear_direction(self, pose: np.ndarray, panorama: np.ndarray) -> np.ndarray | None:
         """The first run direction of a sweep around the agent (``sweep_headings`` headings
         from a random one, level first, then climbing and sinking within the height margins)
-        whose move the panorama shows clear, or None; ``farthest``: of the first of those
-        heights with one, the direction the panorama shows clear the farthest (up to
-        ``FARTHEST_PROBE_STEPS`` steps; the first of the sweep among equals)."""
+        whose move the panorama shows clear, or None."""
         count = self.config.sweep_headings
         if count <= 0:
             return None
@@ -253,30 +227,13 @@ class RandomPolicy(Policy):
             climbs.append(-self.config.max_climb)
         start = self.rng.uniform(-np.pi, np.pi)
         headings = start + np.arange(count) * (2.0 * np.pi / count)
-        probes = FARTHEST_PROBE_STEPS if farthest else FARTHEST_PROBE_STEPS[:1]
+        step = self.context.max_translation_m
         for climb in climbs:
-            best, best_reach = None, 0
             for heading in headings:
                 direction = run_direction(heading, climb)
-                reach = self._clear_reach(panorama, direction, probes)
-                if reach > best_reach:
-                    best, best_reach = direction, reach
-                if best_reach == probes[-1]:
-                    break
-            if best is not None:
-                return best
+                if not self.guard.way_blocked(panorama, direction * step):
+                    return direction
         return None
-
-    def _clear_reach(self, panorama: np.ndarray, direction: np.ndarray,
-                     probes: tuple[int, ...]) -> int:
-        """The longest of ``probes`` (counts of steps, increasing) along ``direction`` that
-        the panorama shows clear, every shorter one clear too; 0: not one step."""
-        reach = 0
-        for steps in probes:
-            if self.guard.way_blocked(panorama, direction * steps * self.context.max_translation_m):
-                break
-            reach = steps
-        return reach
 
 
 def run_direction(heading: float, climb: float) -> np.ndarray:

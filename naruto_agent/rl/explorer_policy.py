@@ -40,7 +40,7 @@ import numpy as np
 
 from naruto_agent.policies.base import Info, Observation, Policy
 from naruto_agent.policies.registry import register_policy
-from naruto_agent.policies.watchdog import StallEvent
+from naruto_agent.policies.stall_recovery import ReachablePlaces
 from naruto_gym.motion.actions import DISCRETE_ACTIONS
 from naruto_gym.rl.egocentric_map import EgocentricMapBuilder
 from naruto_gym.rl.goal_walker import AWAIT_DECISION, GoalWalker
@@ -262,14 +262,25 @@ class CandidateGoalPolicy(Policy):
         self.walker.set_actions(np.array([int(self.choose(choice))]))
         self._until_decision = self.steps_per_goal
 
-    def recover_from_stall(self, event: StallEvent) -> str:
-        """Walk out of the stay: the goal in hand (or a repeated move) is given up for the
-        nearest candidate past the stay's every position by the stay radius and a step, or
-        the reachable place farthest from the trail (:meth:`GoalWalker.leave
-        <naruto_gym.rl.goal_walker.GoalWalker.leave>`); the next choice comes a whole
-        macro-step later."""
+    def reachable_places(self, position: np.ndarray) -> ReachablePlaces | None:
+        """The places the walker's map reaches on its current slice, at the agent's height
+        (:meth:`GoalWalker.reachable_places
+        <naruto_gym.rl.goal_walker.GoalWalker.reachable_places>`)."""
         assert self.walker is not None
-        return self.walker.leave(0, *self.stay_of(event))
+        points, lengths = self.walker.reachable_places(0)
+        heights = np.full((len(points), 1), float(position[2]))
+        return ReachablePlaces(np.hstack([points, heights]), lengths)
+
+    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str:
+        """The walker steps out of the stay to ``goal`` without turning first and keeps it
+        until it is there (:meth:`GoalWalker.walk_out
+        <naruto_gym.rl.goal_walker.GoalWalker.walk_out>`); the next choice comes a whole
+        macro-step later."""
+        assert self.walker is not None and self.stall_watchdog is not None
+        spots, radius = self.stay_of(self.stall_watchdog.events[-1])
+        if self.walker.walk_out(0, goal[:2], spots[-1], radius):
+            return "the walker's path"
+        return "no path on the walker's map: turn in place"
 
 
 @register_policy("explorer")

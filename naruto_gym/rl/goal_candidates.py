@@ -53,6 +53,7 @@ __all__ = [
     "INTERVAL_FEATURES",
     "find_candidates",
     "path_lengths",
+    "reachable_cells",
     "wander_goal",
 ]
 
@@ -360,3 +361,15 @@ def wander_goal(
             if nearest > best:
                 best, best_i, best_j = nearest, i, j
     return best_i, best_j
+
+
+def reachable_cells(
+    lengths: np.ndarray, coarse: np.ndarray, factor: int, si: int, sj: int, radius: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The cells ``lengths`` (from :func:`path_lengths` around ``(si, sj)``) reaches whose far
+    cell holds surface the camera saw (a floor under it: inside an open scan's scanned
+    space), ``(n, 2)`` grid indices, and their path lengths (cells)."""
+    a, b = np.nonzero(lengths > 0)
+    cells = np.stack([si + a - radius, sj + b - radius], axis=1)
+    seen = coarse[SEEN, cells[:, 0] // factor, cells[:, 1] // factor] != 0
+    return cells[seen], lengths[a, b][seen]

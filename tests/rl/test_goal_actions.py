@@ -611,17 +611,21 @@ def _walk_out(
     return moves
 
 
+def _walk_out_behind(walker, start: np.ndarray) -> None:
+    """A stall recovery's way out (:meth:`GoalWalker.walk_out`) to the viewpoint of the
+    block 3 m behind the agent, out of a stay of 0.6 m around ``start``."""
+    behind = walker.viewpoints[0, : walker.counts[0]][:, 0].argmin()
+    assert walker.walk_out(0, walker.viewpoints[0, behind], start, 0.6)
+
+
 def test_out_of_a_stay_the_walker_goes_past_it_without_turning_on_the_spot_first():
-    """A stall watchdog's recovery (:meth:`GoalWalker.leave`): the nearest candidate's
-    viewpoint lies within the stay, so the walker takes the next one, 3 m behind it, and
-    steps backward out of the stay instead of turning half a circle on the spot first."""
+    """A stall watchdog's recovery (:meth:`GoalWalker.walk_out`) to a place 3 m behind the
+    agent: the walker steps backward out of the stay instead of turning half a circle on
+    the spot first."""
     builder, walker, pose = _walker_between_two_blocks()
     start = pose[:2, 3].copy()
-    near = np.hypot(*(walker.centres[0, : walker.counts[0]] - start).T) < 1.0
-    assert near[0] and not near.all()  # the nearest is the block beside it
-    assert np.hypot(*(walker.viewpoints[0, 0] - start)) < 0.6  # viewed from within the stay
-    assert walker.leave(0, start[None], 0.6) == "walk to the nearest candidate past the stay"
-    assert walker.phases[0] == WALK and walker.targets[0][0] < 3.0  # the one behind
+    _walk_out_behind(walker, start)
+    assert walker.phases[0] == WALK and walker.targets[0][0] < start[0] - 0.6  # the one behind
     assert _walk_out(builder, walker, pose, 0.6, 12) == [MOVE_BACKWARD] * 7
 
 
@@ -632,7 +636,7 @@ def test_out_of_a_stay_with_no_step_towards_the_path_the_walker_turns_only_until
     (eight turns on the spot) before it steps out."""
     builder, walker, pose = _walker_between_two_blocks()
     _unseen_block(builder, 4.75, 5.05)  # 0.3 m behind
-    walker.leave(0, pose[None, :2, 3].copy(), 0.6)
+    _walk_out_behind(walker, pose[:2, 3].copy())
     moves = _walk_out(builder, walker, pose, 0.6, 20)
     turns = sum(move in (TURN_LEFT, TURN_RIGHT) for move in moves)
     assert 1 <= turns <= 2 and len(moves) <= 12
@@ -644,7 +648,7 @@ def test_out_of_a_stay_the_walker_never_undoes_its_last_step():
     The step back out of the stay is not taken right after a step forward; the walker turns
     towards the carrot instead."""
     builder, walker, pose = _walker_between_two_blocks()
-    walker.leave(0, pose[None, :2, 3].copy(), 0.6)
+    _walk_out_behind(walker, pose[:2, 3].copy())
     assert int(walker.next_moves()[0]) == MOVE_BACKWARD  # the way out, as above
     walker.last_moves[0] = MOVE_FORWARD  # as if it had just stepped forward (not refused)
     walker.last_positions[0] = pose[:3, 3] - [0.1, 0.0, 0.0]
@@ -653,14 +657,14 @@ def test_out_of_a_stay_the_walker_never_undoes_its_last_step():
 
 def test_a_walk_out_of_a_stay_stays_one_when_the_map_restarts_at_a_new_height():
     """The map's slice restarts when the agent changes height (the goal in hand was found on
-    the old slice): a walk out of a stay then chooses again among the candidates past the
-    same stay, not the nearest one."""
+    the old slice): a walk out of a stay then plans again to the same way out, not to the
+    nearest candidate."""
     builder, walker, pose = _walker_between_two_blocks()
     start = pose[:2, 3].copy()
-    walker.leave(0, start[None], 0.6)
+    _walk_out_behind(walker, start)
     builder.slice_restarts[0] += 1
     assert int(walker.next_moves()[0]) == MOVE_BACKWARD
-    assert walker.phases[0] == WALK and walker.targets[0][0] < 3.0  # still the one behind
+    assert walker.phases[0] == WALK and walker.targets[0][0] < start[0] - 0.6  # the same
     np.testing.assert_allclose(walker.stays[0], [*start, 0.6])
 
 
@@ -672,7 +676,7 @@ def test_a_walk_out_of_a_stay_leaves_before_it_changes_height():
     panorama = np.zeros((32, 64), np.float32)
     panorama[-1] = 1.9  # the floor straight down
     _observe(builder, pose, panorama)
-    walker.leave(0, pose[None, :2, 3].copy(), 0.6)
+    _walk_out_behind(walker, pose[:2, 3].copy())
     moves = _walk_out(builder, walker, pose, 0.6, 12, floor_below_m=1.9)
     assert moves == [MOVE_BACKWARD] * 7
     assert int(walker.next_moves()[0]) == MOVE_DOWN  # past the stay, the height comes next
@@ -680,15 +684,15 @@ def test_a_walk_out_of_a_stay_leaves_before_it_changes_height():
 
 def test_a_walk_out_of_a_stay_that_found_nothing_tries_again_out_of_the_same_stay():
     """A walk out of a stay that found nothing reachable (the map had just restarted at a new
-    height) turns in place; at its next search it chooses again among the candidates past
-    the same stay, not the nearest one (which would lead back into it)."""
+    height) turns in place; at its next search it plans again to the same way out, not to
+    the nearest candidate (which would lead back into the stay)."""
     builder, walker, pose = _walker_between_two_blocks()
     start = pose[:2, 3].copy()
-    walker.leave(0, start[None], 0.6)
+    _walk_out_behind(walker, start)
     walker.phases[0] = IDLE  # as if nothing had been reachable after the restart
     walker.idle_steps[0] = IDLE_SEARCH_EVERY - 1  # the next move searches again
     assert int(walker.next_moves()[0]) == MOVE_BACKWARD
-    assert walker.phases[0] == WALK and walker.targets[0][0] < 3.0  # the one behind
+    assert walker.phases[0] == WALK and walker.targets[0][0] < start[0] - 0.6  # the one behind
     np.testing.assert_allclose(walker.stays[0], [*start, 0.6])
 
 

@@ -99,11 +99,11 @@ def test_states_run_in_the_published_order(episode):
         (State.ROTATING_AT_START, State.MOVING),
         (State.MOVING, State.ROTATING_AT_GOAL),
     ]
-    # A look-around ends in planning, unless the stall watchdog cut it short (its long
-    # look-arounds at a spot: kind "lingering"), which goes through staying.
+    # A look-around ends in planning, unless the stall watchdog cut it short (the first one
+    # lasts longer than a stay may), which goes through staying to the way out.
     events = episode.policy.stall_watchdog.events
     assert len(machine.interruptions) == len(events) >= 1
-    assert all(event.kind == "lingering" for event in events)
+    assert events[0].kind == "lingering"
     for index, (before, after) in enumerate(machine.transitions):
         if before == State.ROTATING_AT_GOAL:
             expected = State.STAYING if index in machine.interruptions else State.PLANNING
@@ -231,25 +231,25 @@ def test_a_held_move_is_planned_around_at_the_next_frame():
         [history[frame + 1] for frame in held])
 
 
-def _hold_normal_plans_from(frame_held: int, stay: np.ndarray | str | None = None):
-    """An episode whose agent's checks hold every move of a normal plan from ``frame_held``
-    on (as next to a wall top on an open scan), until a recovery that moves is under way;
-    ``stay``: where a look-around the stall watchdog cut short at ``frame_held`` lay (the
-    agent's position when it is ``"here"``). Returns the policy, the env, the last
-    observation, the frame the recovery was under way (None: not within 80 frames) and the
-    moves held until then."""
+def _hold_plans_from(frame_held: int, kinds: tuple[str | None, ...] = (None,),
+                     watchdog: bool = True):
+    """An episode whose agent's checks hold every move of a plan of the recovery ``kinds``
+    (None: a normal plan) from ``frame_held`` on (as next to a wall top on an open scan),
+    until a recovery that moves (the agent's own or a way out of a stall) is under way.
+    Returns the policy, the env, the last observation, the frame the recovery was under way
+    (None: not within 80 frames) and the moves held until then."""
     holding = False
 
-    def hold_normal_plans(check):
+    def hold_plans(check):
         def wrapped(start, end):
             plan = policy.machine.plan
-            if holding and plan is not None and not plan.info.get("recovery"):
+            if holding and plan is not None and plan.info.get("recovery") in kinds:
                 return False
             return check(start, end)
         return wrapped
 
-    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu")
-    policy.wrap_move_check(hold_normal_plans)
+    policy = NarutoPolicy(mapper_kind="tsdf", device="cpu", stall_watchdog=watchdog)
+    policy.wrap_move_check(hold_plans)
     env = gym.make("NarutoRecon-v0", scene=SCENE, image_scale=SCALE, panorama_shape=None,
                    max_episode_steps=200)
     policy.bind(EnvContext.from_env(env))
@@ -259,47 +259,42 @@ def _hold_normal_plans_from(frame_held: int, stay: np.ndarray | str | None = Non
     for frame in range(1, 80):
         if frame == frame_held + 1:
             held_before = policy.machine.collisions
-            if stay is not None:
-                here = observation["pose"][:3, 3]
-                spot = here if isinstance(stay, str) else stay
-                policy.recover_from_stall(StallEvent(step=frame_held, position=spot,
-                                                     kind="lingering"))
         holding = frame > frame_held
         action = policy.act(observation, info)
         plan = policy.machine.plan
-        if (holding and plan is not None and plan.info.get("recovery") in ("wander", "retreat")
-                and policy.state in (State.ROTATING_AT_START, State.MOVING)):
+        moving = plan is not None and plan.info.get("recovery") in ("wander", "retreat", "way_out")
+        if holding and moving and policy.state in (State.ROTATING_AT_START, State.MOVING):
             return policy, env, observation, frame, policy.machine.collisions - held_before
         observation, _, _, _, info = env.step(action)
     return policy, env, observation, None, policy.machine.collisions - held_before
 
 
-def test_moves_held_in_one_place_lead_to_a_recovery_the_watchdog_lets_run():
+def test_moves_held_in_one_place_lead_to_a_recovery_that_moves():
     """From frame 30 on, the agent's checks hold every move of a normal plan: after three
-    holds in one place the next plan is a recovery that moves, and a watchdog trigger while
-    it is under way keeps it instead of starting another walk from the same spot."""
-    policy, env, observation, under_way, held = _hold_normal_plans_from(30)
+    holds in one place the next plan is a recovery that moves (the agent's own: the
+    watchdog is off)."""
+    policy, env, _, under_way, held = _hold_plans_from(30, watchdog=False)
     assert under_way is not None and under_way <= 30 + 12, under_way
     assert held == 3
-    plan = policy.machine.plan
-    event = StallEvent(step=under_way, position=observation["pose"][:3, 3], kind="oscillation")
-    assert "kept" in policy.recover_from_stall(event)
-    assert policy.machine.plan is plan
     env.close()
 
 
-@pytest.mark.parametrize("stay, holds", [("here", 1), (np.array([50.0, 50.0, 1.0]), 3)])
-def test_a_move_held_on_the_way_out_of_a_cut_stay_leads_to_a_recovery_at_once(stay, holds):
-    """The watchdog cut a look-around short here: the agent has stayed long already, so the
-    first move held on its way out is followed by a recovery that moves, in the same frame
-    (the frame does not end standing); a stay cut short elsewhere changes nothing (three
-    holds in one place, each ending its frame)."""
-    policy, env, _, under_way, held = _hold_normal_plans_from(30, stay)
-    assert under_way is not None and held == holds, (under_way, held)
-    if holds == 1:
-        assert under_way == 31 and policy.machine.history[-1] != State.STAYING, under_way
-    else:
-        assert State.STAYING in policy.machine.history[31:under_way]
+def test_a_held_way_out_of_a_stall_is_not_chosen_again():
+    """The watchdog fires and the shared recovery plans a way out; the agent's checks hold
+    its first move: that way out counts as failed, the agent's own recovery that moves
+    follows at once, and the next stall's way out lies elsewhere."""
+    policy, env, observation, _, _ = _hold_plans_from(0, kinds=("way_out",))
+    event = StallEvent(step=40, position=observation["pose"][:3, 3].copy(), kind="oscillation")
+    assert policy.recover_from_stall(event).startswith("walk out to")
+    first = policy.stall_recovery.goal.copy()
+    policy.wrap_move_check(lambda check: (
+        lambda start, end: False if policy.machine.plan.info.get("recovery") == "way_out"
+        else check(start, end)))
+    policy.act(observation, {})
+    assert policy.stall_recovery.goal is None and policy.monitor.requested
+    assert policy.recover_from_stall(event).startswith("walk out to")
+    failed_radius = policy.stall_recovery.config.failed_radius_m
+    assert np.linalg.norm(policy.stall_recovery.goal - first) > failed_radius
     env.close()
 
 

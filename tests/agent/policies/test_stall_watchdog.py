@@ -161,16 +161,53 @@ def test_a_users_policy_opts_in_and_its_recovery_is_logged():
 
 
 def test_a_watchdog_without_a_recovery_says_what_to_implement():
-    env = gym.make(
-        "NarutoRecon-v0", scene="replica_like_room", image_scale=0.05, panorama_shape=None
-    )
-    policy = _StandStill(recovers=False)
+    with pytest.raises(NotImplementedError, match=r"walk_out\(position, goal\)"):
+        _StandStill(recovers=False)
+
+
+class _WalksOut(Policy):
+    """A user's policy that stands still and walks only the shared recovery's way out."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.use_stall_watchdog()
+        self.goal = None
+
+    def walk_out(self, position, goal):
+        self.goal = goal
+        return "straight"
+
+    def act(self, observation, info=None):
+        self.check_stall(observation, info)
+        pose = np.array(observation["pose"], np.float64)
+        if self.walking_out:
+            move = self.goal - pose[:3, 3]
+            pose[:3, 3] += move / max(np.linalg.norm(move), 1e-9) * min(
+                self.context.max_translation_m, np.linalg.norm(move))
+        return pose_action(pose)
+
+
+def test_a_users_policy_gets_the_shared_way_out_past_the_stay_and_leaves():
+    """A policy that implements only ``walk_out`` stands still until the watchdog fires;
+    the shared recovery sends it to a place past the stay (read from the panorama), and it
+    gets there without a refusal."""
+    policy = _WalksOut()
+    env = _small_room(policy)
     policy.bind(_context(env))
     observation, info = env.reset(seed=0)
     policy.reset(observation, info)
-    with pytest.raises(NotImplementedError, match="recover_from_stall"):
-        for _ in range(25):
-            observation, _, _, _, info = env.step(policy.act(observation, info))
+    start = observation["pose"][:3, 3].copy()
+    refused, positions = 0, []
+    for _ in range(60):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+        refused += bool(info["collided"])
+        positions.append(observation["pose"][:3, 3])
+    event = policy.stall_events[0]
+    assert event.recovery.startswith("walk out to") and event.recovery.endswith("straight")
+    _, radius = policy.stay_of(event)
+    assert np.linalg.norm(policy.goal - start) > radius
+    reached = np.linalg.norm(np.array(positions) - policy.goal, axis=1).min()
+    assert reached <= policy.stall_recovery.config.arrival_m and refused == 0, (reached, refused)
     env.close()
 
 
@@ -234,10 +271,10 @@ def test_the_watchdog_is_on_in_every_shipped_policy(name, settings):
     assert make_policy(name, stall_watchdog=False).stall_watchdog is None
 
 
-def test_naruto_cuts_a_long_look_around_short_for_a_goal_away_from_it():
+def test_naruto_cuts_a_long_look_around_short_and_walks_out():
     """NARUTO's first look-around (8 views, alternately up and down) learns all along but
     lasts over 30 steps: the watchdog cuts it at ``max_stay_steps`` as lingering, and the
-    next plan goes, without a turn first, to a goal past the stay radius, 0.5 m away within
+    shared recovery's way out takes the agent past the stay radius, 0.5 m away within
     30 steps of the start."""
     policy = make_policy("naruto", mapper_kind="tsdf")
     env = gym.make(
@@ -257,18 +294,17 @@ def test_naruto_cuts_a_long_look_around_short_for_a_goal_away_from_it():
         positions.append(observation["pose"][:3, 3].copy())
     event = policy.stall_events[0]
     assert (event.kind, event.step) == ("lingering", policy.stall_watchdog.config.max_stay_steps)
-    assert "away from the stay" in event.recovery
-    assert any(plan.get("leaving") and plan.get("move_at_once") for plan in policy.plans)
+    assert event.recovery.startswith("walk out to")
     assert np.linalg.norm(positions[-1] - start) > 0.5
     env.close()
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_random_leaves_a_stall_in_a_corner_along_the_heading_clear_the_farthest(seed):
+def test_random_leaves_a_stall_in_a_corner_along_a_way_the_panorama_shows_clear(seed):
     """0.45 m from two walls of a room, most headings are blocked within a few steps: a new
     run that is clear for one step ends in the next redraw, and the walk bounces in the
-    corner. The random walk's recovery runs along the heading the panorama shows clear for
-    the whole probe (1.6 m), whichever heading its sweep starts from."""
+    corner. The shared recovery sends a run to a place past the stay that the panorama shows
+    clear all the way, whichever seed."""
     policy = make_policy("random", seed=seed)
     env = _small_room(policy)
     context = EnvContext.from_env(env, max_episode_steps=200)
@@ -280,10 +316,15 @@ def test_random_leaves_a_stall_in_a_corner_along_the_heading_clear_the_farthest(
     policy.reset(observation, info, seed=seed)
     policy.act(observation, info)  # the panorama the recovery reads
     panorama = policy.guard.panorama(observation)
-    policy.recover_from_stall(StallEvent(step=20, position=pose[:3, 3], kind="oscillation"))
+    event = StallEvent(step=20, position=pose[:3, 3], kind="oscillation")
+    assert "a straight run" in policy.recover_from_stall(event)
+    goal = policy.stall_recovery.goal
+    _, radius = policy.stay_of(event)
+    assert np.linalg.norm(goal - pose[:3, 3]) > radius
     heading = np.array([*policy.direction[:2], 0.0]) / np.linalg.norm(policy.direction[:2])
-    for metres in (0.1, 0.4, 1.6):
-        assert not policy.guard.way_blocked(panorama, heading * metres), metres
+    assert not policy.guard.way_blocked(panorama, goal - pose[:3, 3])
+    np.testing.assert_allclose(heading * np.linalg.norm(goal - pose[:3, 3]), goal - pose[:3, 3],
+                               atol=1e-9)
     env.close()
 
 
