@@ -260,7 +260,7 @@ FIGURES: tuple[Figure, ...] = (
         _README,
         r"no panorama \| ([\d,]+) steps/s \|",
         _VECTOR,
-        "goals.single_env_steps_per_s",
+        "goals.single_env_auto_frames_steps_per_s",
         "{:,.0f}",
     ),
     Figure(

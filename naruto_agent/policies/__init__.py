@@ -1,5 +1,5 @@
-"""Exploration policies: the interface, three baselines, adapters, a registry by name and a
-stall watchdog.
+"""Exploration policies: the interface, three baselines, adapters, a registry by name, a
+stall watchdog and the one recovery from a stall they share.
 
 * :class:`Policy` / :class:`EnvContext`: the interface (bind to an env, reset with the first
   observation and info, act on each observation).
@@ -16,6 +16,8 @@ stall watchdog.
   the registry (every registered name, and any ``"package.module:ClassName"``).
 * :mod:`~naruto_agent.policies.watchdog`: the stall watchdog, which notices a policy that
   stops getting anywhere.
+* :mod:`~naruto_agent.policies.stall_recovery`: the way out of a stall every policy shares
+  (:class:`StallRecovery`, :class:`ReachablePlaces`, :func:`panorama_places`).
 
 See docs/policies.md for the interface and how to add a policy.
 """
@@ -50,6 +52,12 @@ from naruto_agent.policies.registry import (
     register_lazy_policy,
     register_policy,
 )
+from naruto_agent.policies.stall_recovery import (
+    ReachablePlaces,
+    StallRecovery,
+    StallRecoveryConfig,
+    panorama_places,
+)
 from naruto_agent.policies.watchdog import StallEvent, StallWatchdog, StallWatchdogConfig
 
 __all__ = [
@@ -73,12 +81,16 @@ __all__ = [
     "ScalarLayer",
     "ScanGuard",
     "ScanGuardConfig",
+    "ReachablePlaces",
     "StallEvent",
+    "StallRecovery",
+    "StallRecoveryConfig",
     "StallWatchdog",
     "StallWatchdogConfig",
     "action_mode_of_space",
     "as_policy",
     "load_trajectory",
+    "panorama_places",
     "make_policy",
     "policy_class",
     "policy_names",

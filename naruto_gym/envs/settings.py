@@ -16,15 +16,12 @@ from naruto_gym.sensors.panorama import EquirectangularCamera
 from naruto_gym.sensors.pinhole import PinholeCamera
 from naruto_gym.utils.threads import resolve_threads
 
-#: How an env makes its pinhole frames by default, one env or batched: the reference ray cast.
-#: ``"auto"`` (the exact rasterizer wherever it is the faster: at most 4 triangles per pixel
-#: for one frame, 16 for a batched env's frames drawn together) gives the same frames up to
-#: float rounding of the depths and exact edge ties, and is what the learning entry points
-#: (``naruto_gym.rl``) pass. It stays one keyword away until the shipped policies' stall
-#: rules hold on its frames: the frontier and NARUTO policies take other fixed-seed paths on
-#: them, and NARUTO then stays in place for 34 and 45 steps on two of the property test's
-#: real-scan shapes, over the 30-step bound (docs/environment.md, "Pinhole backends").
-PINHOLE_BACKEND = "raycast"
+#: How an env makes its pinhole frames by default, one env or batched: ``"auto"``, the exact
+#: rasterizer wherever it is the faster (at most 4 triangles per pixel for one frame, 16 for a
+#: batched env's frames drawn together), else the ray cast; the frames are the ray cast's up
+#: to float rounding of the depths and exact edge ties. ``"raycast"`` is the reference
+#: (docs/environment.md, "Pinhole backends").
+PINHOLE_BACKEND = "auto"
 
 
 @dataclass(frozen=True)

@@ -227,8 +227,8 @@ class GoalWalker:
         self.phases[envs] = IDLE
         for flags in (self.done, self.wandering, self.leaving, self.glanced):
             flags[envs] = False
-        for zeros in (self.stays, self.lengths, self.decision_moves, self.tables, self.counts,
-                      self.moves_without_candidate, self.glance_left):
+        zeroed = (self.stays, self.lengths, self.decision_moves, self.tables, self.counts)
+        for zeros in (*zeroed, self.moves_without_candidate, self.glance_left):
             zeros[envs] = 0
         self.last_moves[envs] = self.primitives[envs] = -1
         self.floor_heights[envs] = self.climb_ceilings[envs] = np.inf
@@ -313,8 +313,9 @@ class GoalWalker:
         their path lengths (metres), among which a stall recovery chooses its way out."""
         self._refresh(i)
         si, sj = self.map.cell_of(i, self.map.poses[i][:2, 3])
-        cells, lengths = reachable_cells(self.path_lengths[i], self.map.coarse[i],
-                                         self.map.far_factor, si, sj, self.radius)
+        cells, lengths = reachable_cells(
+            self.path_lengths[i], self.map.coarse[i], self.map.far_factor, si, sj, self.radius
+        )
         return self.map.origins[i] + (cells + 0.5) * self.map.cell_m, lengths * self.map.cell_m
 
     def walk_out(self, i: int, goal: np.ndarray, centre: np.ndarray, radius_m: float) -> bool:

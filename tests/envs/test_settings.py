@@ -40,7 +40,7 @@ def test_the_env_keeps_no_copy_of_a_setting():
 def test_the_batched_env_reads_the_same_settings_with_the_same_defaults():
     vector = NarutoReconVectorEnv(2, scene=small_room(), **CHEAP)
     single = NarutoReconEnv(small_room(), **CHEAP)
-    assert PINHOLE_BACKEND == "raycast"
+    assert PINHOLE_BACKEND == "auto"
     assert single.settings.pinhole_backend == vector.settings.pinhole_backend == PINHOLE_BACKEND
     assert dataclasses.replace(vector.settings, threads=None) == dataclasses.replace(
         single.settings, threads=None
@@ -52,27 +52,19 @@ def test_the_batched_env_reads_the_same_settings_with_the_same_defaults():
     vector.close()
 
 
-def test_gymnasium_made_envs_draw_rasterized_frames_with_auto():
-    # the published 680 x 1200 camera, the default room
-    single = gym.make("NarutoRecon-v0", pinhole_backend="auto")
+def test_gymnasium_made_envs_draw_rasterized_frames_by_default():
+    """Gymnasium's documented calls, with no backend keyword: the rasterized frames (the
+    published 680 x 1200 camera, the default room), one env and batched at any worker
+    count."""
+    single = gym.make("NarutoRecon-v0")
     assert single.unwrapped.settings.pinhole_backend == "auto"
     assert single.unwrapped.renderer.frame_backend == "raster"
     single.close()
-    # Gymnasium's documented call: the batched env of any worker count takes the keyword.
-    batched = gym.make_vec(
-        "NarutoRecon-v0",
-        num_envs=2,
-        vectorization_mode="vector_entry_point",
-        pinhole_backend="auto",
-    )
+    batched = gym.make_vec("NarutoRecon-v0", num_envs=2, vectorization_mode="vector_entry_point")
     assert batched.settings.pinhole_backend == "auto"
     batched.close()
     in_process = gym.make_vec(
-        "NarutoRecon-v0",
-        num_envs=2,
-        vectorization_mode="vector_entry_point",
-        workers=1,
-        pinhole_backend="auto",
+        "NarutoRecon-v0", num_envs=2, vectorization_mode="vector_entry_point", workers=1
     )
     assert isinstance(in_process, NarutoReconVectorEnv)
     assert [runtime.renderer.frame_backend for runtime in in_process.scene_runtimes] == [
@@ -82,12 +74,13 @@ def test_gymnasium_made_envs_draw_rasterized_frames_with_auto():
     in_process.close()
 
 
-def test_the_reference_ray_cast_is_the_default():
-    single = gym.make("NarutoRecon-v0")
+def test_the_reference_ray_cast_is_one_keyword_away():
+    single = gym.make("NarutoRecon-v0", pinhole_backend="raycast")
     assert single.unwrapped.renderer.frame_backend == "raycast"
     single.close()
     batched = gym.make_vec(
-        "NarutoRecon-v0", num_envs=2, vectorization_mode="vector_entry_point", workers=1
+        "NarutoRecon-v0", num_envs=2, vectorization_mode="vector_entry_point", workers=1,
+        pinhole_backend="raycast",
     )
     assert [runtime.renderer.frame_backend for runtime in batched.scene_runtimes] == [
         "raycast",
