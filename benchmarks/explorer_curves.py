@@ -65,7 +65,8 @@ class Args:
     references: list[str] = field(default_factory=list)
     """reference levels NAME=VALUE (coverage as a fraction, e.g. untrained=0.536)"""
     reference_file: str | None = None
-    """a check.json of explorer_scripted_check.py: its policies' mean levels as references"""
+    """a check.json of explorer_scripted_check.py: its policies' mean levels over its scenes as
+    references (comparable where its scenes and episode steps are the training's)"""
     reference_policies: list[str] = field(default_factory=list)
     """the policies of --reference-file drawn (default: all of them)"""
     output_file: str = "curves.md"
@@ -245,7 +246,8 @@ def plot(
     for index, (name, level) in enumerate((references or {}).items(), start=len(curves)):
         axis.axhline(100 * level, color=f"C{index % 10}", linestyle="--", label=name)
     axis.set_xlabel("env steps")
-    axis.set_ylabel(f"{METRICS[metric]} of training episodes (%)")
+    axis.set_ylabel(f"{METRICS[metric]} (%)")
+    axis.set_title("training episodes", fontsize="medium")
     axis.legend(fontsize="small")
     figure.tight_layout()
     figure.savefig(path, dpi=120)
