@@ -116,10 +116,27 @@ def test_the_earlier_class_name_is_refused_with_the_name_to_use(tmp_path, capsys
         select_scenes("test", ["apartment"])
 
 
+def _under_the_earlier_class_name(manifest: dict) -> dict:
+    """``manifest`` as a run recorded before the size class ``apartment`` was ``flat``."""
+    text = json.dumps(manifest).replace("--size-class flat", "--size-class apartment")
+    earlier = json.loads(text)
+    for entry in earlier["scenes"].values():
+        if entry["size_class"] == "flat":
+            entry["size_class"] = "apartment"
+    return earlier
+
+
 def test_archived_runs_under_the_earlier_class_name_read_as_flat(tmp_path):
-    archived = read_record(ROOT / "benchmarks/results/leaderboard/suite.json")
+    """A manifest recorded under the class name ``apartment`` (the leaderboard's, as such a
+    run wrote it) reads as ``flat``, commands included, and a run into its folder joins it."""
+    archived = _under_the_earlier_class_name(
+        read_record(ROOT / "benchmarks/results/leaderboard/suite.json")
+    )
     assert "apartment" in {entry["size_class"] for entry in archived["scenes"].values()}
-    manifest = read_manifest(ROOT / "benchmarks/results/leaderboard")
+    folder = tmp_path / "archive"
+    folder.mkdir()
+    (folder / "suite.json").write_text(json.dumps(archived))
+    manifest = read_manifest(folder)
     assert {entry["size_class"] for entry in manifest["scenes"].values()} == {
         "small",
         "flat",
