@@ -110,11 +110,25 @@ def floor_edge_profile(panorama: np.ndarray, max_polar_deg: float = 60.0) -> np.
 
 def profile_clearance(profile: np.ndarray, yaw: float, half_width_rad: float) -> float:
     """Smallest profile distance within ``half_width_rad`` of azimuth ``yaw``."""
-    width = len(profile)
-    azimuth = -np.pi + 2.0 * np.pi * (np.arange(width) + 0.5) / width
-    difference = np.angle(np.exp(1j * (azimuth - yaw)))
-    inside = np.abs(difference) <= half_width_rad
+    inside = azimuth_window(len(profile), yaw, half_width_rad)
     return float(profile[inside].min()) if inside.any() else float("inf")
+
+
+def azimuth_window(width: int, yaw: float, half_width_rad: float) -> np.ndarray:
+    """Which of a profile's (or panorama's) ``width`` columns look within ``half_width_rad``
+    of azimuth ``yaw``, (W,) bool."""
+    azimuth = -np.pi + 2.0 * np.pi * (np.arange(width) + 0.5) / width
+    return np.abs(np.angle(np.exp(1j * (azimuth - yaw)))) <= half_width_rad
+
+
+def vertical_clearance(panorama: np.ndarray) -> tuple[float, float]:
+    """The nearest hit straight above and straight below the agent (the rows within about
+    11 degrees of the poles: a sixteenth of the panorama's rows at each end, at least one),
+    metres; inf where those rows hit nothing."""
+    panorama = np.asarray(panorama, np.float64)
+    rows = max(1, len(panorama) // 16)
+    hits = np.where(panorama > 0.0, panorama, np.inf)
+    return float(hits[:rows].min()), float(hits[-rows:].min())
 
 
 @functools.lru_cache(maxsize=8)

@@ -262,7 +262,8 @@ class Policy(ABC):
         assert self.stall_recovery is not None
         spots, radius = self.stay_of(event)
         position = np.asarray(event.position, np.float64)
-        for places in (self.reachable_places(position), self.panorama_places(position)):
+        offers = (self.reachable_places, self.panorama_places)  # the panorama's only if needed
+        for places in (offer(position) for offer in offers):
             if places is None or self.stall_recovery.way_out(places, spots, radius) is None:
                 continue
             goal = self.stall_recovery.goal

@@ -34,9 +34,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from naruto_agent.guards.panorama_clearance import (
+    azimuth_window,
     floor_edge_profile,
     horizontal_profile,
     profile_clearance,
+    vertical_clearance,
 )
 from naruto_agent.guards.refused_moves import RefusedMoves
 from naruto_agent.policies.base import Info, Observation, Policy, clip_pose_action, pose_action
@@ -298,12 +300,8 @@ class PassivePolicy(Policy):
         """The lowest height the follower scans at here: :data:`FLOOR_CLEARANCE_M` above the
         surface the panorama shows straight below (a sloped or stepped floor, a cabinet's
         top), where a horizontal move still clears it; -inf where nothing is below."""
-        rows = max(1, len(panorama) // 16)  # within about 11 degrees of straight down
-        below = np.asarray(panorama[-rows:], np.float64)
-        below = below[below > 0.0]
-        if len(below) == 0:
-            return -np.inf
-        return float(position[2] - below.min() + FLOOR_CLEARANCE_M)
+        _, below = vertical_clearance(panorama)
+        return float(position[2] - below + FLOOR_CLEARANCE_M)
 
     def _scan_height(self, offset: float | None = None) -> float:
         """The height the follower scans at: ``scan_height_fraction`` of the bounds' height,
@@ -327,12 +325,9 @@ class PassivePolicy(Policy):
                 self._refused_headings.append(float(np.arctan2(move[1], move[0])))
         if not self._refused_headings:
             return profile
-        width = len(profile)
-        azimuth = -np.pi + 2.0 * np.pi * (np.arange(width) + 0.5) / width
         profile = profile.copy()
         for heading in self._refused_headings:
-            near = np.abs(np.angle(np.exp(1j * (azimuth - heading)))) <= np.deg2rad(20.0)
-            profile[near] = 0.0
+            profile[azimuth_window(len(profile), heading, np.deg2rad(20.0))] = 0.0
         return profile
 
     def _act_scripted(self, observation: Observation, info: Info | None) -> np.ndarray:

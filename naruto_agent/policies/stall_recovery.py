@@ -29,6 +29,7 @@ from naruto_agent.guards.panorama_clearance import (
     floor_edge_profile,
     horizontal_profile,
     profile_clearance,
+    vertical_clearance,
 )
 
 
@@ -193,10 +194,7 @@ def panorama_places(
     """
     panorama = np.asarray(panorama, np.float64)
     position = np.asarray(position, np.float64).reshape(3)
-    rows = len(panorama)
-    polar = max(1, rows // 16)  # the rows within about 11 degrees of straight up / down
-    hits = np.where(panorama > 0.0, panorama, np.inf)
-    above, below = hits[:polar].min(), hits[-polar:].min()
+    above, below = vertical_clearance(panorama)
     floor_edge = floor_edge_profile(panorama)
     half_width = np.pi / headings
     spacing = 3.0 * step_m
