@@ -85,10 +85,9 @@ def test_the_scorer_needs_one_action_per_slot():
         CandidateScorerPolicy(SPACE, spaces.Discrete(SLOTS + 10), lambda _: 3e-4)
 
 
-@pytest.fixture(scope="module")
-def model_path(tmp_path_factory):
-    """A PPO model of the scorer after one update on two agents deciding at every goal."""
-    venv = GoalDecisionVecEnv(
+def _two_agents() -> GoalDecisionVecEnv:
+    """Two agents deciding at every goal in generated train rooms, 60-step episodes."""
+    return GoalDecisionVecEnv(
         2,
         max_episode_steps=60,
         scenes=("procedural:room:train",),
@@ -97,6 +96,12 @@ def model_path(tmp_path_factory):
         image_scale=1.0,
         coverage_samples=1000,
     )
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory):
+    """A PPO model of the scorer after one update on two agents deciding at every goal."""
+    venv = _two_agents()
     model = PPO(CandidateScorerPolicy, venv, n_steps=4, batch_size=8, n_epochs=1, seed=0)
     model.learn(8)
     path = tmp_path_factory.mktemp("goal_explorer") / "model.zip"
@@ -115,15 +120,7 @@ def model_path(tmp_path_factory):
 
 
 def test_the_agents_take_as_many_env_steps_as_their_goals_take(model_path):
-    venv = GoalDecisionVecEnv(
-        2,
-        max_episode_steps=60,
-        scenes=("procedural:room:train",),
-        episodes_per_scene=1,
-        camera=ENV["camera"],
-        image_scale=1.0,
-        coverage_samples=1000,
-    )
+    venv = _two_agents()
     venv.reset()
     steps, ended = [[], []], [0, 0]
     for _ in range(12):
