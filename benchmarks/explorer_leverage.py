@@ -32,7 +32,9 @@ at least the longest horizon (default 20 and 40 env steps); the summary's ``"goa
 horizon is the gain until the copy's next decision (``goal_steps``: its env steps). The
 episode itself goes on with ``--advance``: the model's choice (``model``, a checkpoint
 trained on this decision) or a scripted rule's (e.g. ``random``). It prints the
-whole run's as a Markdown table (:func:`leverage_table`). The JSON
+whole run's as a Markdown table (:func:`leverage_table`). Every measured decision keeps what
+the choice saw (the valid candidates' feature rows, ``table``, and what lies around each on
+the walker's map, ``surroundings``): the data of ``benchmarks/train_goal_ranker.py``. The JSON
 (``--output-file``) is written after every decision; a rerun with the same settings resumes (an
 episode is played again from its seed, its measured decisions skipped).
 
@@ -58,6 +60,7 @@ import numpy as np
 import naruto_gym  # noqa: F401  (registers NarutoRecon-v0)
 from naruto_agent.benchmark.records import write_json_atomic
 from naruto_agent.cli_args import parse_dataclass_args
+from naruto_agent.rl.candidate_ranker import walker_surroundings
 from naruto_agent.rl.explorer_policy import DEFAULT_SETTINGS, PACKAGED_MODEL, read_settings
 from naruto_agent.rl.scripted_explorer import CHOICE_RULES, choose_candidate
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation
@@ -244,6 +247,10 @@ def play_episode(
                 "chosen": action,
                 "chosen_slot": slot if action < int(settings["num_candidates"]) else None,
                 "rules": rule_slots(candidates, seed, decision),
+                # What the choice saw: the valid candidates' feature rows (a ranker's data).
+                "table": np.round(candidates[:count], 5).tolist(),
+                "surroundings": np.round(walker_surroundings(stack.walker, 0, count), 5).tolist(),
+                "budget": steps,
                 "gains": {},
             }
             if count and at_goal:

@@ -35,6 +35,8 @@ LAZY_POLICIES: dict[str, str] = {
     "explorer": "naruto_agent.rl.explorer_policy:MapGoalExplorer",
     "explorer-untrained": "naruto_agent.rl.explorer_policy:UntrainedMapGoalExplorer",
     "goal-walker": "naruto_agent.rl.scripted_explorer:GoalWalkerPolicy",
+    "goal-ranker": "naruto_agent.rl.ranker_policy:GoalRankerPolicy",
+    "goal-ranker-untrained": "naruto_agent.rl.ranker_policy:UntrainedGoalRankerPolicy",
 }
 """Registered names resolved by import path on first lookup (their modules are costly to
 import)."""

@@ -59,8 +59,10 @@ def learning_settings(space: Any) -> LearningSettings:
         )
     height, width = rgb.shape[:2] if rgb.shape[-1] == 3 else rgb.shape[1:]
     if height != width:
-        raise ValueError(f"the model's frames are {height} x {width}; PPOExplorer needs square "
-                         "frames (the size of make_sb3_vec_env)")
+        raise ValueError(
+            f"the model's frames are {height} x {width}; PPOExplorer needs square "
+            "frames (the size of make_sb3_vec_env)"
+        )
     depth = frames.get("depth")
     depth_format = "float" if depth is not None and depth.dtype != np.uint8 else "uint8"
     return LearningSettings(int(height), "map" in frames, depth_format)
@@ -85,8 +87,13 @@ class PPOExplorer(SB3Policy):
             setting to pass).
     """
 
-    def __init__(self, model_path: str, size: int | None = None, deterministic: bool = False,
-                 top_down_map: bool | None = None) -> None:
+    def __init__(
+        self,
+        model_path: str,
+        size: int | None = None,
+        deterministic: bool = False,
+        top_down_map: bool | None = None,
+    ) -> None:
         from stable_baselines3 import PPO
 
         model = PPO.load(model_path, device="cpu")
@@ -104,9 +111,11 @@ class PPOExplorer(SB3Policy):
             )
         self.settings = found
         self.learning_observation = LearningObservation(
-            found.size, depth=found.depth, top_down_map=found.top_down_map)
-        super().__init__(model, deterministic=deterministic,
-                         observation_transform=self.learning_observation)
+            found.size, depth=found.depth, top_down_map=found.top_down_map
+        )
+        super().__init__(
+            model, deterministic=deterministic, observation_transform=self.learning_observation
+        )
 
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
         super().reset(observation, info, seed)

@@ -51,6 +51,8 @@ from naruto_gym.rl.goal_planner import traversable
 __all__ = [
     "CANDIDATE_FEATURES",
     "INTERVAL_FEATURES",
+    "SURROUNDING_RADII_M",
+    "candidate_surroundings",
     "find_candidates",
     "path_lengths",
     "reachable_cells",
@@ -70,6 +72,8 @@ CANDIDATE_FEATURES = (
 )
 #: The columns of the decision every ``K`` steps' table (module docstring).
 INTERVAL_FEATURES = CANDIDATE_FEATURES[:-1]
+#: Half sides of the squares :func:`candidate_surroundings` counts in, metres.
+SURROUNDING_RADII_M = (1.2, 2.4)
 _JIT = {"cache": True, "nogil": True}
 _NEIGHBOURS = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]])
 _DIAGONAL = np.sqrt(2.0)
@@ -373,3 +377,61 @@ def reachable_cells(
     cells = np.stack([si + a - radius, sj + b - radius], axis=1)
     seen = coarse[SEEN, cells[:, 0] // factor, cells[:, 1] // factor] != 0
     return cells[seen], lengths[a, b][seen]
+
+
+def candidate_surroundings(
+    coarse: np.ndarray,
+    origin: np.ndarray,
+    far_cell_m: float,
+    centres: np.ndarray,
+    radii_m: tuple[float, ...] = SURROUNDING_RADII_M,
+) -> np.ndarray:
+    """What lies around each candidate's cluster on the far map: per radius, the share of the
+    square of that half side around the cluster's centre that is *targets* (unseen obstacles
+    and free cells beside unknown ones, as :func:`find_candidates` counts them) and the
+    share that is unknown (neither free nor occupied; outside the map counts as unknown).
+    The table's ``size`` describes the cluster alone (0.8 m); these say how much is left to
+    see beyond it.
+
+    Args:
+        coarse: one agent's far grid ``(layers, rows, columns)``.
+        origin: world (x, y) of the grid's corner.
+        far_cell_m: side of a far cell.
+        centres: ``(n, 2)`` world (x, y) of the candidates' cluster centres.
+        radii_m: half sides of the squares, metres.
+
+    Returns:
+        ``(n, 2 * len(radii_m))`` float32: per radius, the targets' share, then the unknown
+        share.
+    """
+    occupied = coarse[OCCUPIED] != 0
+    free = (coarse[FREE] != 0) & ~occupied
+    unknown = ~occupied & (coarse[FREE] == 0)
+    padded = np.pad(unknown, 1, constant_values=True)
+    beside_unknown = padded[:-2, 1:-1] | padded[2:, 1:-1] | padded[1:-1, :-2] | padded[1:-1, 2:]
+    targets = (occupied & (coarse[SEEN] == 0)) | (free & beside_unknown)
+    rows, columns = unknown.shape
+    out = np.zeros((len(centres), 2 * len(radii_m)), np.float32)
+    sums = []
+    for layer in (targets, unknown):
+        integral = np.zeros((rows + 1, columns + 1), np.int64)
+        integral[1:, 1:] = layer.cumsum(0).cumsum(1)
+        sums.append(integral)
+    cells = np.floor((np.asarray(centres, np.float64) - origin[:2]) / far_cell_m).astype(np.int64)
+    for k, radius_m in enumerate(radii_m):
+        half = max(int(round(radius_m / far_cell_m)), 1)
+        area = (2 * half + 1) ** 2
+        for n, (i, j) in enumerate(cells):
+            i0, i1 = max(i - half, 0), min(i + half + 1, rows)
+            j0, j1 = max(j - half, 0), min(j + half + 1, columns)
+            inside = max(i1 - i0, 0) * max(j1 - j0, 0)
+            for column, integral in enumerate(sums):
+                count = 0
+                if inside:
+                    count = (
+                        integral[i1, j1] - integral[i0, j1] - integral[i1, j0] + integral[i0, j0]
+                    )
+                if column == 1:  # cells of the square outside the map are unknown
+                    count += area - inside
+                out[n, 2 * k + column] = count / area
+    return out

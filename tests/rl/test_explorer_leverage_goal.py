@@ -35,6 +35,8 @@ def test_each_candidate_is_walked_to_its_goal_and_on_for_every_horizon(leverage,
         count, slot = decision["candidates"], decision["chosen_slot"]
         assert all(len(decision["gains"][h]) == count for h in ("5", "20", "goal"))
         assert len(decision["goal_steps"]) == count
+        # What the choice saw, for a ranker's data: every candidate's row and surroundings.
+        assert len(decision["table"]) == count and len(decision["surroundings"]) == count
         # The episode walked the chosen goal as its copy did: same steps, same gain.
         assert decision["realised_steps"] == decision["goal_steps"][slot]
         assert decision["realised"] == pytest.approx(decision["gains"]["goal"][slot], abs=1e-5)

@@ -48,8 +48,8 @@ def test_the_baselines_register_themselves_and_naruto_stays_lazy():
     assert policy_class("random") is RandomPolicy
     assert policy_class("passive") is PassivePolicy
     assert policy_names() == sorted(
-        {"explorer", "explorer-untrained", "frontier", "goal-walker", "naruto", "passive",
-         "random"} | set(POLICIES)
+        {"explorer", "explorer-untrained", "frontier", "goal-ranker", "goal-ranker-untrained",
+         "goal-walker", "naruto", "passive", "random"} | set(POLICIES)
     )
     # Looking the names up never imports the agent (its module imports torch).
     assert "naruto" in LAZY_POLICIES or "naruto_agent.naruto" in sys.modules
