@@ -178,7 +178,8 @@ def test_measured_decisions_train_a_ranker_that_the_policy_and_its_twin_play(tra
         for scene in ("procedural:small:0", "procedural:small:1"):
             runs.append(str(tmp_path / f"{scene.rsplit(':', 1)[1]}.json"))
             argv = ["--scenes", scene, "--max-episode-steps", "60", "--decision", "goal",
-                    "--advance", "nearest", "--horizons", "5", "10", "--output-file", runs[-1]]  # fmt: skip
+                    "--advance", "nearest", "--horizons", "5", "10",
+                    "--output-file", runs[-1]]  # fmt: skip
             leverage.main(parse_dataclass_args(leverage.Args, argv))
     finally:
         del sys.modules["leverage_for_ranker"]
