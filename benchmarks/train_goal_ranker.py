@@ -10,10 +10,11 @@ the decision's candidates, in coverage points
 (:mod:`naruto_agent.rl.candidate_ranker`). Decisions with fewer than two candidates teach
 nothing and are left out.
 
-The scenes are split: every ``--validation-every``-th scene (in name order) is held out, and
-the learning curve is measured on its decisions. For each training seed, rankers are trained
-on the first ``n`` decisions of the seed's shuffle of the others, for each ``n`` of
-``--sizes``, and the curve (``curve.csv``) gives per ``n``, on the held-out decisions:
+The curve is cross-validated by scene: in fold ``k`` of ``--folds`` the scenes whose place in
+name order is ``k`` modulo ``--folds`` are held out. For each training seed and each ``n`` of
+``--sizes``, a ranker is trained in every fold on the first ``n`` decisions of the seed's
+shuffle of the fold's other scenes, and the curve (``curve.csv``) gives per seed and ``n``,
+averaged over the folds, on the held-out decisions:
 
 * ``gain_over_nearest``: the mean gain of the ranker's choice minus the nearest candidate's
   (coverage points over the horizon; the nearest rule, the data's own continuation, is 0);
@@ -21,10 +22,10 @@ on the first ``n`` decisions of the seed's shuffle of the others, for each ``n``
 * ``explained_variance``: of the targets by the ranker's centred scores.
 
 ``levels.json`` holds the same for the untrained twin (the same network, fresh weights per
-seed) and for every scripted rule of ``goal-walker``. The ranker trained on every decision
-(held-out ones included) with the first seed is written to ``ranker.pt``.
+seed) and for every scripted rule of ``goal-walker``, and ``curve.png`` draws them all. The
+ranker trained on every decision with the first seed is written to ``ranker.pt``.
 
-    python benchmarks/train_goal_ranker.py --data runs/ranker/train_nearest.json \\
+    python benchmarks/train_goal_ranker.py --data runs/ranker/decisions.json \\
         --output-dir runs/goal_ranker
 """
 
@@ -53,24 +54,27 @@ from naruto_gym.rl.goal_candidates import CANDIDATE_FEATURES
 
 @dataclass
 class Args:
-    data: list[str] = field(default_factory=lambda: ["runs/ranker/train_nearest.json"])
+    data: list[str] = field(
+        default_factory=lambda: ["runs/ranker/decisions.json", "runs/ranker/decisions_flat.json"]
+    )
     """leverage runs (``explorer_leverage.py --decision goal``) of the train split"""
     horizon: int = 100
     """env steps a candidate's gain is averaged over (at most the runs' longest horizon)"""
-    validation_every: int = 4
-    """every n-th scene (name order) is held out for the curve"""
+    folds: int = 4
+    """folds of the cross-validation by scene (scene k in name order is held out in fold
+    k modulo folds)"""
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
     """training seeds (shuffle of the decisions and the network's initial weights)"""
     sizes: list[int] = field(default_factory=lambda: [25, 50, 100, 200, 400, 800, 1600])
     """training decisions per point of the curve (more than the data hold: all of them)"""
-    epochs: int = 400
+    epochs: int = 200
     """full-batch Adam steps"""
     learning_rate: float = 3e-3
     """Adam's learning rate"""
-    weight_decay: float = 1e-4
+    weight_decay: float = 1e-3
     """Adam's weight decay"""
-    hidden: int = 64
-    """width of the ranker's MLPs"""
+    hidden: int = 16
+    """width of the ranker's MLPs (small: a few hundred decisions train it)"""
     num_candidates: int = 8
     """candidate slots"""
     output_dir: str = "runs/goal_ranker"
@@ -234,12 +238,18 @@ def rule_levels(data: Decisions) -> dict[str, dict[str, float]]:
     return out
 
 
-def split(data: Decisions, every: int) -> tuple[Decisions, Decisions]:
-    """(training, held-out) decisions: every ``every``-th scene in name order held out."""
+def split(data: Decisions, folds: int, fold: int) -> tuple[Decisions, Decisions]:
+    """(training, held-out) decisions of one fold: the scenes whose place in name order is
+    ``fold`` modulo ``folds`` held out."""
     names = sorted(set(data.scenes))
-    held = {name for k, name in enumerate(names) if k % every == every - 1}
+    held = {name for k, name in enumerate(names) if k % folds == fold}
     mask = np.array([scene in held for scene in data.scenes])
     return data.take(np.flatnonzero(~mask)), data.take(np.flatnonzero(mask))
+
+
+def mean_levels(levels: list[dict[str, float]]) -> dict[str, float]:
+    """Each level's mean over folds."""
+    return {key: round(float(np.mean([entry[key] for entry in levels])), 4) for key in levels[0]}
 
 
 def plot_curve(rows: list[dict[str, Any]], levels: dict[str, Any], path: Path) -> Path:
@@ -262,6 +272,8 @@ def plot_curve(rows: list[dict[str, Any]], levels: dict[str, Any], path: Path) -
             color="C3", linestyle="--", label="untrained twin",
         )  # fmt: skip
         axis.set_xscale("log")
+        axis.set_xticks(sizes, [str(n) for n in sizes])
+        axis.minorticks_off()
         axis.set_xlabel("training decisions")
     for k, (rule, level) in enumerate(levels["rules"].items()):
         left.axhline(level["gain_over_nearest"], color=f"C{k + 4}", linestyle=":", label=rule)
@@ -269,7 +281,10 @@ def plot_curve(rows: list[dict[str, Any]], levels: dict[str, Any], path: Path) -
     right.set_ylabel("explained variance of the advantages")
     left.legend(fontsize=7)
     right.legend(fontsize=7)
-    figure.suptitle(f"held-out decisions: {levels['held_out_decisions']}")
+    figure.suptitle(
+        f"held-out decisions, {levels['args']['folds']} folds by scene "
+        f"({levels['decisions']} decisions, {levels['scenes']} scenes)"
+    )
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
@@ -281,22 +296,28 @@ def main(args: Args) -> Path:
     out = Path(args.output_dir)
     out.mkdir(parents=True, exist_ok=True)
     data = load_decisions(args.data, args.horizon, args.num_candidates)
-    train, held = split(data, args.validation_every)
-    print(
-        f"{len(data)} decisions of {len(set(data.scenes))} scenes: {len(train)} to train on, "
-        f"{len(held)} held out ({len(set(held.scenes))} scenes)"
-    )
+    scenes = len(set(data.scenes))
+    if scenes < args.folds or args.folds < 2:
+        raise ValueError(
+            f"{args.folds} folds need at least 2 and at most the {scenes} scenes of the data"
+        )
+    print(f"{len(data)} decisions of {scenes} scenes, {args.folds} folds by scene")
+    folds = [split(data, args.folds, fold) for fold in range(args.folds)]
+    largest = min(len(train) for train, _ in folds)
+    settings = RankerSettings(args.hidden, args.num_candidates, args.horizon)
     rows: list[dict[str, Any]] = []
     untrained: list[dict[str, float]] = []
     for seed in args.seeds:
-        order = np.random.default_rng(seed).permutation(len(train))
-        twin = CandidateRanker(RankerSettings(args.hidden, args.num_candidates, args.horizon))
+        twin = CandidateRanker(settings)
         twin.reinitialise(seed)
-        untrained.append(ranker_levels(twin, held))
-        for size in sorted({min(n, len(train)) for n in args.sizes}):
+        untrained.append(mean_levels([ranker_levels(twin, held) for _, held in folds]))
+        for size in sorted({min(n, largest) for n in args.sizes}):
             started = time.perf_counter()
-            ranker = fit(train.take(order[:size]), args, seed)
-            row = {"seed": seed, "decisions": size, **ranker_levels(ranker, held)}
+            per_fold = []
+            for train, held in folds:
+                order = np.random.default_rng(seed).permutation(len(train))
+                per_fold.append(ranker_levels(fit(train.take(order[:size]), args, seed), held))
+            row = {"seed": seed, "decisions": size, **mean_levels(per_fold)}
             row["seconds"] = round(time.perf_counter() - started, 1)
             rows.append(row)
             print(row, flush=True)
@@ -304,11 +325,12 @@ def main(args: Args) -> Path:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
+    rules = [rule_levels(held) for _, held in folds]
     levels = {
-        "held_out_decisions": len(held),
-        "training_decisions": len(train),
+        "decisions": len(data),
+        "scenes": scenes,
         "untrained": untrained,
-        "rules": rule_levels(held),
+        "rules": {rule: mean_levels([fold[rule] for fold in rules]) for rule in rules[0]},
         "args": asdict(args),
     }
     (out / "levels.json").write_text(json.dumps(levels, indent=1))

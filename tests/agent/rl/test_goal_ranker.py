@@ -160,7 +160,7 @@ def test_fitting_learns_a_ranking_that_the_features_decide(trainer):
         tables,
         [f"scene{k % 10}" for k in range(len(tables))],
     )
-    train, held = trainer.split(data, 5)
+    train, held = trainer.split(data, 5, 4)
     args = parse_dataclass_args(trainer.Args, ["--epochs", "300"])
     fitted = trainer.ranker_levels(trainer.fit(train, args, seed=0), held)
     twin = CandidateRanker()
@@ -184,7 +184,7 @@ def test_measured_decisions_train_a_ranker_that_the_policy_and_its_twin_play(tra
     finally:
         del sys.modules["leverage_for_ranker"]
     out = tmp_path / "ranker"
-    argv = ["--data", *runs, "--horizon", "10", "--validation-every", "2", "--sizes", "2", "100",
+    argv = ["--data", *runs, "--horizon", "10", "--folds", "2", "--sizes", "2", "100",
             "--seeds", "0", "1", "--epochs", "20", "--output-dir", str(out)]  # fmt: skip
     path = trainer.main(parse_dataclass_args(trainer.Args, argv))
     curve = (out / "curve.csv").read_text().splitlines()
