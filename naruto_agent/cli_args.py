@@ -14,6 +14,7 @@ import argparse
 import ast
 import dataclasses
 import inspect
+import textwrap
 from collections.abc import Iterable
 from typing import Any, TypeVar, get_args, get_origin, get_type_hints
 
@@ -57,6 +58,20 @@ def field_docs(cls: type) -> dict[str, str]:
     return docs
 
 
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Help with each flag's default, wrapped at spaces only: names with hyphens (policy
+    names such as ``goal-ranker-untrained``) stay whole on one line."""
+
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        return textwrap.wrap(" ".join(text.split()), width, break_on_hyphens=False)
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return textwrap.fill(
+            " ".join(text.split()), width, initial_indent=indent, subsequent_indent=indent,
+            break_on_hyphens=False,
+        )  # fmt: skip
+
+
 def dataclass_parser(
     cls: type, description: str | None = None, prog: str | None = None
 ) -> argparse.ArgumentParser:
@@ -64,7 +79,7 @@ def dataclass_parser(
     parser = argparse.ArgumentParser(
         prog=prog,
         description=description,
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=HelpFormatter,
     )
     hints = get_type_hints(cls)
     docs = field_docs(cls)
