@@ -131,6 +131,24 @@ def export_checkpoint(model_path: str | Path, out_path: str | Path) -> Path:
 WEIGHTS = ("trained", "untrained")
 
 
+def check_weights(weights: str, trained: str) -> str:
+    """``weights`` when it is one of :data:`WEIGHTS`.
+
+    Args:
+        weights: the keyword given.
+        trained: what the trained weights are, for the message ("the checkpoint's").
+
+    Raises:
+        ValueError: any other value.
+    """
+    if weights not in WEIGHTS:
+        raise ValueError(
+            f"weights must be one of {WEIGHTS} ({trained}, or its untrained twin's), "
+            f"got {weights!r}"
+        )
+    return weights
+
+
 def reinitialise_weights(model: Any, seed: int) -> None:
     """Give an SB3 model's policy fresh weights, as a new model with the same settings gets
     them (the policy's own initialisation), drawn from ``seed``; the global torch random state
@@ -313,11 +331,7 @@ class MapGoalExplorer(CandidateGoalPolicy):
     ) -> None:
         from stable_baselines3 import PPO
 
-        if weights not in WEIGHTS:
-            raise ValueError(
-                f"weights must be one of {WEIGHTS} (the checkpoint's, or its untrained "
-                f"twin's), got {weights!r}"
-            )
+        check_weights(weights, "the checkpoint's")
         path = Path(model_path) if model_path is not None else PACKAGED_MODEL
         if not path.exists():
             hint = (

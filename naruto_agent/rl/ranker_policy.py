@@ -29,7 +29,7 @@ import numpy as np
 from naruto_agent.policies.base import Info, Observation
 from naruto_agent.policies.registry import register_policy
 from naruto_agent.rl.candidate_ranker import load_ranker, walker_surroundings
-from naruto_agent.rl.explorer_policy import DEFAULT_SETTINGS, WEIGHTS, CandidateGoalPolicy
+from naruto_agent.rl.explorer_policy import DEFAULT_SETTINGS, CandidateGoalPolicy, check_weights
 from naruto_gym.rl.goal_actions import GOAL_STEPS
 
 PACKAGED_RANKER = Path(__file__).with_name("checkpoints") / "goal_ranker.pt"
@@ -57,7 +57,8 @@ class GoalRankerPolicy(CandidateGoalPolicy):
 
     Raises:
         FileNotFoundError: no ranker at ``model_path`` (or none packaged).
-        ValueError: a file that is not a ranker, or ``weights`` not one of ``WEIGHTS``.
+        ValueError: a file that is not a ranker, or ``weights`` not one of
+            :data:`~naruto_agent.rl.explorer_policy.WEIGHTS`.
     """
 
     def __init__(
@@ -66,15 +67,10 @@ class GoalRankerPolicy(CandidateGoalPolicy):
         stall_watchdog: bool = True,
         weights: str = "trained",
     ) -> None:
-        if weights not in WEIGHTS:
-            raise ValueError(
-                f"weights must be one of {WEIGHTS} (the file's, or its untrained twin's), "
-                f"got {weights!r}"
-            )
+        self.weights = check_weights(weights, "the file's")
         self.ranker, self.record = load_ranker(model_path or PACKAGED_RANKER)
         settings = {**RANKER_WALKER, "num_candidates": self.ranker.settings.num_candidates}
         super().__init__(settings, stall_watchdog)
-        self.weights = weights
 
     def reset(self, observation: Observation, info: Info, seed: int | None = None) -> None:
         if self.weights == "untrained":
