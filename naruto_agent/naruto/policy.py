@@ -423,12 +423,13 @@ class NarutoPolicy(Policy):
     def _note_hold(self, position: np.ndarray, held: Plan | None) -> None:
         """A move of ``held`` was held or refused at ``position``: the monitor counts the
         holds per place and per goal (a spot whose plans keep being held fails); a held
-        recovery is followed by a recovery that moves at once (a held way out of a stall
-        is not chosen again)."""
+        recovery is followed by a recovery that moves at once; a held way out of a stall
+        failed, and the shared recovery sends the agent to the next one."""
         if held is not None and held.info.get("recovery"):
             if held.info["recovery"] == "way_out" and self.stall_recovery is not None:
                 self.stall_recovery.fail()
-            self.monitor.request_recovery()  # the next step of the escalation, at once
+            else:
+                self.monitor.request_recovery()  # the next step of the escalation, at once
             return
         self.monitor.move_held(position)
         if held is not None:

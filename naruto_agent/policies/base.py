@@ -128,7 +128,8 @@ class Policy(ABC):
     start of its ``act``, and implements :meth:`walk_out`. On a stall the one shared recovery
     (:mod:`naruto_agent.policies.stall_recovery`) chooses a reachable place past the stay,
     away from the trail, among those :meth:`reachable_places` names (the policy's own map;
-    by default its depth panorama), and :meth:`walk_out` walks there.
+    by default its depth panorama), and :meth:`walk_out` walks there; a way out that fails
+    before the agent gets there (refused, held, idle) is followed at once by the next one.
 
     Attributes:
         stall_watchdog: the watchdog in use, or None (off, the default).
@@ -145,6 +146,7 @@ class Policy(ABC):
         self.stall_watchdog: StallWatchdog | None = None
         self.stall_recovery: StallRecovery | None = None
         self._stall_panorama: np.ndarray | None = None
+        self._stay_event: StallEvent | None = None  # the stall whose way out is walked
 
     @property
     def context(self) -> EnvContext:
@@ -197,6 +199,7 @@ class Policy(ABC):
         if self.stall_recovery is not None:
             self.stall_recovery.reset()
         self._stall_panorama = None
+        self._stay_event = None
 
     # -- stall watchdog (opt-in) -----------------------------------------------------------
     def use_stall_watchdog(
@@ -226,7 +229,9 @@ class Policy(ABC):
         """Feed the watchdog this step's position and refusal (and ``progress``, a measure
         of what the policy knows, e.g. its observed voxels, when it has one); on a stall, run
         :meth:`recover_from_stall` and return the event (with what the recovery did), else
-        None. Call it at the start of ``act``; it does nothing without a watchdog."""
+        None. Call it at the start of ``act``; it does nothing without a watchdog. A way out
+        that failed since the last step (:attr:`StallRecovery.walk_failed`) is followed by the
+        next way out of the same stay, noted in that stall's record."""
         if self.stall_watchdog is None:
             return None
         position = np.asarray(observation["pose"], np.float64)[:3, 3]
@@ -237,6 +242,11 @@ class Policy(ABC):
         event = self.stall_watchdog.observe(position, refused, progress)
         if event is not None:
             event.recovery = self.recover_from_stall(event)
+        elif (self.stall_recovery is not None and self.stall_recovery.walk_failed
+              and self._stay_event is not None):
+            stay = self._stay_event
+            stay.recovery += (f"; failed at step {self.stall_watchdog.step}, then "
+                              + self.leave_stay(stay, position))
         return event
 
     def stay_of(self, event: StallEvent) -> tuple[np.ndarray, float]:
@@ -255,13 +265,19 @@ class Policy(ABC):
         return self.stall_recovery is not None and self.stall_recovery.goal is not None
 
     def recover_from_stall(self, event: StallEvent) -> str:
-        """The shared recovery: the reachable place past the stay farthest from the trail,
-        among :meth:`reachable_places` (then the panorama's, :func:`panorama_places`, when
-        the map has none past the stay), walked to by :meth:`walk_out`; with none,
-        :meth:`no_way_out`. Returns what it did, in a few words, for the record."""
+        """The shared recovery: :meth:`leave_stay` from where the stall was noticed. Returns
+        what it did, in a few words, for the record."""
+        self._stay_event = event
+        return self.leave_stay(event, np.asarray(event.position, np.float64))
+
+    def leave_stay(self, event: StallEvent, position: np.ndarray) -> str:
+        """Walk from ``position`` out of ``event``'s stay: to the reachable place past it
+        farthest from the trail, among :meth:`reachable_places` (then the panorama's,
+        :func:`panorama_places`, when the map has none past the stay), walked to by
+        :meth:`walk_out`; with none, :meth:`no_way_out`. Returns what it did."""
         assert self.stall_recovery is not None
         spots, radius = self.stay_of(event)
-        position = np.asarray(event.position, np.float64)
+        position = np.asarray(position, np.float64)
         offers = (self.reachable_places, self.panorama_places)  # the panorama's only if needed
         for places in (offer(position) for offer in offers):
             if places is None or self.stall_recovery.way_out(places, spots, radius) is None:

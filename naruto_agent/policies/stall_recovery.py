@@ -14,8 +14,12 @@ does then is the same for every policy, whatever it plans with:
 3. the policy walks there with its own motion (the hook
    :meth:`~naruto_agent.policies.Policy.walk_out`).
 
-A way out the env refused, or one that did not get the agent out before the next stall, is
-not chosen again in the episode, so each recovery tries somewhere else.
+A way out fails when, before the agent is past the stay, the env refuses a move on it or the
+agent gets no nearer to it for ``max_idle_steps`` steps (a move its own checks held, or its
+own rules took over), or when the next stall comes first. A failed way out is not chosen
+again in the episode, and the policy is sent at once to the next way out of the same stay
+(:attr:`StallRecovery.walk_failed`): the steps a stay may last are not spent on the
+policy's own rules, which are what kept it there.
 """
 
 from __future__ import annotations
@@ -71,23 +75,30 @@ class StallRecoveryConfig:
         trail_points: how many of the agent's last positions count as its trail.
         failed_radius_m: places this close to a way out that failed are not chosen again.
         arrival_m: the way out is reached within this of it (a step and a half).
+        max_idle_steps: a way out the agent got no nearer to (by ``min_progress_m``) for this
+            many steps in a row failed (2: one held move and the step after it; leaving a
+            stay of 0.6 m takes 6 steps, and a stay is noticed 20-24 steps in).
+        min_progress_m: the least a step must bring the agent nearer to the way out to count.
     """
 
     max_path_m: float = 3.0
     trail_points: int = 300
     failed_radius_m: float = 0.5
     arrival_m: float = 0.15
+    max_idle_steps: int = 2
+    min_progress_m: float = 0.01
 
     def __post_init__(self) -> None:
-        for name in ("max_path_m", "failed_radius_m", "arrival_m"):
+        for name in ("max_path_m", "failed_radius_m", "arrival_m", "min_progress_m"):
             if not getattr(self, name) > 0:
                 raise ValueError(
                     f"StallRecoveryConfig.{name} must be positive, got {getattr(self, name)}"
                 )
-        if self.trail_points < 1:
-            raise ValueError(
-                f"StallRecoveryConfig.trail_points must be at least 1, got {self.trail_points}"
-            )
+        for name in ("trail_points", "max_idle_steps"):
+            if getattr(self, name) < 1:
+                raise ValueError(
+                    f"StallRecoveryConfig.{name} must be at least 1, got {getattr(self, name)}"
+                )
 
 
 class StallRecovery:
@@ -100,6 +111,9 @@ class StallRecovery:
     Attributes:
         config: the settings.
         goal: the way out being walked (None when none is).
+        walk_failed: the way out walked last failed before the agent got there (refused, held
+            or idle) and no other has been chosen since: the next way out of the same stay is
+            due (:meth:`~naruto_agent.policies.Policy.check_stall` sends the policy there).
     """
 
     def __init__(self, config: StallRecoveryConfig | None = None) -> None:
@@ -111,35 +125,55 @@ class StallRecovery:
         self._trail: deque[np.ndarray] = deque(maxlen=self.config.trail_points)
         self._failed: list[np.ndarray] = []
         self.goal: np.ndarray | None = None
+        self._stay = (np.zeros((0, 3)), 0.0)  # the spots and radius of the stay being left
+        self.walk_failed = False
+        self._closest = np.inf
+        self._idle_steps = 0
 
     def record(self, position: np.ndarray, refused: bool = False) -> None:
         """One step: the agent's position and whether the env refused its last move. A way
-        out is done once the agent is within ``arrival_m`` of it; one the env refused
-        failed."""
+        out is done once the agent is within ``arrival_m`` of it. One the env refused, or
+        one the agent got no nearer to for ``max_idle_steps`` steps, failed while the agent
+        is still in the stay, and ends (the policy's own rules go on) past it."""
         position = np.asarray(position, np.float64).reshape(3).copy()
         self._trail.append(position)
         if self.goal is None:
             return
-        if refused:
-            self.fail()
-        elif np.linalg.norm(position - self.goal) <= self.config.arrival_m:
+        distance = float(np.linalg.norm(position - self.goal))
+        if distance <= self.config.arrival_m:
             self.goal = None
+            return
+        if distance < self._closest - self.config.min_progress_m:
+            self._closest, self._idle_steps = distance, 0
+        else:
+            self._idle_steps += 1
+        if refused or self._idle_steps >= self.config.max_idle_steps:
+            spots, radius_m = self._stay
+            if np.linalg.norm(spots - position, axis=1).min() <= radius_m:
+                self.fail()
+            else:
+                self.goal = None
 
     def fail(self) -> None:
-        """The way out being walked failed (refused, or a stall came first): it is not
-        chosen again in the episode."""
+        """The way out being walked failed (refused, held, idle, or a stall came first): it
+        is not chosen again in the episode, and the next one is due (:attr:`walk_failed`)."""
         if self.goal is not None:
             self._failed.append(self.goal)
             self.goal = None
+            self.walk_failed = True
 
     def way_out(self, places: ReachablePlaces, spots: np.ndarray, radius_m: float) -> int | None:
         """The index of the place to walk to out of the stay at ``spots`` (``(n, 3)``
         positions) of radius ``radius_m``, or None when no place is past it; the chosen
         place becomes :attr:`goal`."""
         self.fail()  # a way out still walked at the next stall did not get the agent out
+        self.walk_failed = False
         index = self.choose(places, spots, radius_m)
         if index is not None:
             self.goal = places.points[index].copy()
+            self._stay = (np.asarray(spots, np.float64).reshape(-1, 3), float(radius_m))
+            start = self._trail[-1] if self._trail else spots.reshape(-1, 3)[-1]
+            self._closest, self._idle_steps = float(np.linalg.norm(start - self.goal)), 0
         return index
 
     def choose(self, places: ReachablePlaces, spots: np.ndarray, radius_m: float) -> int | None:

@@ -53,6 +53,36 @@ def test_a_way_out_still_walked_at_the_next_stall_failed():
     assert recovery.way_out(places, np.zeros((1, 3)), 0.6) is None  # both failed now
 
 
+def test_a_way_out_the_agent_gets_no_nearer_to_in_the_stay_failed_and_the_next_is_due():
+    """Two steps without getting nearer (a held move, then the policy's own rules) while
+    still in the stay: the way out failed, the next is due, and it lies elsewhere."""
+    recovery = StallRecovery()
+    recovery.record(np.zeros(3))
+    places, stay = _line([-2.0, 1.5], z=0.0), np.zeros((1, 3))
+    assert recovery.way_out(places, stay, 0.6) == 0
+    recovery.record(np.array([-0.1, 0.0, 0.0]))  # nearer: progress
+    recovery.record(np.array([-0.1, 0.0, 0.0]))  # held: idle 1
+    assert recovery.goal is not None and not recovery.walk_failed
+    recovery.record(np.array([0.0, 0.0, 0.0]))  # back: idle 2
+    assert recovery.goal is None and recovery.walk_failed
+    assert recovery.way_out(places, stay, 0.6) == 1 and not recovery.walk_failed
+
+
+def test_past_the_stay_a_refused_or_idle_way_out_ends_without_failing():
+    """Once the agent is past the stay the way out has done its work: a refusal or idle
+    steps there end the walk (the policy's own rules go on); it may be chosen again."""
+    places, stay = _line([-2.0, 1.5], z=0.0), np.zeros((1, 3))
+    for refused in (True, False):
+        recovery = StallRecovery()
+        recovery.record(np.zeros(3))
+        assert recovery.way_out(places, stay, 0.6) == 0
+        recovery.record(np.array([-0.8, 0.0, 0.0]))
+        for _ in range(1 if refused else recovery.config.max_idle_steps):
+            recovery.record(np.array([-0.8, 0.0, 0.0]), refused=refused)
+        assert recovery.goal is None and not recovery.walk_failed
+        assert recovery.way_out(_line([-2.0], z=0.0), stay, 0.6) == 0  # it did not fail
+
+
 def test_no_place_past_the_stay_or_within_reach_means_no_way_out():
     recovery = StallRecovery(StallRecoveryConfig(max_path_m=1.0))
     places = _line([0.2, 1.5])  # within the stay, and beyond max_path_m
@@ -64,7 +94,8 @@ def test_no_place_past_the_stay_or_within_reach_means_no_way_out():
 
 @pytest.mark.parametrize(
     ("field", "value"),
-    [("max_path_m", 0.0), ("failed_radius_m", -1.0), ("arrival_m", 0.0), ("trail_points", 0)],
+    [("max_path_m", 0.0), ("failed_radius_m", -1.0), ("arrival_m", 0.0), ("trail_points", 0),
+     ("max_idle_steps", 0), ("min_progress_m", 0.0)],
 )
 def test_bad_settings_are_refused_with_the_field_named(field, value):
     with pytest.raises(ValueError, match=field):

@@ -211,6 +211,44 @@ def test_a_users_policy_gets_the_shared_way_out_past_the_stay_and_leaves():
     env.close()
 
 
+class _IgnoresFirstWayOut(_WalksOut):
+    """A user's policy whose own rules keep it standing on the first way out it is given."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.goals: list[np.ndarray] = []
+
+    def walk_out(self, position, goal):
+        self.goals.append(goal)
+        self.goal = position if len(self.goals) == 1 else goal  # the first: it stands
+        return "ignored" if len(self.goals) == 1 else "straight"
+
+
+def test_a_way_out_the_policy_does_not_walk_is_followed_at_once_by_the_next():
+    """The policy stands on its first way out: after ``max_idle_steps`` steps (not the next
+    stall, a window later) the shared recovery gives it another, elsewhere, and it is past
+    the stay within 8 steps more."""
+    policy = _IgnoresFirstWayOut()
+    env = _small_room(policy)
+    policy.bind(_context(env))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info)
+    positions = []
+    for _ in range(40):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+        positions.append(observation["pose"][:3, 3])
+    event = policy.stall_events[0]
+    idle = policy.stall_recovery.config.max_idle_steps
+    assert event.recovery.endswith("straight")
+    assert f"; failed at step {event.step + idle}, then" in event.recovery, event.recovery
+    failed_radius = policy.stall_recovery.config.failed_radius_m
+    assert np.linalg.norm(policy.goals[1] - policy.goals[0]) > failed_radius
+    spots, radius = policy.stay_of(event)
+    after = np.array(positions[event.step + idle : event.step + idle + 8])
+    assert (np.linalg.norm(after[:, None] - spots[None], axis=2).min(axis=1) > radius).any()
+    env.close()
+
+
 def _small_room(policy: Policy) -> gym.Env:
     """The catalogue's room at small frames, with the panorama, in ``policy``'s action mode."""
     return gym.make(
