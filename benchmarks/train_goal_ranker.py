@@ -25,6 +25,10 @@ averaged over the folds, on the held-out decisions:
 seed) and for every scripted rule of ``goal-walker``, and ``curve.png`` draws them all. The
 ranker trained on every decision with the first seed is written to ``ranker.pt``.
 
+``horizons.json`` holds the same levels at the largest training size for each of
+``--compare-horizons`` beside ``--horizon``: how far ahead the gains are predictable (the
+farther, the more a gain depends on the later decisions, and the less on this one).
+
     python benchmarks/train_goal_ranker.py --data runs/ranker/decisions.json \\
         --output-dir runs/goal_ranker
 """
@@ -58,8 +62,11 @@ class Args:
         default_factory=lambda: ["runs/ranker/decisions.json", "runs/ranker/decisions_flat.json"]
     )
     """leverage runs (``explorer_leverage.py --decision goal``) of the train split"""
-    horizon: int = 100
-    """env steps a candidate's gain is averaged over (at most the runs' longest horizon)"""
+    horizon: int = 20
+    """env steps a candidate's gain is averaged over (at most the runs' longest horizon); 20:
+    the horizon whose gains the ranker predicts best beyond the rules (``horizons.json``)"""
+    compare_horizons: list[int] = field(default_factory=lambda: [10, 30, 40, 100])
+    """other horizons cross-validated at the largest training size (none: skip)"""
     folds: int = 4
     """folds of the cross-validation by scene (scene k in name order is held out in fold
     k modulo folds)"""
@@ -174,11 +181,13 @@ def centred_scores(ranker: CandidateRanker, data: Decisions) -> np.ndarray:
     return ((scores - mean) * valid).numpy()
 
 
-def fit(data: Decisions, args: Args, seed: int) -> CandidateRanker:
+def fit(data: Decisions, args: Args, seed: int, horizon: int | None = None) -> CandidateRanker:
     """A ranker trained on ``data`` (full-batch Adam on the squared error of its centred
-    scores against the advantages)."""
+    scores against the advantages over ``horizon``, by default ``args.horizon``)."""
     torch.manual_seed(seed)
-    ranker = CandidateRanker(RankerSettings(args.hidden, args.num_candidates, args.horizon))
+    ranker = CandidateRanker(
+        RankerSettings(args.hidden, args.num_candidates, horizon or args.horizon)
+    )
     optimiser = torch.optim.Adam(
         ranker.parameters(), lr=args.learning_rate, weight_decay=args.weight_decay
     )
@@ -291,6 +300,57 @@ def plot_curve(rows: list[dict[str, Any]], levels: dict[str, Any], path: Path) -
     return path
 
 
+def cross_validate(
+    data: Decisions, args: Args, horizon: int, sizes: list[int]
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The curve's rows (per seed and training size) and the levels of the untrained twin
+    and the rules, on the held-out decisions of every fold, for gains over ``horizon``."""
+    folds = [split(data, args.folds, fold) for fold in range(args.folds)]
+    largest = min(len(train) for train, _ in folds)
+    settings = RankerSettings(args.hidden, args.num_candidates, horizon)
+    rows: list[dict[str, Any]] = []
+    untrained: list[dict[str, float]] = []
+    for seed in args.seeds:
+        twin = CandidateRanker(settings)
+        twin.reinitialise(seed)
+        untrained.append(mean_levels([ranker_levels(twin, held) for _, held in folds]))
+        for size in sorted({min(n, largest) for n in sizes}):
+            started = time.perf_counter()
+            per_fold = []
+            for train, held in folds:
+                order = np.random.default_rng(seed).permutation(len(train))
+                ranker = fit(train.take(order[:size]), args, seed, horizon)
+                per_fold.append(ranker_levels(ranker, held))
+            row = {"seed": seed, "decisions": size, **mean_levels(per_fold)}
+            row["seconds"] = round(time.perf_counter() - started, 1)
+            rows.append(row)
+            print(row, flush=True)
+    rules = [rule_levels(held) for _, held in folds]
+    levels = {
+        "decisions": len(data),
+        "scenes": len(set(data.scenes)),
+        "untrained": untrained,
+        "rules": {rule: mean_levels([fold[rule] for fold in rules]) for rule in rules[0]},
+    }
+    return rows, levels
+
+
+def compare_horizons(args: Args) -> dict[str, Any]:
+    """The ranker's, the twin's and the rules' held-out levels at the largest training size
+    for ``--horizon`` and each of ``--compare-horizons`` (means over the seeds)."""
+    out: dict[str, Any] = {}
+    for horizon in sorted({args.horizon, *args.compare_horizons}):
+        data = load_decisions(args.data, horizon, args.num_candidates)
+        rows, levels = cross_validate(data, args, horizon, [len(data)])
+        out[str(horizon)] = {
+            "ranker": mean_levels([{k: r[k] for k in r if k not in ("seed", "decisions",
+                                                                    "seconds")} for r in rows]),
+            "untrained": mean_levels(levels["untrained"]),
+            "rules": levels["rules"],
+        }
+    return out
+
+
 def main(args: Args) -> Path:
     torch.set_num_threads(1)
     out = Path(args.output_dir)
@@ -302,50 +362,32 @@ def main(args: Args) -> Path:
             f"{args.folds} folds need at least 2 and at most the {scenes} scenes of the data"
         )
     print(f"{len(data)} decisions of {scenes} scenes, {args.folds} folds by scene")
-    folds = [split(data, args.folds, fold) for fold in range(args.folds)]
-    largest = min(len(train) for train, _ in folds)
-    settings = RankerSettings(args.hidden, args.num_candidates, args.horizon)
-    rows: list[dict[str, Any]] = []
-    untrained: list[dict[str, float]] = []
-    for seed in args.seeds:
-        twin = CandidateRanker(settings)
-        twin.reinitialise(seed)
-        untrained.append(mean_levels([ranker_levels(twin, held) for _, held in folds]))
-        for size in sorted({min(n, largest) for n in args.sizes}):
-            started = time.perf_counter()
-            per_fold = []
-            for train, held in folds:
-                order = np.random.default_rng(seed).permutation(len(train))
-                per_fold.append(ranker_levels(fit(train.take(order[:size]), args, seed), held))
-            row = {"seed": seed, "decisions": size, **mean_levels(per_fold)}
-            row["seconds"] = round(time.perf_counter() - started, 1)
-            rows.append(row)
-            print(row, flush=True)
+    rows, levels = cross_validate(data, args, args.horizon, args.sizes)
+    levels["args"] = asdict(args)
     with (out / "curve.csv").open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    rules = [rule_levels(held) for _, held in folds]
-    levels = {
-        "decisions": len(data),
-        "scenes": scenes,
-        "untrained": untrained,
-        "rules": {rule: mean_levels([fold[rule] for fold in rules]) for rule in rules[0]},
-        "args": asdict(args),
-    }
     (out / "levels.json").write_text(json.dumps(levels, indent=1))
     plot_curve(rows, levels, out / "curve.png")
+    if args.compare_horizons:
+        horizons = compare_horizons(args)
+        (out / "horizons.json").write_text(json.dumps(horizons, indent=1))
+        for horizon, entry in horizons.items():
+            print(f"horizon {horizon}: ranker {entry['ranker']}, "
+                  f"twin {entry['untrained']['gain_over_nearest']}, rules "
+                  f"{ {rule: v['gain_over_nearest'] for rule, v in entry['rules'].items()} }")
     ranker = fit(data, args, args.seeds[0])
     path = save_ranker(
         ranker,
         out / "ranker.pt",
         decisions=len(data),
-        scenes=len(set(data.scenes)),
+        scenes=scenes,
         horizon=args.horizon,
         data=args.data,
     )
     print(f"rules on the held-out decisions: {levels['rules']}")
-    print(f"untrained twin: {untrained}")
+    print(f"untrained twin: {levels['untrained']}")
     print(f"wrote {path} ({path.stat().st_size / 1024:.0f} kB)")
     return path
 

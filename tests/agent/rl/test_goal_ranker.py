@@ -3,6 +3,7 @@ file, its untrained twin, its training script and the policy in the harness."""
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -184,12 +185,17 @@ def test_measured_decisions_train_a_ranker_that_the_policy_and_its_twin_play(tra
     finally:
         del sys.modules["leverage_for_ranker"]
     out = tmp_path / "ranker"
-    argv = ["--data", *runs, "--horizon", "10", "--folds", "2", "--sizes", "2", "100",
-            "--seeds", "0", "1", "--epochs", "20", "--output-dir", str(out)]  # fmt: skip
+    argv = ["--data", *runs, "--horizon", "10", "--compare-horizons", "5", "--folds", "2",
+            "--sizes", "2", "100", "--seeds", "0", "1", "--epochs", "20",
+            "--output-dir", str(out)]  # fmt: skip
     path = trainer.main(parse_dataclass_args(trainer.Args, argv))
     curve = (out / "curve.csv").read_text().splitlines()
     assert curve[0].startswith("seed,decisions,gain_over_nearest,regret,explained_variance")
     assert len(curve) == 1 + 2 * 2
+    horizons = json.loads((out / "horizons.json").read_text())
+    assert sorted(horizons) == ["10", "5"]
+    assert horizons["5"]["rules"]["nearest"]["gain_over_nearest"] == 0.0
+    assert set(horizons["10"]["ranker"]) == {"gain_over_nearest", "regret", "explained_variance"}
     _, record = load_ranker(path)
     assert record["horizon"] == 10 and record["decisions"] > 2
 
