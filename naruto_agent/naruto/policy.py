@@ -265,13 +265,16 @@ class NarutoPolicy(Policy):
             return None
         return ReachablePlaces(points, np.linalg.norm(points - position, axis=1))
 
-    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str:
-        """Cut the plan in progress short for an E-RRT path to ``goal`` (a straight one, as the
-        panorama showed it clear, when the planner finds none), moving at once; arrived, it
-        looks on ahead and plans."""
+    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str | None:
+        """Cut the plan in progress short for an E-RRT path to ``goal`` (a straight one where
+        the planner finds none and the panorama shows the way clear; None, declined, where it
+        shows it blocked), moving at once; arrived, it looks on ahead and plans."""
         plan = self.goal_planner.recovery.path_to(position, goal, "way_out")
         how = "along an E-RRT path"
         if plan is None:
+            panorama = self.guard.panorama_at(position)
+            if panorama is not None and self.guard.way_blocked(panorama, goal - position):
+                return None
             distance = float(np.linalg.norm(goal - position))
             steps = max(1, int(np.ceil(distance / self.config.planner.step_m)))
             path = position + np.outer(np.arange(steps + 1) / steps, goal - position)

@@ -147,6 +147,7 @@ class Policy(ABC):
         self.stall_recovery: StallRecovery | None = None
         self._stall_panorama: np.ndarray | None = None
         self._stay_event: StallEvent | None = None  # the stall whose way out is walked
+        self._failed_ways_out = 0  # ways out of that stall that failed
 
     @property
     def context(self) -> EnvContext:
@@ -199,7 +200,7 @@ class Policy(ABC):
         if self.stall_recovery is not None:
             self.stall_recovery.reset()
         self._stall_panorama = None
-        self._stay_event = None
+        self._stay_event, self._failed_ways_out = None, 0
 
     # -- stall watchdog (opt-in) -----------------------------------------------------------
     def use_stall_watchdog(
@@ -244,9 +245,14 @@ class Policy(ABC):
             event.recovery = self.recover_from_stall(event)
         elif (self.stall_recovery is not None and self.stall_recovery.walk_failed
               and self._stay_event is not None):
-            stay = self._stay_event
-            stay.recovery += (f"; failed at step {self.stall_watchdog.step}, then "
-                              + self.leave_stay(stay, position))
+            stay, self.stall_recovery.walk_failed = self._stay_event, False
+            self._failed_ways_out += 1
+            if self._failed_ways_out > self.stall_recovery.config.max_failed_ways_out:
+                self._stay_event = None
+                done = self.no_way_out(stay)
+            else:
+                done = self.leave_stay(stay, position)
+            stay.recovery += f"; failed at step {self.stall_watchdog.step}, then {done}"
         return event
 
     def stay_of(self, event: StallEvent) -> tuple[np.ndarray, float]:
@@ -267,24 +273,29 @@ class Policy(ABC):
     def recover_from_stall(self, event: StallEvent) -> str:
         """The shared recovery: :meth:`leave_stay` from where the stall was noticed. Returns
         what it did, in a few words, for the record."""
-        self._stay_event = event
+        self._stay_event, self._failed_ways_out = event, 0
         return self.leave_stay(event, np.asarray(event.position, np.float64))
 
     def leave_stay(self, event: StallEvent, position: np.ndarray) -> str:
         """Walk from ``position`` out of ``event``'s stay: to the reachable place past it
         farthest from the trail, among :meth:`reachable_places` (then the panorama's,
         :func:`panorama_places`, when the map has none past the stay), walked to by
-        :meth:`walk_out`; with none, :meth:`no_way_out`. Returns what it did."""
-        assert self.stall_recovery is not None
+        :meth:`walk_out` (a place it declines, the next); with none, :meth:`no_way_out`.
+        Returns what it did."""
+        recovery = self.stall_recovery
+        assert recovery is not None
         spots, radius = self.stay_of(event)
         position = np.asarray(position, np.float64)
         offers = (self.reachable_places, self.panorama_places)  # the panorama's only if needed
         for places in (offer(position) for offer in offers):
-            if places is None or self.stall_recovery.way_out(places, spots, radius) is None:
-                continue
-            goal = self.stall_recovery.goal
-            return f"walk out to ({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f}): " + (
-                self.walk_out(position.copy(), goal.copy()))
+            for _ in range(recovery.config.max_declined if places is not None else 0):
+                if recovery.way_out(places, spots, radius) is None:
+                    break
+                goal = recovery.goal
+                how = self.walk_out(position.copy(), goal.copy())
+                if how is not None:
+                    return f"walk out to ({goal[0]:.2f}, {goal[1]:.2f}, {goal[2]:.2f}): {how}"
+                recovery.decline()
         return self.no_way_out(event)
 
     def reachable_places(self, position: np.ndarray) -> ReachablePlaces | None:
@@ -301,10 +312,12 @@ class Policy(ABC):
         return panorama_places(self._stall_panorama, position, self.context.max_translation_m,
                                bounds=np.asarray(self.context.bounds, np.float64))
 
-    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str:
+    def walk_out(self, position: np.ndarray, goal: np.ndarray) -> str | None:
         """Walk from ``position`` to ``goal`` (3,), the way out of a stall the shared recovery
-        chose, with the policy's own motion; returns how, in a few words. Policies that use a
-        watchdog must implement it (:attr:`walking_out` says whether the walk is still on)."""
+        chose, with the policy's own motion; returns how, in a few words, or None when the
+        policy cannot walk there (no path, or its own reading shows the way blocked: the
+        recovery offers the next place, no step spent). Policies that use a watchdog must
+        implement it (:attr:`walking_out` says whether the walk is still on)."""
         raise NotImplementedError(
             f"{type(self).__name__} uses a stall watchdog but does not implement "
             "walk_out(position, goal); implement it, or call use_stall_watchdog(enabled=False)"

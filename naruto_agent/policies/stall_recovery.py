@@ -79,6 +79,12 @@ class StallRecoveryConfig:
             many steps in a row failed (2: one held move and the step after it; leaving a
             stay of 0.6 m takes 6 steps, and a stay is noticed 20-24 steps in).
         min_progress_m: the least a step must bring the agent nearer to the way out to count.
+        max_failed_ways_out: ways out of one stay that may fail before the policy's own
+            recovery takes over (:meth:`~naruto_agent.policies.Policy.no_way_out`): each
+            failure costs a step, and several in a row say the map's places are not reachable.
+        max_declined: places in a row a policy may decline to walk to
+            (:meth:`~naruto_agent.policies.Policy.walk_out` returns None) before the next
+            source of places is asked.
     """
 
     max_path_m: float = 3.0
@@ -87,6 +93,8 @@ class StallRecoveryConfig:
     arrival_m: float = 0.15
     max_idle_steps: int = 2
     min_progress_m: float = 0.01
+    max_failed_ways_out: int = 3
+    max_declined: int = 5
 
     def __post_init__(self) -> None:
         for name in ("max_path_m", "failed_radius_m", "arrival_m", "min_progress_m"):
@@ -94,7 +102,7 @@ class StallRecoveryConfig:
                 raise ValueError(
                     f"StallRecoveryConfig.{name} must be positive, got {getattr(self, name)}"
                 )
-        for name in ("trail_points", "max_idle_steps"):
+        for name in ("trail_points", "max_idle_steps", "max_failed_ways_out", "max_declined"):
             if getattr(self, name) < 1:
                 raise ValueError(
                     f"StallRecoveryConfig.{name} must be at least 1, got {getattr(self, name)}"
@@ -161,6 +169,13 @@ class StallRecovery:
             self._failed.append(self.goal)
             self.goal = None
             self.walk_failed = True
+
+    def decline(self) -> None:
+        """The policy cannot walk to the way out just chosen (no path, or its own reading of
+        the way shows it blocked): it is not chosen again, and no step was spent on it."""
+        if self.goal is not None:
+            self._failed.append(self.goal)
+            self.goal = None
 
     def way_out(self, places: ReachablePlaces, spots: np.ndarray, radius_m: float) -> int | None:
         """The index of the place to walk to out of the stay at ``spots`` (``(n, 3)``

@@ -68,6 +68,15 @@ def test_a_way_out_the_agent_gets_no_nearer_to_in_the_stay_failed_and_the_next_i
     assert recovery.way_out(places, stay, 0.6) == 1 and not recovery.walk_failed
 
 
+def test_a_declined_way_out_is_not_chosen_again_and_is_no_failed_walk():
+    recovery = StallRecovery()
+    places, stay = _line([-2.0, 1.5], z=0.0), np.zeros((1, 3))
+    assert recovery.way_out(places, stay, 0.6) == 0
+    recovery.decline()
+    assert recovery.goal is None and not recovery.walk_failed
+    assert recovery.way_out(places, stay, 0.6) == 1
+
+
 def test_past_the_stay_a_refused_or_idle_way_out_ends_without_failing():
     """Once the agent is past the stay the way out has done its work: a refusal or idle
     steps there end the walk (the policy's own rules go on); it may be chosen again."""
@@ -95,7 +104,8 @@ def test_no_place_past_the_stay_or_within_reach_means_no_way_out():
 @pytest.mark.parametrize(
     ("field", "value"),
     [("max_path_m", 0.0), ("failed_radius_m", -1.0), ("arrival_m", 0.0), ("trail_points", 0),
-     ("max_idle_steps", 0), ("min_progress_m", 0.0)],
+     ("max_idle_steps", 0), ("min_progress_m", 0.0), ("max_failed_ways_out", 0),
+     ("max_declined", 0)],
 )
 def test_bad_settings_are_refused_with_the_field_named(field, value):
     with pytest.raises(ValueError, match=field):

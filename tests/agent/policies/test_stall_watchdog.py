@@ -249,6 +249,52 @@ def test_a_way_out_the_policy_does_not_walk_is_followed_at_once_by_the_next():
     env.close()
 
 
+class _DeclinesOrIgnores(_WalksOut):
+    """A user's policy that declines its first way out of each stay (no path to it) and
+    stands on every other one, and counts its own recoveries."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.offered: list[np.ndarray] = []
+        self.own_recoveries = 0
+
+    def walk_out(self, position, goal):
+        self.offered.append(goal)
+        if len(self.offered) == 1:
+            return None
+        self.goal = position  # it stands
+        return "ignored"
+
+    def no_way_out(self, event):
+        self.own_recoveries += 1
+        return "own recovery"
+
+
+def test_a_declined_place_is_replaced_at_once_and_failed_ways_out_end_in_the_own_recovery():
+    """The first place is declined (no step spent: the second is offered in the same step);
+    the policy then stands on every way out, and after ``max_failed_ways_out`` failed ones
+    its own recovery (``no_way_out``) takes over, once."""
+    policy = _DeclinesOrIgnores()
+    env = _small_room(policy)
+    policy.bind(_context(env))
+    observation, info = env.reset(seed=0)
+    policy.reset(observation, info)
+    for _ in range(20):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+    event = policy.stall_events[0]
+    assert event.step == 20 and len(policy.offered) == 2
+    assert event.recovery.startswith(f"walk out to ({policy.offered[1][0]:.2f}")
+    config = policy.stall_recovery.config
+    for _ in range((config.max_failed_ways_out + 1) * config.max_idle_steps + 1):
+        observation, _, _, _, info = env.step(policy.act(observation, info))
+    assert event.recovery.count("; failed at step") == config.max_failed_ways_out + 1
+    assert event.recovery.endswith("then own recovery") and policy.own_recoveries == 1
+    assert len(policy.offered) == 2 + config.max_failed_ways_out
+    assert all(np.linalg.norm(a - b) > config.failed_radius_m
+               for k, a in enumerate(policy.offered) for b in policy.offered[:k])
+    env.close()
+
+
 def _small_room(policy: Policy) -> gym.Env:
     """The catalogue's room at small frames, with the panorama, in ``policy``'s action mode."""
     return gym.make(
