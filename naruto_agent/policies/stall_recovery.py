@@ -156,19 +156,21 @@ class StallRecovery:
         else:
             self._idle_steps += 1
         if refused or self._idle_steps >= self.config.max_idle_steps:
-            spots, radius_m = self._stay
-            if np.linalg.norm(spots - position, axis=1).min() <= radius_m:
-                self.fail()
-            else:
-                self.goal = None
+            self.fail()
 
     def fail(self) -> None:
-        """The way out being walked failed (refused, held, idle, or a stall came first): it
-        is not chosen again in the episode, and the next one is due (:attr:`walk_failed`)."""
-        if self.goal is not None:
-            self._failed.append(self.goal)
+        """The way out being walked failed (refused, held or idle): still in the stay, it is
+        not chosen again in the episode and the next one is due (:attr:`walk_failed`); past
+        the stay it has done its work and just ends."""
+        if self.goal is None:
+            return
+        spots, radius_m = self._stay
+        if self._trail and np.linalg.norm(spots - self._trail[-1], axis=1).min() > radius_m:
             self.goal = None
-            self.walk_failed = True
+            return
+        self._failed.append(self.goal)
+        self.goal = None
+        self.walk_failed = True
 
     def decline(self) -> None:
         """The policy cannot walk to the way out just chosen (no path, or its own reading of
@@ -181,7 +183,9 @@ class StallRecovery:
         """The index of the place to walk to out of the stay at ``spots`` (``(n, 3)``
         positions) of radius ``radius_m``, or None when no place is past it; the chosen
         place becomes :attr:`goal`."""
-        self.fail()  # a way out still walked at the next stall did not get the agent out
+        if self.goal is not None:  # still walked at the next stall: it did not get the agent out
+            self._failed.append(self.goal)
+            self.goal = None
         self.walk_failed = False
         index = self.choose(places, spots, radius_m)
         if index is not None:

@@ -90,6 +90,10 @@ def test_past_the_stay_a_refused_or_idle_way_out_ends_without_failing():
             recovery.record(np.array([-0.8, 0.0, 0.0]), refused=refused)
         assert recovery.goal is None and not recovery.walk_failed
         assert recovery.way_out(_line([-2.0], z=0.0), stay, 0.6) == 0  # it did not fail
+    # A move the policy's own checks held (it calls fail()) past the stay: the same.
+    recovery.record(np.array([-0.8, 0.0, 0.0]))
+    recovery.fail()
+    assert recovery.goal is None and not recovery.walk_failed
 
 
 def test_no_place_past_the_stay_or_within_reach_means_no_way_out():
