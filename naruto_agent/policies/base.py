@@ -288,7 +288,9 @@ class Policy(ABC):
         position = np.asarray(position, np.float64)
         offers = (self.reachable_places, self.panorama_places)  # the panorama's only if needed
         for places in (offer(position) for offer in offers):
-            for _ in range(recovery.config.max_declined if places is not None else 0):
+            if places is None:
+                continue
+            for _ in range(recovery.config.max_declined):
                 if recovery.way_out(places, spots, radius) is None:
                     break
                 goal = recovery.goal

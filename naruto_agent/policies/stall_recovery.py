@@ -168,13 +168,12 @@ class StallRecovery:
         if self._trail and np.linalg.norm(spots - self._trail[-1], axis=1).min() > radius_m:
             self.goal = None
             return
-        self._failed.append(self.goal)
-        self.goal = None
+        self.decline()
         self.walk_failed = True
 
     def decline(self) -> None:
-        """The policy cannot walk to the way out just chosen (no path, or its own reading of
-        the way shows it blocked): it is not chosen again, and no step was spent on it."""
+        """The way out just chosen is given up without a step walked on it (the policy cannot
+        walk there, or a new stall came first): it is not chosen again in the episode."""
         if self.goal is not None:
             self._failed.append(self.goal)
             self.goal = None
@@ -183,9 +182,7 @@ class StallRecovery:
         """The index of the place to walk to out of the stay at ``spots`` (``(n, 3)``
         positions) of radius ``radius_m``, or None when no place is past it; the chosen
         place becomes :attr:`goal`."""
-        if self.goal is not None:  # still walked at the next stall: it did not get the agent out
-            self._failed.append(self.goal)
-            self.goal = None
+        self.decline()  # still walked at the next stall: it did not get the agent out
         self.walk_failed = False
         index = self.choose(places, spots, radius_m)
         if index is not None:
