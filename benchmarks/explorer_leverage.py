@@ -66,7 +66,8 @@ from naruto_agent.rl.scripted_explorer import CHOICE_RULES, choose_candidate
 from naruto_gym.rl.egocentric_map import EgocentricMapObservation
 from naruto_gym.rl.explorer_env import EXPLORER_ENV
 from naruto_gym.rl.goal_actions import GOAL_STEPS, GoalActions
-from naruto_gym.rl.goal_walker import AWAIT_DECISION, DECISIONS
+from naruto_gym.rl.goal_lookahead import gain_at, lookahead_curves
+from naruto_gym.rl.goal_walker import DECISIONS
 from naruto_gym.scenes import suite
 
 #: The summary's distributions, per horizon.
@@ -161,39 +162,12 @@ def goal_gains(
     stack: GoalActions, count: int, coverage: float, horizons: list[int]
 ) -> tuple[dict[str, list[float]], list[int]]:
     """Coverage gained by each of the ``count`` candidates of a decision at every goal,
-    walked on a copy of the stack: until the copy's next decision (``"goal"``, and its env
-    steps) and for each horizon, the nearest candidate taken at every later decision."""
-    gains: dict[str, list[float]] = {str(h): [] for h in horizons}
-    gains["goal"] = []
-    steps_to_decision: list[int] = []
-    cap = int(stack.steps_per_goal)
-    for slot in range(count):
-        trial = copy.deepcopy(stack)
-        trial.walker.set_actions(np.array([slot]))
-        reached, step, own = coverage, 0, True
-        while own or step < max(horizons):
-            move = int(trial.walker.next_moves()[0])
-            if move == AWAIT_DECISION or (own and step == cap):
-                if own:
-                    gains["goal"].append(reached - coverage)
-                    steps_to_decision.append(step)
-                    own = False
-                trial.walker.refresh_candidates()
-                trial.walker.set_actions(np.array([0]))
-                continue
-            _, _, terminated, truncated, info = trial.env.step(move)
-            step += 1
-            reached = float(info["coverage"])
-            if str(step) in gains:
-                gains[str(step)].append(reached - coverage)
-            if terminated or truncated:
-                break
-        if own:
-            gains["goal"].append(reached - coverage)
-            steps_to_decision.append(step)
-        for h in horizons:
-            if len(gains[str(h)]) <= slot:
-                gains[str(h)].append(reached - coverage)
+    walked on a copy of the stack (:func:`~naruto_gym.rl.goal_lookahead.lookahead_curves`):
+    until the copy's next decision (``"goal"``, and its env steps) and for each horizon, the
+    nearest candidate taken at every later decision."""
+    curves, steps_to_decision = lookahead_curves(stack, count, coverage, max(horizons))
+    gains = {str(h): [gain_at(curve, h) for curve in curves] for h in horizons}
+    gains["goal"] = [gain_at(curve, s) for curve, s in zip(curves, steps_to_decision, strict=True)]
     return gains, steps_to_decision
 
 
