@@ -184,16 +184,24 @@ def scoring(seed: int) -> dict[str, Any]:
     }
 
 
+#: Env steps of a policy's fingerprint episodes (200 for a policy not listed).
+EPISODE_STEPS = {"passive": 60}
+
+
 def fingerprint() -> dict[str, Any]:
+    """Every registered policy's episodes on three scenes, the batched env, generated scenes
+    and the scores of a fixed mesh."""
     scenes = ["replica_like_room", "two_rooms", "replica_like_room:no_ceiling+holes"]
-    steps = {"passive": 60, "random": 200, "frontier": 200, "naruto": 200}
+    from naruto_agent.policies import policy_names
+
     out: dict[str, Any] = {"episodes": {}}
-    for policy in ("passive", "random", "frontier", "naruto"):
+    for policy in policy_names():
         for scene in scenes:
             key = f"{policy}@{scene}"
             print(key, file=sys.stderr, flush=True)
             try:
-                out["episodes"][key] = policy_episode(policy, scene, steps[policy], seed=3)
+                steps = EPISODE_STEPS.get(policy, 200)
+                out["episodes"][key] = policy_episode(policy, scene, steps, seed=3)
             except Exception as error:  # recorded: a change must not alter this either
                 out["episodes"][key] = {"error": f"{type(error).__name__}: {error}"}
     print("batched env", file=sys.stderr, flush=True)
