@@ -38,7 +38,8 @@ def lookahead_curves(
         count: the candidates to walk (slots ``0 .. count - 1``).
         coverage: the env's coverage at the decision (the curves are gains over it).
         horizon: env steps each copy walks at least; a copy also walks its candidate's goal to
-            its end (at most ``steps_per_goal`` steps) and stops where the episode ends.
+            its end and stops where the episode ends. Every goal ends after at most
+            ``steps_per_goal`` env steps, as in ``GoalActions.step``.
 
     Returns:
         Per candidate, its gain curve (entry ``k``: the gain after ``k + 1`` env steps; shorter
@@ -52,15 +53,16 @@ def lookahead_curves(
         trial = copy.deepcopy(stack)
         trial.walker.set_actions(np.array([slot]))
         curve: list[float] = []
-        own = True
+        own, decided = True, 0  # decided: the env step at which the current goal was set
         while own or len(curve) < horizon:
             move = int(trial.walker.next_moves()[0])
-            if move == AWAIT_DECISION or (own and len(curve) == cap):
+            if move == AWAIT_DECISION or len(curve) - decided == cap:
                 if own:
                     to_decision.append(len(curve))
                     own = False
                 trial.walker.refresh_candidates()
                 trial.walker.set_actions(np.array([0]))
+                decided = len(curve)
                 continue
             _, _, terminated, truncated, info = trial.env.step(move)
             curve.append(float(info["coverage"]) - coverage)
