@@ -70,6 +70,10 @@ from naruto_gym.rl.goal_lookahead import gain_at, lookahead_curves
 from naruto_gym.rl.goal_walker import DECISIONS
 from naruto_gym.scenes import suite
 
+#: ``--advance`` of the rollout choice: at every measured decision, the candidate whose walk
+#: gained the most (:func:`rollout_slot`), so the decisions come from the states it reaches.
+ROLLOUT = "rollout"
+
 #: The summary's distributions, per horizon.
 PERCENTILES = {"median": 50.0, "p90": 90.0}
 
@@ -95,7 +99,8 @@ class Args:
     """the decision measured: "interval" (every K steps) or "goal" (at every goal); default:
     the model's settings"""
     advance: str = "model"
-    """what chooses the episode's own decisions: "model" or a goal-walker rule (random...)"""
+    """what chooses the episode's own decisions: "model", a goal-walker rule (random...) or
+    "rollout" (the measured candidate of the largest mean gain over the longest horizon)"""
     decision_every: int = 1
     """measure every n-th decision"""
     model_path: str | None = None
@@ -171,6 +176,15 @@ def goal_gains(
     return gains, steps_to_decision
 
 
+def rollout_slot(entry: dict[str, Any], horizons: list[int]) -> int:
+    """The rollout choice at a measured decision: the candidate of the largest gain averaged
+    over the longest horizon (trapezoids over the measured horizons, from 0 at the decision;
+    the goal ranker's target)."""
+    steps = [0, *sorted(horizons)]
+    curves = np.array([[0.0] * entry["candidates"], *(entry["gains"][str(h)] for h in steps[1:])])
+    return int(np.argmax(np.trapezoid(curves, steps, axis=0)))
+
+
 def rule_slots(candidates: np.ndarray, seed: int, decision: int) -> dict[str, int]:
     """The slot each scripted rule picks (``random`` drawn from the seed and decision)."""
     rng = np.random.default_rng([seed, decision])
@@ -200,11 +214,13 @@ def play_episode(
     step = 0
     for decision in range(steps):
         candidates = observation["candidates"]
-        if model is None:
-            action = rule_slots(candidates, seed, decision)[args.advance]
-        else:
+        if model is not None:
             action, _ = model.predict(observation, deterministic=args.deterministic)
             action = int(action)
+        elif args.advance != ROLLOUT:
+            action = rule_slots(candidates, seed, decision)[args.advance]
+        else:
+            action = 0  # the measured candidate of the largest mean gain, below
         measured = decision % args.decision_every == 0 and step + max(horizons) <= steps
         if decision in stored:
             entry = stored[decision]
@@ -234,6 +250,8 @@ def play_episode(
             entry["gains"] = {h: np.round(g, 5).tolist() for h, g in gains.items()}
         else:
             entry = None
+        if args.advance == ROLLOUT and entry is not None and entry["candidates"]:
+            action = entry["chosen"] = entry["chosen_slot"] = rollout_slot(entry, horizons)
         observation, _, terminated, truncated, info = stack.step(action)
         step += int(info["primitive_steps"])
         if entry is not None:
@@ -270,8 +288,15 @@ def measured_settings(args: Args) -> tuple[Any, dict[str, Any]]:
     """
     from stable_baselines3 import PPO
 
-    if args.advance != "model" and args.advance not in CHOICE_RULES:
-        raise ValueError(f"--advance must be 'model' or one of {CHOICE_RULES}, got {args.advance}")
+    if args.advance not in ("model", ROLLOUT, *CHOICE_RULES):
+        raise ValueError(
+            f"--advance must be 'model', {ROLLOUT!r} or one of {CHOICE_RULES}, got {args.advance}"
+        )
+    if args.advance == ROLLOUT and (args.decision != "goal" or args.decision_every != 1):
+        raise ValueError(
+            f"--advance {ROLLOUT} chooses among measured candidates: it needs --decision goal "
+            f"and every decision measured (--decision-every 1)"
+        )
     if args.decision not in (None, *DECISIONS):
         raise ValueError(f"--decision must be one of {DECISIONS}, got {args.decision!r}")
     model_path = Path(args.model_path) if args.model_path else PACKAGED_MODEL
