@@ -48,3 +48,21 @@ def test_each_candidate_is_walked_to_its_goal_and_on_for_every_horizon(leverage,
     assert "until the next decision" in leverage.leverage_table(summary)
     with pytest.raises(ValueError, match="--advance"):
         leverage.main(parse_dataclass_args(leverage.Args, [*argv, "--advance", "best"]))
+
+
+def test_the_rollout_advance_walks_the_measured_best(leverage, tmp_path):
+    argv = ["--scenes", "procedural:small:0", "--max-episode-steps", "60", "--decision", "goal",
+            "--advance", "rollout", "--horizons", "5", "10",
+            "--output-file", str(tmp_path / "rollout.json")]  # fmt: skip
+    result = leverage.main(parse_dataclass_args(leverage.Args, argv))
+    decisions = result["episodes"]["procedural:small:0/seed0"]["decisions"]
+    assert any(d["chosen_slot"] != 0 for d in decisions)  # not the nearest throughout
+    for decision in decisions:
+        pairs = zip(decision["gains"]["5"], decision["gains"]["10"], strict=True)
+        areas = [g5 * 5 / 2 + (g5 + g10) * 5 / 2 for g5, g10 in pairs]  # trapezoids from 0
+        assert areas[decision["chosen_slot"]] == pytest.approx(max(areas))
+        assert decision["realised"] == pytest.approx(
+            decision["gains"]["goal"][decision["chosen_slot"]], abs=1e-5
+        )
+    with pytest.raises(ValueError, match="decision-every"):
+        leverage.main(parse_dataclass_args(leverage.Args, [*argv, "--decision-every", "2"]))
